@@ -1,0 +1,178 @@
+//! CPU evaluators of the diffraction BRDF, in f64 (MODEL §2, §6): the geometry shared by all
+//! of them (`(u, v, w)`, the gain factor with Fresnel and shadowing), the direct-sum
+//! [`reference`], the [`model`] of the GPU's FLSS algorithm, Bessel functions for the
+//! Chebyshev expansion, and batch CSV [`query`]s. No Vulkan here.
+//!
+//! Directions are unit vectors in the tangent frame of MODEL §1: `N = (0,0,1)`, `x` along the
+//! height-field columns; `ωi` points towards the light, `ωr` towards the eye.
+
+pub mod bessel;
+pub mod model;
+pub mod query;
+pub mod reference;
+
+/// Switches and constants of the gain factor `C(ωi, ωr)`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shading {
+    /// Multiply by the Schlick reflectance relative to normal incidence, `R/R0`.
+    pub fresnel: bool,
+    /// Multiply by Stam's V-cavity shadowing/masking `S`.
+    pub shadowing: bool,
+    /// Refractive index `n` (`R0 = ((n−1)/(n+1))²`).
+    pub ior: f64,
+}
+
+impl Default for Shading {
+    fn default() -> Self {
+        Self {
+            fresnel: true,
+            shadowing: true,
+            ior: 1.5,
+        }
+    }
+}
+
+impl Shading {
+    /// Plain geometry: no Fresnel, no shadowing.
+    pub const GEOMETRIC: Shading = Shading {
+        fresnel: false,
+        shadowing: false,
+        ior: 1.5,
+    };
+}
+
+/// Unit vector of polar angle `theta_deg` from the normal and azimuth `phi_deg` from `+x`.
+pub fn direction(theta_deg: f64, phi_deg: f64) -> [f64; 3] {
+    let (st, ct) = theta_deg.to_radians().sin_cos();
+    let (sp, cp) = phi_deg.to_radians().sin_cos();
+    [st * cp, st * sp, ct]
+}
+
+pub(crate) fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// `(u, v, w) = −ωi − ωr` (MODEL §1).
+pub fn uvw(wi: [f64; 3], wr: [f64; 3]) -> [f64; 3] {
+    [-wi[0] - wr[0], -wi[1] - wr[1], -wi[2] - wr[2]]
+}
+
+/// Schlick reflectance at normal incidence, `R0 = ((n−1)/(n+1))²`.
+pub fn schlick_r0(ior: f64) -> f64 {
+    let r = (ior - 1.0) / (ior + 1.0);
+    r * r
+}
+
+/// The gain factor `C(ωi, ωr)` of MODEL §2 with Stam's geometric term:
+///
+/// `C = [R/R0] · (1 + ωi·ωr)² / (w² cosθi cosθr) · [S]`, and `C = 0` when either cosine ≤ 0.
+///
+/// MODEL.md writes the denominator as `w² cosθr`; with that, a flat mirror seen in the
+/// specular direction would give `ρ = cosθi`, not the documented 1. Stam's
+/// `G = (1 + ωi·ωr)²/(cosθi cosθr)` restores `ρ = 1` (Fresnel off) at every angle, so that is
+/// what every evaluator uses; renderers multiply by `cosθi` for irradiance.
+///
+/// Near `w = 0` (both directions grazing) the numerator vanishes faster than `w²`; the
+/// result stays finite for every pair of unit vectors.
+pub fn gain(wi: [f64; 3], wr: [f64; 3], shading: &Shading) -> f64 {
+    let (ci, cr) = (wi[2], wr[2]);
+    if ci <= 0.0 || cr <= 0.0 {
+        return 0.0;
+    }
+    let w = ci + cr;
+    // 1 + ωi·ωr = |ωi + ωr|²/2, which does not cancel near grazing specular.
+    let h = [wi[0] + wr[0], wi[1] + wr[1], wi[2] + wr[2]];
+    let h2 = dot(h, h);
+    let geometric = 0.25 * h2 * h2 / (w * w * ci * cr);
+    let mut c = geometric;
+    if shading.fresnel || shading.shadowing {
+        let hl = h2.sqrt();
+        // hl ≥ w > 0 here because both z components are positive.
+        let h = [h[0] / hl, h[1] / hl, h[2] / hl];
+        let cos_rh = dot(wr, h).clamp(0.0, 1.0);
+        if shading.fresnel {
+            let r0 = schlick_r0(shading.ior);
+            let r = r0 + (1.0 - r0) * (1.0 - cos_rh).powi(5);
+            c *= r / r0;
+        }
+        if shading.shadowing {
+            c *= shadowing(h[2], ci, cr, cos_rh);
+        }
+    }
+    if c.is_finite() {
+        c
+    } else {
+        0.0
+    }
+}
+
+/// Stam's V-cavity shadowing/masking `S = min(1, 2(N·H)(N·ωr)/(ωr·H), 2(N·H)(N·ωi)/(ωr·H))`.
+fn shadowing(n_h: f64, ci: f64, cr: f64, cos_rh: f64) -> f64 {
+    if cos_rh <= 0.0 {
+        return 0.0;
+    }
+    let k = 2.0 * n_h / cos_rh;
+    1f64.min(k * cr).min(k * ci)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn specular_gain_is_one_without_fresnel_at_every_angle() {
+        for t in [0.0, 10.0, 45.0, 75.0, 89.0, 89.99] {
+            let wi = direction(t, 30.0);
+            let wr = direction(t, 210.0);
+            let g = gain(
+                wi,
+                wr,
+                &Shading {
+                    fresnel: false,
+                    ..Default::default()
+                },
+            );
+            assert!((g - 1.0).abs() < 1e-12, "θ = {t}: C = {g}");
+        }
+    }
+
+    #[test]
+    fn fresnel_ratio_is_one_at_normal_incidence_and_grows_towards_grazing() {
+        let s = Shading::default();
+        let g0 = gain([0.0, 0.0, 1.0], [0.0, 0.0, 1.0], &s);
+        assert!((g0 - 1.0).abs() < 1e-12);
+        let g80 = gain(direction(80.0, 0.0), direction(80.0, 180.0), &s);
+        assert!(g80 > 5.0, "R(80°)/R0 = {g80}");
+    }
+
+    #[test]
+    fn gain_is_finite_and_non_negative_everywhere() {
+        for ti in 0..=90 {
+            for tr in 0..=90 {
+                for pr in [0.0, 45.0, 90.0, 180.0, 270.0] {
+                    let wi = direction(ti as f64, 0.0);
+                    let wr = direction(tr as f64, pr);
+                    for s in [Shading::default(), Shading::GEOMETRIC] {
+                        let g = gain(wi, wr, &s);
+                        assert!(g.is_finite() && g >= 0.0, "{ti} {tr} {pr}: {g}");
+                    }
+                }
+            }
+        }
+        // ωi = ωr, exact grazing and below the horizon.
+        let wi = direction(89.999_999, 0.0);
+        assert!(gain(wi, wi, &Shading::default()).is_finite());
+        assert_eq!(
+            gain([1.0, 0.0, 0.0], direction(30.0, 0.0), &Shading::default()),
+            0.0
+        );
+        assert_eq!(
+            gain(
+                direction(100.0, 0.0),
+                direction(30.0, 0.0),
+                &Shading::default()
+            ),
+            0.0
+        );
+    }
+}

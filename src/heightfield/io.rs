@@ -1,0 +1,399 @@
+//! Height-field files: 8/16-bit grayscale PNG (`h = g·h_max`) and raw little-endian `.f32`
+//! heights in µm, each with an optional TOML sidecar (`elaphe.png` → `elaphe.toml`) giving
+//! `dh_um`, `h_max_um` (images) or `nx`, `ny` (raw). Caller-supplied values override the
+//! sidecar. Writes go through a temporary sibling file and a rename, so a failed save never
+//! leaves a half-written file behind.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicU64, Ordering};
+
+use super::generate::{generate, GratingKind, GratingSpec};
+use super::HeightField;
+use crate::{Error, Result};
+
+/// Prefix that selects a generated default grating instead of a file.
+pub const BUILTIN_PREFIX: &str = "builtin:";
+
+/// The keys a sidecar may hold; anything else is rejected so typos do not pass silently.
+#[derive(Debug, Default, serde::Deserialize, serde::Serialize)]
+#[serde(deny_unknown_fields)]
+struct Sidecar {
+    #[serde(skip_serializing_if = "Option::is_none")]
+    nx: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    ny: Option<usize>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    dh_um: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    h_max_um: Option<f64>,
+}
+
+/// File formats by extension.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Format {
+    Png,
+    RawF32,
+}
+
+fn format_of(path: &Path) -> Result<Format> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("png") => Ok(Format::Png),
+        Some("f32") => Ok(Format::RawF32),
+        _ => Err(Error::Image {
+            path: path.to_path_buf(),
+            msg: "unknown height-field format; expected .png (8/16-bit grayscale) or .f32 \
+                  (raw little-endian heights in µm)"
+                .into(),
+        }),
+    }
+}
+
+/// `elaphe.png` → `elaphe.toml`.
+pub fn sidecar_path(path: &Path) -> PathBuf {
+    path.with_extension("toml")
+}
+
+/// Reads the sidecar beside `path`, or an empty one when there is none.
+fn read_sidecar(path: &Path) -> Result<Sidecar> {
+    let side = sidecar_path(path);
+    let text = match std::fs::read_to_string(&side) {
+        Ok(t) => t,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Sidecar::default()),
+        Err(e) => return Err(Error::io(side, e)),
+    };
+    toml::from_str(&text).map_err(|e| Error::parse(&side, one_line_toml_error(&text, &e)))
+}
+
+/// toml's own message spans several lines (with a source excerpt); the crate prints errors
+/// on one line, so rebuild it as "line L, column C: message".
+fn one_line_toml_error(text: &str, e: &toml::de::Error) -> String {
+    let msg = e.message().trim().replace('\n', "; ");
+    match e.span() {
+        Some(span) => {
+            let before = &text[..span.start.min(text.len())];
+            let line = before.matches('\n').count() + 1;
+            let column = before.len() - before.rfind('\n').map_or(0, |i| i + 1) + 1;
+            format!("line {line}, column {column}: {msg}")
+        }
+        None => msg,
+    }
+}
+
+fn check_h_max(h_max: f64, path: &Path) -> Result<f64> {
+    if h_max.is_finite() && h_max >= 0.0 {
+        Ok(h_max)
+    } else {
+        Err(Error::parse(
+            path,
+            format!("h_max_um = {h_max}; the height of grey level 1 must be finite and ≥ 0 µm"),
+        ))
+    }
+}
+
+/// Attaches the file name to validation errors from [`HeightField::new`].
+fn with_path(path: &Path) -> impl FnOnce(Error) -> Error + '_ {
+    move |e| match e {
+        Error::Invalid { .. } => Error::parse(path, e.to_string()),
+        other => other,
+    }
+}
+
+impl HeightField {
+    /// Loads a PNG (8/16-bit grayscale, alpha ignored) or raw `.f32` height field. `dh_um`
+    /// and `h_max_um` override the sidecar; a value missing from both is an error naming
+    /// both places. Never panics on a bad file.
+    pub fn load(path: &Path, dh_um: Option<f64>, h_max_um: Option<f64>) -> Result<HeightField> {
+        let format = format_of(path)?;
+        // A missing file is the first thing to report, before any complaint about its scale.
+        std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+        let side = read_sidecar(path)?;
+        let side_path = sidecar_path(path);
+        let dh = dh_um.or(side.dh_um).ok_or_else(|| {
+            Error::parse(
+                path,
+                format!(
+                    "pixel size unknown: give dh_um (--dh-um or the scene) or `dh_um` in {}",
+                    side_path.display()
+                ),
+            )
+        })?;
+        match format {
+            Format::Png => {
+                let h_max = h_max_um.or(side.h_max_um).ok_or_else(|| {
+                    Error::parse(
+                        path,
+                        format!(
+                            "height scale unknown: give h_max_um (--hmax-um or the scene) or \
+                             `h_max_um` in {}",
+                            side_path.display()
+                        ),
+                    )
+                })?;
+                let h_max = check_h_max(h_max, path)?;
+                let (nx, ny, grey) = read_png(path)?;
+                for (key, want, got) in [("nx", side.nx, nx), ("ny", side.ny, ny)] {
+                    if want.is_some_and(|w| w != got) {
+                        return Err(Error::parse(
+                            &side_path,
+                            format!(
+                                "{key} = {} but {} is {nx}×{ny}",
+                                want.unwrap_or(0),
+                                path.display()
+                            ),
+                        ));
+                    }
+                }
+                let heights = grey.into_iter().map(|g| g * h_max).collect();
+                HeightField::new(nx, ny, dh, heights).map_err(with_path(path))
+            }
+            Format::RawF32 => {
+                if h_max_um.is_some() || side.h_max_um.is_some() {
+                    return Err(Error::parse(
+                        path,
+                        "h_max_um only applies to grayscale images; .f32 heights are already in µm",
+                    ));
+                }
+                let (Some(nx), Some(ny)) = (side.nx, side.ny) else {
+                    return Err(Error::parse(
+                        path,
+                        format!(
+                            "raw .f32 heights need `nx` and `ny` in {}",
+                            side_path.display()
+                        ),
+                    ));
+                };
+                let heights = read_f32(path, nx, ny)?;
+                HeightField::new(nx, ny, dh, heights).map_err(with_path(path))
+            }
+        }
+    }
+
+    /// `builtin:<kind>` (blazed, sinusoidal, elaphe, xenopeltis) is the default generated
+    /// grating of that kind, the same field as the shipped `assets/<kind>.png` before
+    /// quantisation; `dh_um` then resamples it at that pixel size and `h_max_um` rescales
+    /// its peak-to-valley height. Anything else is a path for [`HeightField::load`].
+    pub fn load_source(
+        spec: &str,
+        dh_um: Option<f64>,
+        h_max_um: Option<f64>,
+    ) -> Result<HeightField> {
+        let Some(name) = spec.strip_prefix(BUILTIN_PREFIX) else {
+            return HeightField::load(Path::new(spec), dh_um, h_max_um);
+        };
+        let kind: GratingKind = name.parse()?;
+        let mut grating = GratingSpec::default_for(kind);
+        if let Some(dh) = dh_um {
+            grating.dh_um = dh;
+        }
+        let hf = generate(&grating)?;
+        match h_max_um {
+            None => Ok(hf),
+            Some(h_max) => {
+                if !(h_max.is_finite() && h_max >= 0.0) {
+                    return Err(Error::invalid(
+                        "h_max",
+                        format!("{h_max} µm; must be finite and ≥ 0"),
+                    ));
+                }
+                let (lo, hi) = hf.range();
+                let scale = if hi > lo { h_max / (hi - lo) } else { 0.0 };
+                let heights = hf.heights_um.iter().map(|h| (h - lo) * scale).collect();
+                HeightField::new(hf.nx, hf.ny, hf.dh_um, heights)
+            }
+        }
+    }
+
+    /// Saves by extension: `.png` → 16-bit grayscale with heights shifted so the minimum is
+    /// 0 and the sidecar giving `dh_um` and `h_max_um = max − min`; `.f32` → raw
+    /// little-endian µm with `nx`, `ny`, `dh_um` in the sidecar. PNG quantises heights to
+    /// steps of `h_max/65535`.
+    pub fn save(&self, path: &Path) -> Result<()> {
+        let (data, sidecar) = match format_of(path)? {
+            Format::Png => {
+                let (lo, hi) = self.range();
+                let span = hi - lo;
+                let levels: Vec<u16> = self
+                    .heights_um
+                    .iter()
+                    .map(|h| {
+                        if span > 0.0 {
+                            ((h - lo) / span * 65535.0).round().clamp(0.0, 65535.0) as u16
+                        } else {
+                            0
+                        }
+                    })
+                    .collect();
+                let bytes: Vec<u8> = levels.iter().flat_map(|v| v.to_ne_bytes()).collect();
+                let mut png = Vec::new();
+                let (w, h) = (self.nx as u32, self.ny as u32);
+                image::ImageEncoder::write_image(
+                    image::codecs::png::PngEncoder::new(&mut png),
+                    &bytes,
+                    w,
+                    h,
+                    image::ExtendedColorType::L16,
+                )
+                .map_err(|e| Error::Image {
+                    path: path.to_path_buf(),
+                    msg: format!("PNG encoding failed: {e}"),
+                })?;
+                let side = Sidecar {
+                    dh_um: Some(self.dh_um),
+                    h_max_um: Some(span),
+                    ..Sidecar::default()
+                };
+                (png, side)
+            }
+            Format::RawF32 => {
+                let bytes = self
+                    .heights_um
+                    .iter()
+                    .flat_map(|&h| (h as f32).to_le_bytes())
+                    .collect();
+                let side = Sidecar {
+                    nx: Some(self.nx),
+                    ny: Some(self.ny),
+                    dh_um: Some(self.dh_um),
+                    ..Sidecar::default()
+                };
+                (bytes, side)
+            }
+        };
+        let side_path = sidecar_path(path);
+        let text =
+            toml::to_string(&sidecar).map_err(|e| Error::parse(&side_path, e.to_string()))?;
+        // Sidecar first: a crash between the two renames leaves a new sidecar beside an old
+        // image at worst, never an image without its scale.
+        write_atomic(&side_path, text.as_bytes())?;
+        write_atomic(path, &data)
+    }
+}
+
+/// Decodes a grayscale PNG into values `g ∈ [0, 1]`, row-major.
+fn read_png(path: &Path) -> Result<(usize, usize, Vec<f64>)> {
+    let image_err = |msg: String| Error::Image {
+        path: path.to_path_buf(),
+        msg,
+    };
+    let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
+    let reader = reader
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
+    let img = reader
+        .decode()
+        .map_err(|e| image_err(format!("cannot decode: {e}")))?;
+    let (nx, ny) = (img.width() as usize, img.height() as usize);
+    use image::ColorType as C;
+    let grey: Vec<f64> = match img.color() {
+        C::L8 | C::La8 => img
+            .to_luma8()
+            .into_raw()
+            .into_iter()
+            .map(|v| f64::from(v) / 255.0)
+            .collect(),
+        C::L16 | C::La16 => img
+            .to_luma16()
+            .into_raw()
+            .into_iter()
+            .map(|v| f64::from(v) / 65535.0)
+            .collect(),
+        other => {
+            return Err(image_err(format!(
+                "{other:?} image; a height field must be a grayscale (8- or 16-bit) image"
+            )))
+        }
+    };
+    Ok((nx, ny, grey))
+}
+
+/// Reads `nx·ny` little-endian f32 heights; the file length must match exactly.
+fn read_f32(path: &Path, nx: usize, ny: usize) -> Result<Vec<f64>> {
+    let expected = nx
+        .checked_mul(ny)
+        .and_then(|n| n.checked_mul(4))
+        .filter(|_| nx <= super::MAX_SIDE && ny <= super::MAX_SIDE)
+        .ok_or_else(|| {
+            Error::parse(
+                sidecar_path(path),
+                format!(
+                    "size {nx}×{ny} exceeds the limit of {} samples a side",
+                    super::MAX_SIDE
+                ),
+            )
+        })?;
+    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+    if data.len() != expected {
+        return Err(Error::Image {
+            path: path.to_path_buf(),
+            msg: format!(
+                "{} bytes; {nx}×{ny} f32 heights need {expected} (truncated or wrong sidecar?)",
+                data.len()
+            ),
+        });
+    }
+    Ok(data
+        .chunks_exact(4)
+        .map(|b| f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])))
+        .collect())
+}
+
+/// Distinguishes temporaries of concurrent writers inside one process.
+static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// Writes `bytes` to `path` through a temporary file in the same directory (so the rename
+/// stays on one file system and is atomic) and a rename. On failure the temporary is
+/// removed and `path` is untouched.
+pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "out".to_owned());
+    let tmp = path.with_file_name(format!(
+        ".{name}.{}-{}.tmp",
+        std::process::id(),
+        TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
+    ));
+    let result = (|| {
+        let mut file = std::fs::File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
+        file.write_all(bytes).map_err(|e| Error::io(&tmp, e))?;
+        file.sync_all().map_err(|e| Error::io(&tmp, e))?;
+        std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
+    })();
+    if result.is_err() {
+        // Best effort: the temporary is garbage either way and the real error matters more.
+        let _ = std::fs::remove_file(&tmp);
+    }
+    result
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn toml_errors_name_line_and_column() {
+        let text = "dh_um = 0.1\nh_max_um = \"x\"\n";
+        let e = toml::from_str::<Sidecar>(text).unwrap_err();
+        let msg = one_line_toml_error(text, &e);
+        assert!(msg.starts_with("line 2, column "), "{msg}");
+        assert!(!msg.contains('\n'));
+        let text = "dh_um = 0.1\n\nfoo = 1\n";
+        let e = toml::from_str::<Sidecar>(text).unwrap_err();
+        let msg = one_line_toml_error(text, &e);
+        assert!(
+            msg.starts_with("line 3, column 1") && msg.contains("foo"),
+            "{msg}"
+        );
+    }
+
+    #[test]
+    fn unknown_extension_is_rejected() {
+        assert!(format_of(Path::new("a.jpg")).is_err());
+        assert!(format_of(Path::new("noext")).is_err());
+        assert_eq!(format_of(Path::new("A.PNG")).unwrap(), Format::Png);
+    }
+}

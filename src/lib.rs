@@ -1,0 +1,18 @@
+//! diffract: spectral diffraction from natural nanostructures (Stam 1999; Dhillon et al.
+//! 2014), from a measured height field to a rendered image, with f64 CPU evaluators that
+//! the GPU is checked against.
+//!
+//! Data flows top-down through the modules:
+//! [`heightfield`] → [`spectrum`] (DFT terms) → [`colour`] (CIE tables) → [`brdf`] (CPU
+//! reference and model) → `gpu` (Vulkan resources and pipelines) → `render` (frames and
+//! BRDF maps) → images and numbers. `gpu` knows no physics and `brdf` knows no Vulkan.
+#![warn(unsafe_op_in_unsafe_fn)]
+
+pub mod brdf;
+pub mod colour;
+pub mod error;
+pub mod heightfield;
+pub mod material;
+pub mod spectrum;
+
+pub use error::{Error, Result};

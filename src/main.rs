@@ -1,0 +1,37 @@
+//! The `diffract` command line: parses arguments, calls the library, prints one error line
+//! and exits non-zero on failure.
+
+use std::process::ExitCode;
+
+use clap::{Parser, Subcommand};
+
+/// Diffraction colours of natural nanostructures (Stam 1999; Dhillon et al. 2014).
+#[derive(Parser)]
+#[command(version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Evaluate the BRDF for a CSV of directions and wavelengths (reference or model).
+    Brdf(diffract::brdf::query::BrdfArgs),
+    /// Generate a test grating height field (PNG or .f32 with a .toml sidecar).
+    Heightfield(diffract::heightfield::HeightfieldArgs),
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match &cli.command {
+        Command::Brdf(a) => diffract::brdf::query::run(a),
+        Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
+    };
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("error: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}
