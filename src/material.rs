@@ -67,10 +67,10 @@ pub struct MaterialArgs {
     #[arg(long)]
     pub heightfield: Option<String>,
     /// Pixel size of the height field in µm (overrides the sidecar).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub dh_um: Option<f64>,
     /// Height of grey level 1 in µm (overrides the sidecar).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub hmax_um: Option<f64>,
     /// Highest expansion term T (terms 0..=T).
     #[arg(long)]
@@ -82,7 +82,7 @@ pub struct MaterialArgs {
     #[arg(long)]
     pub expansion: Option<Expansion>,
     /// Spatial coherence length in µm.
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub coherence_um: Option<f64>,
     /// Wavelength step in nm (divides 400).
     #[arg(long)]

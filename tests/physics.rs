@@ -251,14 +251,15 @@ fn integrated_colour_of_model_matches_reference() {
     }
 }
 
-/// Smallest T whose model is within `tol` (relative to the peak) of the reference.
+/// For each tolerance, the smallest T whose model is within it (relative to the peak) of
+/// the reference at every probe; `usize::MAX` if T = 60 does not reach it.
 fn terms_needed(
     hf: &HeightField,
     e: Expansion,
     wi: [f64; 3],
     probes: &[[f64; 3]],
-    tol: f64,
-) -> usize {
+    tols: &[f64],
+) -> Vec<usize> {
     let shading = Shading::GEOMETRIC;
     let lambda = 380.0;
     let refs: Vec<f64> = probes
@@ -267,20 +268,19 @@ fn terms_needed(
         .collect();
     let peak = refs.iter().cloned().fold(0.0, f64::max);
     let (s, w) = terms(hf, e, 60, 4);
-    for t in 0..=60 {
-        let worst = probes
-            .iter()
-            .zip(&refs)
-            .map(|(wr, r)| (model::rho(&s, t, &w, &shading, wi, *wr, lambda) - r).abs())
-            .fold(0.0, f64::max);
-        if std::env::var_os("DIFFRACT_DEBUG").is_some() {
-            println!("{e} T={t}: worst {:.3e} peak {peak:.3e}", worst);
-        }
-        if worst <= tol * peak {
-            return t;
-        }
-    }
-    usize::MAX
+    let errs: Vec<f64> = (0..=60)
+        .map(|t| {
+            probes
+                .iter()
+                .zip(&refs)
+                .map(|(wr, r)| (model::rho(&s, t, &w, &shading, wi, *wr, lambda) - r).abs())
+                .fold(0.0, f64::max)
+                / peak
+        })
+        .collect();
+    tols.iter()
+        .map(|tol| errs.iter().position(|e| e <= tol).unwrap_or(usize::MAX))
+        .collect()
 }
 
 #[test]
@@ -299,18 +299,22 @@ fn taylor_and_chebyshev_both_converge_on_a_tall_structure() {
             direction(t.abs(), if t < 0.0 { 180.0 } else { 0.0 })
         })
         .collect();
-    let tol = 1e-4;
-    let taylor = terms_needed(&hf, Expansion::Taylor, wi, &probes, tol);
-    let cheb = terms_needed(&hf, Expansion::Chebyshev, wi, &probes, tol);
-    println!("terms for 1e-4 at h=1 µm, 380 nm, θi=85°: Taylor T={taylor}, Chebyshev T={cheb}");
-    assert!(
-        taylor <= 60 && cheb <= 60,
-        "no convergence: Taylor {taylor}, Chebyshev {cheb}"
-    );
-    assert!(
-        cheb < taylor,
-        "Chebyshev should need fewer terms ({cheb} vs {taylor})"
-    );
+    let tols = [1e-2, 1e-4, 1e-6, 1e-8];
+    let taylor = terms_needed(&hf, Expansion::Taylor, wi, &probes, &tols);
+    let cheb = terms_needed(&hf, Expansion::Chebyshev, wi, &probes, &tols);
+    println!("terms needed at h = 1 µm, 380 nm, θi = 85°, tolerances {tols:?}: Taylor T = {taylor:?}, Chebyshev T = {cheb:?}");
+    for (i, tol) in tols.iter().enumerate() {
+        assert!(
+            taylor[i] <= 60 && cheb[i] <= 60,
+            "tol {tol}: Taylor {}, Chebyshev {}",
+            taylor[i],
+            cheb[i]
+        );
+        assert!(
+            cheb[i] < taylor[i],
+            "tol {tol}: Chebyshev should need fewer terms"
+        );
+    }
 }
 
 #[test]
