@@ -13,7 +13,6 @@ pub use generate::{
     generate, GratingKind, GratingSpec, LatticeWave, DEFAULT_DH_UM, DEFAULT_SIZE_UM,
     MAX_GENERATED_DH_UM,
 };
-pub(crate) use io::write_atomic;
 pub use io::{sidecar_path, BUILTIN_PREFIX};
 
 /// Largest accepted side length (samples). 4096² f64 heights are 128 MiB, and each DFT

@@ -11,8 +11,12 @@
 pub mod brdf;
 pub mod colour;
 pub mod error;
+pub mod fsutil;
 pub mod heightfield;
+pub mod image_io;
 pub mod material;
+pub mod mesh;
+pub mod scene;
 pub mod spectrum;
 
 pub use error::{Error, Result};

@@ -7,12 +7,12 @@
 //! `rho,X,Y,Z`: for a spectral row `rho = ρ_λ` and `XYZ` is the per-nm tristimulus density
 //! of that line under D65; for an integrated row `rho = Y`.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 use rayon::prelude::*;
 
 use crate::colour::{monochromatic_xyz, ColourTable, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
+use crate::fsutil::write_atomic;
 use crate::heightfield::HeightField;
 use crate::material::{default_cache_dir, MaterialArgs};
 use crate::{Error, Result};
@@ -191,34 +191,6 @@ pub fn format_answers(queries: &[Query], answers: &[Answer]) -> String {
         ));
     }
     s
-}
-
-/// Writes `contents` to `path` through a temporary file in the same directory, so an
-/// existing file is either replaced whole or left untouched.
-pub fn write_atomic(path: &Path, contents: &[u8]) -> Result<()> {
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    let name = path.file_name().ok_or_else(|| {
-        Error::invalid(
-            "output path",
-            format!("{} has no file name", path.display()),
-        )
-    })?;
-    let tmp = dir.join(format!(
-        ".{}.tmp{}",
-        name.to_string_lossy(),
-        std::process::id()
-    ));
-    let result = std::fs::File::create(&tmp)
-        .and_then(|mut f| f.write_all(contents).and_then(|_| f.sync_all()))
-        .and_then(|_| std::fs::rename(&tmp, path));
-    if let Err(e) = result {
-        let _ = std::fs::remove_file(&tmp);
-        return Err(Error::io(path, e));
-    }
-    Ok(())
 }
 
 /// Runs `diffract brdf`.

@@ -4,12 +4,11 @@
 //! sidecar. Writes go through a temporary sibling file and a rename, so a failed save never
 //! leaves a half-written file behind.
 
-use std::io::Write;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicU64, Ordering};
 
 use super::generate::{generate, GratingKind, GratingSpec};
 use super::HeightField;
+use crate::fsutil::write_atomic;
 use crate::{Error, Result};
 
 /// Prefix that selects a generated default grating instead of a file.
@@ -339,35 +338,6 @@ fn read_f32(path: &Path, nx: usize, ny: usize) -> Result<Vec<f64>> {
         .chunks_exact(4)
         .map(|b| f64::from(f32::from_le_bytes([b[0], b[1], b[2], b[3]])))
         .collect())
-}
-
-/// Distinguishes temporaries of concurrent writers inside one process.
-static TEMP_COUNTER: AtomicU64 = AtomicU64::new(0);
-
-/// Writes `bytes` to `path` through a temporary file in the same directory (so the rename
-/// stays on one file system and is atomic) and a rename. On failure the temporary is
-/// removed and `path` is untouched.
-pub(crate) fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().into_owned())
-        .unwrap_or_else(|| "out".to_owned());
-    let tmp = path.with_file_name(format!(
-        ".{name}.{}-{}.tmp",
-        std::process::id(),
-        TEMP_COUNTER.fetch_add(1, Ordering::Relaxed)
-    ));
-    let result = (|| {
-        let mut file = std::fs::File::create(&tmp).map_err(|e| Error::io(&tmp, e))?;
-        file.write_all(bytes).map_err(|e| Error::io(&tmp, e))?;
-        file.sync_all().map_err(|e| Error::io(&tmp, e))?;
-        std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e))
-    })();
-    if result.is_err() {
-        // Best effort: the temporary is garbage either way and the real error matters more.
-        let _ = std::fs::remove_file(&tmp);
-    }
-    result
 }
 
 #[cfg(test)]

@@ -20,7 +20,8 @@ use std::path::Path;
 
 use super::num_complex::Complex64;
 use super::{reachable_band, Band, Expansion, Extrema, TermRequest, TermStack};
-use crate::heightfield::{write_atomic, HeightField};
+use crate::fsutil::write_atomic;
+use crate::heightfield::HeightField;
 use crate::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"DFTTERMS";

@@ -1,0 +1,371 @@
+//! Getting pictures out (and back in for tests): 8-bit sRGB PNG and float32 linear OpenEXR,
+//! written atomically (temporary file in the target directory, then rename, so a failed or
+//! interrupted write never replaces an existing file), plus the tolerance metrics that golden
+//! image tests compare with (absolute-difference percentiles and CIEDE2000).
+//!
+//! Pixel buffers are row-major, top row first, linear sRGB (`[r, g, b]` per pixel). The
+//! colour science (transfer curve, Lab, ΔE) is [`crate::colour`]'s; this module only moves
+//! pixels and bytes. No non-finite value ever reaches a file: NaN and ±Inf are written as 0.
+
+use std::path::Path;
+
+use crate::colour;
+use crate::fsutil::write_atomically;
+use crate::{Error, Result};
+
+fn image_err(path: &Path, msg: impl Into<String>) -> Error {
+    Error::Image {
+        path: path.to_path_buf(),
+        msg: msg.into(),
+    }
+}
+
+/// Checks that a `width × height` buffer of `len` pixels is consistent and non-empty.
+fn check_size(path: &Path, width: u32, height: u32, len: usize) -> Result<()> {
+    if width == 0 || height == 0 {
+        return Err(image_err(path, format!("empty image ({width}×{height})")));
+    }
+    if width as u64 * height as u64 != len as u64 {
+        return Err(image_err(
+            path,
+            format!(
+                "{width}×{height} image needs {} pixels, got {len}",
+                width as u64 * height as u64
+            ),
+        ));
+    }
+    Ok(())
+}
+
+fn finite_or_zero(x: f32) -> f32 {
+    if x.is_finite() {
+        x
+    } else {
+        0.0
+    }
+}
+
+fn check_exposure(exposure: f32) -> Result<()> {
+    if exposure.is_finite() && exposure > 0.0 {
+        Ok(())
+    } else {
+        Err(Error::invalid(
+            "exposure",
+            format!("{exposure}; must be positive and finite"),
+        ))
+    }
+}
+
+/// Writes linear sRGB as an 8-bit sRGB PNG: multiply by `exposure`, clamp to [0, 1], apply
+/// the sRGB transfer curve ([`colour::linear_to_srgb8`]). NaN and ±Inf become black.
+pub fn write_png_srgb(
+    path: &Path,
+    width: u32,
+    height: u32,
+    linear_rgb: &[[f32; 3]],
+    exposure: f32,
+) -> Result<()> {
+    check_size(path, width, height, linear_rgb.len())?;
+    check_exposure(exposure)?;
+    let bytes: Vec<u8> = linear_rgb
+        .iter()
+        .flat_map(|p| colour::linear_to_srgb8(p.map(|c| finite_or_zero(c) as f64), exposure as f64))
+        .collect();
+    let img = image::RgbImage::from_raw(width, height, bytes)
+        .ok_or_else(|| image_err(path, "pixel buffer does not match the size"))?;
+    write_atomically(path, |w| {
+        image::DynamicImage::ImageRgb8(img)
+            .write_to(w, image::ImageFormat::Png)
+            .map_err(|e| image_err(path, format!("PNG encoding failed: {e}")))
+    })
+}
+
+/// Writes linear RGB as a float32 OpenEXR file (no curve, no clamping; NaN/±Inf become 0).
+pub fn write_exr(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<()> {
+    check_size(path, width, height, rgb.len())?;
+    let floats: Vec<f32> = rgb.iter().flat_map(|p| p.map(finite_or_zero)).collect();
+    let img = image::Rgb32FImage::from_raw(width, height, floats)
+        .ok_or_else(|| image_err(path, "pixel buffer does not match the size"))?;
+    write_atomically(path, |w| {
+        image::DynamicImage::ImageRgb32F(img)
+            .write_to(w, image::ImageFormat::OpenExr)
+            .map_err(|e| image_err(path, format!("EXR encoding failed: {e}")))
+    })
+}
+
+/// Writes PNG (8-bit sRGB) or EXR (float32 linear, scaled by `exposure` too, so both show
+/// the same picture) chosen by the extension of `path` (case-insensitive).
+pub fn write_image(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgb: &[[f32; 3]],
+    exposure: f32,
+) -> Result<()> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("png") => write_png_srgb(path, width, height, rgb, exposure),
+        Some("exr") => {
+            check_exposure(exposure)?;
+            let scaled: Vec<[f32; 3]> = rgb.iter().map(|p| p.map(|c| c * exposure)).collect();
+            write_exr(path, width, height, &scaled)
+        }
+        _ => Err(image_err(
+            path,
+            "unknown output format: use a .png (8-bit sRGB) or .exr (float linear) file name",
+        )),
+    }
+}
+
+/// Opens an image and insists on its format (by content, falling back to the extension).
+fn open_as(path: &Path, format: image::ImageFormat, name: &str) -> Result<image::DynamicImage> {
+    let reader = image::ImageReader::open(path)
+        .map_err(|e| Error::io(path, e))?
+        .with_guessed_format()
+        .map_err(|e| Error::io(path, e))?;
+    if reader.format() != Some(format) {
+        return Err(image_err(path, format!("not a {name} file")));
+    }
+    reader
+        .decode()
+        .map_err(|e| image_err(path, format!("cannot decode {name}: {e}")))
+}
+
+/// Reads an OpenEXR file as linear RGB floats (alpha dropped): `(width, height, pixels)`.
+pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
+    let img = open_as(path, image::ImageFormat::OpenExr, "OpenEXR")?.into_rgb32f();
+    let (w, h) = img.dimensions();
+    let px = img
+        .into_raw()
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    Ok((w, h, px))
+}
+
+/// Reads a PNG as 8-bit RGB (grey is expanded, alpha dropped, 16-bit reduced):
+/// `(width, height, pixels)`. Values are the stored (sRGB-encoded) bytes.
+pub fn read_png_rgb8(path: &Path) -> Result<(u32, u32, Vec<[u8; 3]>)> {
+    let img = open_as(path, image::ImageFormat::Png, "PNG")?.into_rgb8();
+    let (w, h) = img.dimensions();
+    let px = img
+        .into_raw()
+        .chunks_exact(3)
+        .map(|c| [c[0], c[1], c[2]])
+        .collect();
+    Ok((w, h, px))
+}
+
+/// Differences between two linear sRGB images of the same size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ImageDiff {
+    /// Mean of `|actual − expected|` over all channels of all pixels.
+    pub mean_abs: f64,
+    /// 99th percentile (nearest rank) of the per-channel absolute differences.
+    pub p99_abs: f64,
+    /// Largest per-channel absolute difference.
+    pub max_abs: f64,
+    /// Mean CIEDE2000 difference per pixel (linear sRGB → XYZ → CIELAB, D65 white `Y = 1`).
+    pub mean_delta_e: f64,
+    /// 95th percentile (nearest rank) of the per-pixel CIEDE2000 difference.
+    pub p95_delta_e: f64,
+}
+
+impl std::fmt::Display for ImageDiff {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "|Δ| mean {:.5} p99 {:.5} max {:.5}; ΔE2000 mean {:.3} p95 {:.3}",
+            self.mean_abs, self.p99_abs, self.max_abs, self.mean_delta_e, self.p95_delta_e
+        )
+    }
+}
+
+/// Nearest-rank percentile `q ∈ (0, 1]` of `v` (sorted in place; NaN sorts last).
+fn percentile(v: &mut [f64], q: f64) -> f64 {
+    if v.is_empty() {
+        return 0.0;
+    }
+    v.sort_unstable_by(f64::total_cmp);
+    let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
+    v[rank - 1]
+}
+
+/// CIELAB of a linear sRGB colour, through the exact inverse of [`colour::XYZ_TO_SRGB`] so
+/// that linear white `(1,1,1)` lands on `L* = 100`.
+fn linear_srgb_to_lab(rgb: [f32; 3]) -> [f64; 3] {
+    let m = glam::DMat3::from_cols_array_2d(&colour::XYZ_TO_SRGB).transpose();
+    let xyz = m.inverse() * glam::DVec3::new(rgb[0] as f64, rgb[1] as f64, rgb[2] as f64);
+    colour::xyz_to_lab(xyz.to_array())
+}
+
+/// Compares two linear sRGB images pixel by pixel. Any non-finite value, and a size
+/// mismatch (which makes the images incomparable), yields infinite differences so that every
+/// tolerance check fails loudly instead of passing on garbage.
+pub fn compare_images(actual: &[[f32; 3]], expected: &[[f32; 3]]) -> ImageDiff {
+    if actual.len() != expected.len() || actual.is_empty() {
+        let inf = f64::INFINITY;
+        return ImageDiff {
+            mean_abs: inf,
+            p99_abs: inf,
+            max_abs: inf,
+            mean_delta_e: inf,
+            p95_delta_e: inf,
+        };
+    }
+    let mut abs = Vec::with_capacity(actual.len() * 3);
+    let mut de = Vec::with_capacity(actual.len());
+    for (a, e) in actual.iter().zip(expected) {
+        let finite = a.iter().chain(e).all(|c| c.is_finite());
+        for c in 0..3 {
+            abs.push(if finite {
+                (a[c] as f64 - e[c] as f64).abs()
+            } else {
+                f64::INFINITY
+            });
+        }
+        de.push(if finite {
+            colour::delta_e2000(linear_srgb_to_lab(*a), linear_srgb_to_lab(*e))
+        } else {
+            f64::INFINITY
+        });
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    let mean_abs = mean(&abs);
+    let mean_delta_e = mean(&de);
+    let max_abs = abs.iter().copied().fold(0.0, f64::max);
+    ImageDiff {
+        mean_abs,
+        p99_abs: percentile(&mut abs, 0.99),
+        max_abs,
+        mean_delta_e,
+        p95_delta_e: percentile(&mut de, 0.95),
+    }
+}
+
+/// Per-channel `|actual − expected|` for looking at a failed comparison (write it with some
+/// exposure). Pixels that are non-finite in either image, or that exist in only one of them,
+/// are marked magenta `[1, 0, 1]`. The result has the length of the longer input.
+pub fn difference_image(actual: &[[f32; 3]], expected: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    const MARK: [f32; 3] = [1.0, 0.0, 1.0];
+    (0..actual.len().max(expected.len()))
+        .map(|i| match (actual.get(i), expected.get(i)) {
+            (Some(a), Some(e)) if a.iter().chain(e).all(|c| c.is_finite()) => {
+                [0, 1, 2].map(|c| (a[c] - e[c]).abs())
+            }
+            _ => MARK,
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp_dir(tag: &str) -> std::path::PathBuf {
+        let d = std::env::temp_dir().join(format!("diffract-imgio-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn gradient(w: u32, h: u32) -> Vec<[f32; 3]> {
+        (0..w * h)
+            .map(|i| {
+                let (x, y) = ((i % w) as f32 / w as f32, (i / w) as f32 / h as f32);
+                [x, y, 0.25 + 0.5 * x * y]
+            })
+            .collect()
+    }
+
+    #[test]
+    fn exr_round_trip_is_exact_and_sanitised() {
+        let d = tmp_dir("exr");
+        let p = d.join("a.exr");
+        let mut px = gradient(7, 5);
+        px[3] = [f32::NAN, f32::INFINITY, 12.5];
+        write_exr(&p, 7, 5, &px).unwrap();
+        let (w, h, back) = read_exr(&p).unwrap();
+        assert_eq!((w, h), (7, 5));
+        assert_eq!(back[3], [0.0, 0.0, 12.5]);
+        for (i, (a, b)) in px.iter().zip(&back).enumerate() {
+            if i != 3 {
+                assert_eq!(a, b);
+            }
+        }
+        let _ = std::fs::remove_dir_all(d);
+    }
+
+    #[test]
+    fn png_applies_exposure_and_the_srgb_curve() {
+        let d = tmp_dir("png");
+        let p = d.join("a.png");
+        let px = vec![
+            [0.0, 0.5, 1.0],
+            [0.25, f32::NAN, f32::INFINITY],
+            [2.0, -1.0, 0.214],
+        ];
+        write_png_srgb(&p, 3, 1, &px, 2.0).unwrap();
+        let (w, h, back) = read_png_rgb8(&p).unwrap();
+        assert_eq!((w, h), (3, 1));
+        assert_eq!(back[0], [0, 255, 255]);
+        // 0.5 linear = 188 in sRGB; NaN and Inf are black.
+        assert_eq!(back[1], [188, 0, 0]);
+        assert_eq!(back[2][0], 255);
+        assert_eq!(back[2][1], 0);
+        // 0.428 linear ≈ 0.686 sRGB → 175.
+        assert_eq!(back[2][2], 175);
+        let _ = std::fs::remove_dir_all(d);
+    }
+
+    #[test]
+    fn bad_sizes_and_extensions_are_rejected_without_touching_the_file() {
+        let d = tmp_dir("bad");
+        let p = d.join("keep.png");
+        std::fs::write(&p, b"precious").unwrap();
+        assert!(write_png_srgb(&p, 2, 2, &[[0.0; 3]; 3], 1.0).is_err());
+        assert!(write_png_srgb(&p, 0, 0, &[], 1.0).is_err());
+        assert!(write_png_srgb(&p, 1, 1, &[[0.0; 3]], 0.0).is_err());
+        assert!(write_image(&d.join("x.jpg"), 1, 1, &[[0.0; 3]], 1.0).is_err());
+        assert_eq!(std::fs::read(&p).unwrap(), b"precious");
+        // No temporary files are left behind.
+        let names: Vec<_> = std::fs::read_dir(&d)
+            .unwrap()
+            .map(|e| e.unwrap().file_name())
+            .collect();
+        assert_eq!(names.len(), 1, "{names:?}");
+        let _ = std::fs::remove_dir_all(d);
+    }
+
+    #[test]
+    fn comparison_metrics() {
+        let a = gradient(10, 10);
+        let same = compare_images(&a, &a);
+        assert_eq!(same.max_abs, 0.0);
+        assert_eq!(same.p95_delta_e, 0.0);
+        let mut b = a.clone();
+        b[0] = [a[0][0] + 0.5, a[0][1], a[0][2]];
+        let d = compare_images(&a, &b);
+        assert!((d.max_abs - 0.5).abs() < 1e-6);
+        assert!((d.mean_abs - 0.5 / 300.0).abs() < 1e-6);
+        // One pixel in 100 changed: under the 99th percentile of 300 channel values.
+        assert_eq!(d.p99_abs, 0.0);
+        assert!(d.mean_delta_e > 0.0 && d.p95_delta_e == 0.0);
+        // White vs mid grey is a large colour difference; white vs itself none.
+        let w = compare_images(&[[1.0; 3]], &[[0.18; 3]]);
+        assert!(w.mean_delta_e > 30.0, "{w}");
+        // Linear white is (within the 4-digit matrix) the D65 white of CIELAB.
+        let white = linear_srgb_to_lab([1.0; 3]);
+        assert!((white[0] - 100.0).abs() < 0.01, "{white:?}");
+        assert!(white[1].abs() < 0.05 && white[2].abs() < 0.05, "{white:?}");
+        assert!(compare_images(&a, &a[1..]).max_abs.is_infinite());
+        let mut n = a.clone();
+        n[5][1] = f32::NAN;
+        assert!(compare_images(&n, &a).max_abs.is_infinite());
+        let diff = difference_image(&n, &b);
+        assert_eq!(diff.len(), 100);
+        assert_eq!(diff[5], [1.0, 0.0, 1.0]);
+        assert!((diff[0][0] - 0.5).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,512 @@
+//! Scene files (TOML): camera, directional light, mesh and its placement, the diffraction
+//! [`Material`], output size/exposure and optional texture blending. This module parses and
+//! validates them, resolves relative paths against the scene file's directory and turns the
+//! camera and mesh placement into matrices. It renders nothing.
+//!
+//! Every section and key is optional; missing ones take the values of the embedded default
+//! scene (`assets/default_scene.toml`, which lists every key with a comment). Unknown keys
+//! are errors, and every error names the file (and, for syntax and type errors, the line).
+
+use std::path::{Path, PathBuf};
+
+use glam::{Mat4, Vec3};
+use serde::{Deserialize, Serialize};
+
+use crate::material::Material;
+use crate::mesh::Mesh;
+use crate::{Error, Result};
+
+/// The embedded default scene (also the reference for every key's default).
+pub const DEFAULT_SCENE_TOML: &str = include_str!("../assets/default_scene.toml");
+
+/// A pinhole camera looking from `eye` at `target`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Camera {
+    pub eye: [f32; 3],
+    pub target: [f32; 3],
+    pub up: [f32; 3],
+    /// Vertical field of view in degrees, in (0, 180).
+    pub fov_y_deg: f32,
+    pub near: f32,
+    pub far: f32,
+}
+
+impl Default for Camera {
+    fn default() -> Self {
+        Self {
+            eye: [0.0, 2.6, 2.6],
+            target: [0.0, 0.05, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 35.0,
+            near: 0.01,
+            far: 100.0,
+        }
+    }
+}
+
+impl Camera {
+    /// World → view matrix (right-handed, looking down −z).
+    pub fn view(&self) -> Mat4 {
+        Mat4::look_at_rh(self.eye.into(), self.target.into(), self.up.into())
+    }
+
+    /// View → Vulkan clip space: right-handed perspective with depth in [0, 1] and clip-space
+    /// `y` pointing down (glam's `perspective_rh` with `y` negated).
+    pub fn projection(&self, aspect: f32) -> Mat4 {
+        let p = Mat4::perspective_rh(self.fov_y_deg.to_radians(), aspect, self.near, self.far);
+        Mat4::from_scale(Vec3::new(1.0, -1.0, 1.0)) * p
+    }
+
+    /// World → Vulkan clip space (`projection · view`) for a `width / height` aspect ratio.
+    pub fn view_proj(&self, aspect: f32) -> Mat4 {
+        self.projection(aspect) * self.view()
+    }
+
+    /// Eye position as a vector.
+    pub fn eye(&self) -> Vec3 {
+        self.eye.into()
+    }
+}
+
+/// A directional light.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Light {
+    /// The direction the light travels, in world space (need not be normalised).
+    pub direction: [f32; 3],
+    /// Radiance scale (≥ 0).
+    pub intensity: f32,
+}
+
+impl Default for Light {
+    fn default() -> Self {
+        Self {
+            direction: [0.25, -0.45, 1.0],
+            intensity: 1.0,
+        }
+    }
+}
+
+impl Light {
+    /// `ωi` in world space: the unit vector from a surface point towards the light,
+    /// `−normalize(direction)`.
+    pub fn towards_light(&self) -> Vec3 {
+        -Vec3::from(self.direction).normalize_or_zero()
+    }
+}
+
+/// Which mesh to draw and where. A `[mesh]` section gives exactly one of `path` and
+/// `builtin`; without a `[mesh]` section the built-in snake is used.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MeshSpec {
+    /// OBJ file (made absolute against the scene file's directory on load).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub path: Option<PathBuf>,
+    /// `snake`, `sphere` or `plane` ([`Mesh::builtin`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub builtin: Option<String>,
+    #[serde(default)]
+    pub translate: [f32; 3],
+    /// Euler angles in degrees, applied about world `x`, then `y`, then `z`.
+    #[serde(default)]
+    pub rotate_deg: [f32; 3],
+    /// Uniform scale (> 0).
+    #[serde(default = "one")]
+    pub scale: f32,
+}
+
+fn one() -> f32 {
+    1.0
+}
+
+impl Default for MeshSpec {
+    fn default() -> Self {
+        Self {
+            path: None,
+            builtin: Some("snake".into()),
+            translate: [0.0; 3],
+            rotate_deg: [0.0; 3],
+            scale: 1.0,
+        }
+    }
+}
+
+impl MeshSpec {
+    /// Object → world matrix: `translate · Rz · Ry · Rx · scale`.
+    pub fn model_matrix(&self) -> Mat4 {
+        let [rx, ry, rz] = self.rotate_deg.map(f32::to_radians);
+        Mat4::from_translation(self.translate.into())
+            * Mat4::from_rotation_z(rz)
+            * Mat4::from_rotation_y(ry)
+            * Mat4::from_rotation_x(rx)
+            * Mat4::from_scale(Vec3::splat(self.scale))
+    }
+
+    /// The mesh in object space (no transform applied).
+    pub fn load_untransformed(&self) -> Result<Mesh> {
+        match (&self.path, &self.builtin) {
+            (Some(p), None) => Mesh::load_obj(p),
+            (None, Some(b)) => Mesh::builtin(b).ok_or_else(|| {
+                Error::invalid(
+                    "mesh",
+                    format!(
+                        "unknown builtin `{b}`; expected one of {}",
+                        Mesh::BUILTIN_NAMES.join(", ")
+                    ),
+                )
+            }),
+            _ => Err(Error::invalid(
+                "mesh",
+                "give exactly one of `path` and `builtin`",
+            )),
+        }
+    }
+
+    /// The mesh in **world space**: [`Self::model_matrix`] is already applied to positions,
+    /// normals and tangents, so draw it with an identity model matrix.
+    pub fn load(&self) -> Result<Mesh> {
+        let mut mesh = self.load_untransformed()?;
+        mesh.transform(self.model_matrix());
+        Ok(mesh)
+    }
+}
+
+/// Image size, exposure and background.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Output {
+    /// Pixels, 1..=8192.
+    pub width: u32,
+    /// Pixels, 1..=8192.
+    pub height: u32,
+    /// Linear multiplier applied before the sRGB curve (> 0).
+    pub exposure: f32,
+    /// Linear sRGB colour where no surface is hit.
+    pub background: [f32; 3],
+}
+
+impl Default for Output {
+    fn default() -> Self {
+        Self {
+            width: 512,
+            height: 512,
+            exposure: 1.0,
+            background: [0.02, 0.02, 0.02],
+        }
+    }
+}
+
+impl Output {
+    /// `width / height`.
+    pub fn aspect(&self) -> f32 {
+        self.width as f32 / self.height as f32
+    }
+}
+
+/// Texture blending (thesis Algorithm 4): the texture colour is mixed with the diffraction
+/// colour, `c = (1 − w_diffuse)·c_diffraction + (1 − α)·c_texture + w_diffuse·c_texture`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TextureSpec {
+    /// sRGB PNG looked up by the mesh UVs (made absolute against the scene file's directory).
+    pub path: PathBuf,
+    /// Weight of the diffuse texture part, in [0, 1].
+    #[serde(default = "default_w_diffuse")]
+    pub w_diffuse: f32,
+}
+
+fn default_w_diffuse() -> f32 {
+    0.3
+}
+
+impl TextureSpec {
+    /// Reads the texture: `(width, height, sRGB-encoded RGB bytes)`, top row first.
+    pub fn load(&self) -> Result<(u32, u32, Vec<[u8; 3]>)> {
+        crate::image_io::read_png_rgb8(&self.path)
+    }
+}
+
+/// A complete scene.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Scene {
+    #[serde(default)]
+    pub camera: Camera,
+    #[serde(default)]
+    pub light: Light,
+    #[serde(default)]
+    pub mesh: MeshSpec,
+    #[serde(default)]
+    pub material: Material,
+    #[serde(default)]
+    pub output: Output,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub texture: Option<TextureSpec>,
+}
+
+impl Default for Scene {
+    /// The embedded default scene ([`Scene::default_scene`]).
+    fn default() -> Self {
+        Self::default_scene()
+    }
+}
+
+/// 1-based line and column of a byte offset.
+fn line_col(text: &str, offset: usize) -> (usize, usize) {
+    let offset = offset.min(text.len());
+    let before = text.get(..offset).unwrap_or(text);
+    let line = before.matches('\n').count() + 1;
+    let col = before.rsplit('\n').next().map_or(0, |l| l.chars().count()) + 1;
+    (line, col)
+}
+
+impl Scene {
+    /// Parses the embedded `assets/default_scene.toml`. It is part of the build and covered
+    /// by tests, so it cannot fail at run time; should it ever, the hard-coded section
+    /// defaults (which the tests keep identical to it) are used.
+    pub fn default_scene() -> Scene {
+        Self::from_toml_str(DEFAULT_SCENE_TOML, Path::new("assets/default_scene.toml"))
+            .unwrap_or_else(|_| Scene {
+                camera: Camera::default(),
+                light: Light::default(),
+                mesh: MeshSpec::default(),
+                material: Material::default(),
+                output: Output::default(),
+                texture: None,
+            })
+    }
+
+    /// Reads and validates a scene file.
+    pub fn load(path: &Path) -> Result<Scene> {
+        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        Self::from_toml_str(&text, path)
+    }
+
+    /// Parses and validates scene text. `origin` is the scene file's path: it names the file
+    /// in errors, and relative mesh, texture and height-field paths are resolved against its
+    /// directory.
+    pub fn from_toml_str(text: &str, origin: &Path) -> Result<Scene> {
+        let mut scene: Scene = toml::from_str(text).map_err(|e| {
+            let msg = match e.span() {
+                Some(span) => {
+                    let (line, col) = line_col(text, span.start);
+                    format!("line {line}, column {col}: {}", e.message().trim())
+                }
+                // Without a span the full report is the best there is; keep it on one line.
+                None => e
+                    .to_string()
+                    .split_whitespace()
+                    .collect::<Vec<_>>()
+                    .join(" "),
+            };
+            Error::parse(origin, msg)
+        })?;
+        let base = origin.parent().unwrap_or(Path::new(""));
+        if let Some(p) = &scene.mesh.path {
+            scene.mesh.path = Some(base.join(p));
+        }
+        if let Some(t) = &mut scene.texture {
+            t.path = base.join(&t.path);
+        }
+        let hf = &scene.material.heightfield;
+        if !hf.starts_with("builtin:") && !hf.is_empty() && Path::new(hf).is_relative() {
+            scene.material.heightfield = base.join(hf).to_string_lossy().into_owned();
+        }
+        scene.validate().map_err(|msg| Error::parse(origin, msg))?;
+        Ok(scene)
+    }
+
+    /// Object → world matrix of the mesh ([`MeshSpec::model_matrix`]).
+    pub fn model_matrix(&self) -> Mat4 {
+        self.mesh.model_matrix()
+    }
+
+    /// Semantic checks; the message names the section and key.
+    fn validate(&self) -> std::result::Result<(), String> {
+        let finite3 = |what: &str, v: [f32; 3]| {
+            if v.iter().all(|c| c.is_finite()) {
+                Ok(())
+            } else {
+                Err(format!("{what} = {v:?}: all components must be finite"))
+            }
+        };
+        let positive = |what: &str, x: f32| {
+            if x.is_finite() && x > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("{what} = {x}: must be positive and finite"))
+            }
+        };
+
+        let c = &self.camera;
+        finite3("[camera] eye", c.eye)?;
+        finite3("[camera] target", c.target)?;
+        finite3("[camera] up", c.up)?;
+        if !(c.fov_y_deg.is_finite() && c.fov_y_deg > 0.0 && c.fov_y_deg < 180.0) {
+            return Err(format!(
+                "[camera] fov_y_deg = {}: must be between 0 and 180 degrees (exclusive)",
+                c.fov_y_deg
+            ));
+        }
+        positive("[camera] near", c.near)?;
+        positive("[camera] far", c.far)?;
+        if c.far <= c.near {
+            return Err(format!(
+                "[camera] far = {} must be greater than near = {}",
+                c.far, c.near
+            ));
+        }
+        let view = Vec3::from(c.target) - Vec3::from(c.eye);
+        let Some(view) = view.try_normalize() else {
+            return Err("[camera] eye and target are the same point".into());
+        };
+        let Some(up) = Vec3::from(c.up).try_normalize() else {
+            return Err("[camera] up is the zero vector".into());
+        };
+        if view.cross(up).length() < 1e-3 {
+            return Err(format!(
+                "[camera] up = {:?} is parallel to the view direction (target − eye)",
+                c.up
+            ));
+        }
+
+        let l = &self.light;
+        finite3("[light] direction", l.direction)?;
+        if Vec3::from(l.direction).try_normalize().is_none() {
+            return Err("[light] direction is the zero vector".into());
+        }
+        if !(l.intensity.is_finite() && l.intensity >= 0.0) {
+            return Err(format!(
+                "[light] intensity = {}: must be finite and ≥ 0",
+                l.intensity
+            ));
+        }
+
+        let m = &self.mesh;
+        match (&m.path, &m.builtin) {
+            (Some(_), Some(_)) => {
+                return Err("[mesh] give either `path` or `builtin`, not both".into())
+            }
+            (None, None) => return Err("[mesh] needs `path` or `builtin`".into()),
+            (None, Some(b)) if !Mesh::BUILTIN_NAMES.contains(&b.as_str()) => {
+                return Err(format!(
+                    "[mesh] builtin = \"{b}\": expected one of {}",
+                    Mesh::BUILTIN_NAMES.join(", ")
+                ))
+            }
+            _ => {}
+        }
+        finite3("[mesh] translate", m.translate)?;
+        finite3("[mesh] rotate_deg", m.rotate_deg)?;
+        positive("[mesh] scale", m.scale)?;
+
+        let o = &self.output;
+        for (what, v) in [("width", o.width), ("height", o.height)] {
+            if !(1..=8192).contains(&v) {
+                return Err(format!("[output] {what} = {v}: must be 1..=8192 pixels"));
+            }
+        }
+        positive("[output] exposure", o.exposure)?;
+        finite3("[output] background", o.background)?;
+        if o.background.iter().any(|&c| c < 0.0) {
+            return Err(format!(
+                "[output] background = {:?}: must not be negative",
+                o.background
+            ));
+        }
+
+        if let Some(t) = &self.texture {
+            if t.path.as_os_str().is_empty() {
+                return Err("[texture] path is empty".into());
+            }
+            if !(t.w_diffuse.is_finite() && (0.0..=1.0).contains(&t.w_diffuse)) {
+                return Err(format!(
+                    "[texture] w_diffuse = {}: must be in [0, 1]",
+                    t.w_diffuse
+                ));
+            }
+        }
+
+        if self.material.heightfield.is_empty() {
+            return Err("[material] heightfield is empty".into());
+        }
+        self.material
+            .validate()
+            .map_err(|e| format!("[material] {e}"))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn embedded_default_parses_and_equals_the_section_defaults() {
+        let parsed = Scene::from_toml_str(DEFAULT_SCENE_TOML, Path::new("x/default.toml"))
+            .expect("embedded default scene");
+        assert_eq!(parsed.camera, Camera::default());
+        assert_eq!(parsed.light, Light::default());
+        assert_eq!(parsed.mesh, MeshSpec::default());
+        assert_eq!(parsed.material, Material::default());
+        assert_eq!(parsed.output, Output::default());
+        assert_eq!(parsed.texture, None);
+        assert_eq!(Scene::default(), parsed);
+        // An empty file is the default scene too.
+        assert_eq!(
+            Scene::from_toml_str("", Path::new("e.toml")).unwrap(),
+            parsed
+        );
+    }
+
+    #[test]
+    fn a_scene_serialises_to_toml_that_parses_back() {
+        let mut s = Scene::default_scene();
+        s.texture = Some(TextureSpec {
+            path: "/t/skin.png".into(),
+            w_diffuse: 0.25,
+        });
+        s.material.dh_um = Some(0.05);
+        let text = toml::to_string(&s).expect("serialise");
+        assert_eq!(
+            Scene::from_toml_str(&text, Path::new("/x/s.toml")).unwrap(),
+            s
+        );
+    }
+
+    #[test]
+    fn line_col_counts_from_one() {
+        assert_eq!(line_col("ab\ncd", 0), (1, 1));
+        assert_eq!(line_col("ab\ncd", 4), (2, 2));
+        assert_eq!(line_col("ab", 99), (1, 3));
+    }
+
+    #[test]
+    fn vulkan_clip_space_has_y_down_and_depth_0_to_1() {
+        let cam = Camera {
+            eye: [0.0, 0.0, 5.0],
+            target: [0.0, 0.0, 0.0],
+            up: [0.0, 1.0, 0.0],
+            fov_y_deg: 60.0,
+            near: 1.0,
+            far: 10.0,
+        };
+        let m = cam.view_proj(1.0);
+        let ndc = |p: Vec3| {
+            let c = m * p.extend(1.0);
+            c.truncate() / c.w
+        };
+        // A point above the target appears in the upper half: negative y in Vulkan NDC.
+        assert!(ndc(Vec3::new(0.0, 1.0, 0.0)).y < 0.0);
+        assert!(ndc(Vec3::new(1.0, 0.0, 0.0)).x > 0.0);
+        assert!(
+            ndc(Vec3::new(0.0, 0.0, 4.0)).z.abs() < 1e-5,
+            "near plane → 0"
+        );
+        assert!(
+            (ndc(Vec3::new(0.0, 0.0, -5.0)).z - 1.0).abs() < 1e-5,
+            "far plane → 1"
+        );
+    }
+}
