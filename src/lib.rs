@@ -11,6 +11,7 @@
 pub mod brdf;
 pub mod colour;
 pub mod error;
+pub mod eval;
 pub mod fsutil;
 pub mod heightfield;
 pub mod image_io;

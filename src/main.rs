@@ -19,6 +19,8 @@ enum Command {
     Brdf(diffract::brdf::query::BrdfArgs),
     /// Generate a test grating height field (PNG or .f32 with a .toml sidecar).
     Heightfield(diffract::heightfield::HeightfieldArgs),
+    /// Grating-equation experiment (MODEL §8): period estimated from first-order peaks.
+    EvalGrating(diffract::eval::EvalArgs),
 }
 
 fn main() -> ExitCode {
@@ -26,6 +28,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Brdf(a) => diffract::brdf::query::run(a),
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
+        Command::EvalGrating(a) => diffract::eval::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
