@@ -82,7 +82,7 @@ impl ColourTable {
     /// Builds the table for a step of `step_nm` nanometres (must divide 400: 1, 2, 4, 5, 8, 10, ...).
     pub fn new(step_nm: u32) -> Result<Self> {
         let span = LAMBDA_MAX_NM - LAMBDA_MIN_NM;
-        if step_nm == 0 || span % step_nm != 0 {
+        if step_nm == 0 || !span.is_multiple_of(step_nm) {
             return Err(Error::invalid(
                 "wavelength step",
                 format!("{step_nm} nm; it must be a positive divisor of 400 nm (1, 2, 4, 5, 8, 10, 16, 20, 25, 40, 50, ...)"),

@@ -264,7 +264,7 @@ impl Mesh {
     /// `assets/<name>.obj`).
     pub fn builtin(name: &str) -> Option<Mesh> {
         match name {
-            "snake" => Some(Mesh::snake(2.0, 0.08, 100, 24)),
+            "snake" => Some(Mesh::snake(2.0, 0.08, 160, 48)),
             "sphere" => Some(Mesh::sphere(1.0, 64, 32)),
             "plane" => Some(Mesh::plane(2.0, 16)),
             _ => None,
@@ -361,6 +361,70 @@ impl Mesh {
             (p, None)
         });
         build_generated("snake", raw)
+    }
+
+    /// Facets the mesh into flat "scales", as on a snake's skin: every pair of consecutive
+    /// triangles (a quad of the built-in grids; a lone last triangle stands alone) becomes
+    /// one flat facet with the averaged face normal, and its frame is rolled about the
+    /// facet's bitangent by a seeded random angle in `±roll_deg` and pitched about its
+    /// tangent by one in `±pitch_deg`.
+    ///
+    /// A 1D grating across `T` diffracts only where `v = −(ωi+ωr)·B ≈ 0` and `u` meets an
+    /// order, both within the coherence lobe (~0.005): on a smooth surface that is a
+    /// hairline. Rolling spreads `u` and pitching spreads `v` from scale to scale, so whole
+    /// scales light up in the colours of their orders, as on real iridescent skin.
+    pub fn scales(&self, roll_deg: f32, pitch_deg: f32, seed: u64) -> Mesh {
+        let mut state = seed ^ 0x05CA_1E5E_DD1F_FAC7_u64;
+        let mut next_unit = move || {
+            // splitmix64 → uniform in [−1, 1)
+            state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+            let mut z = state;
+            z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+            z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+            z ^= z >> 31;
+            (z >> 11) as f64 / (1u64 << 52) as f64 - 1.0
+        };
+        let roll = f64::from(roll_deg).to_radians();
+        let pitch = f64::from(pitch_deg).to_radians();
+        let mut out = Mesh {
+            vertices: Vec::with_capacity(self.indices.len()),
+            indices: Vec::with_capacity(self.indices.len()),
+            name: format!(
+                "{} (scales, roll ±{roll_deg}°, pitch ±{pitch_deg}°)",
+                self.name
+            ),
+        };
+        for facet in self.indices.chunks(6) {
+            let corner = |i: &u32| self.vertices[*i as usize];
+            let p = |i: &u32| v3(corner(i).position);
+            let mut n = DVec3::ZERO;
+            let mut t = DVec3::ZERO;
+            for tri in facet.chunks_exact(3) {
+                n += (p(&tri[1]) - p(&tri[0])).cross(p(&tri[2]) - p(&tri[0]));
+            }
+            for i in facet {
+                let tg = corner(i).tangent;
+                t += v3([tg[0], tg[1], tg[2]]);
+            }
+            let n = n.normalize_or(v3(corner(&facet[0]).normal));
+            let t = (t - n * n.dot(t))
+                .try_normalize()
+                .unwrap_or_else(|| grating_direction(n.as_vec3()).as_dvec3());
+            let (s, c) = (roll * next_unit()).sin_cos();
+            let (n, t) = (n * c + t * s, t * c - n * s);
+            // Pitch: rotate the normal towards the bitangent (about the tangent).
+            let b = n.cross(t);
+            let (s, c) = (pitch * next_unit()).sin_cos();
+            let n = n * c + b * s;
+            for i in facet {
+                let mut v = corner(i);
+                v.normal = f3(n);
+                v.tangent = [t.x as f32, t.y as f32, t.z as f32, v.tangent[3]];
+                out.indices.push(out.vertices.len() as u32);
+                out.vertices.push(v);
+            }
+        }
+        out
     }
 
     /// Applies an affine transform: positions by `m`, normals by its inverse transpose,
@@ -773,7 +837,9 @@ fn vertex_tangents(
 /// snout): zero at both tips.
 fn snake_profile(s: f64) -> f64 {
     let s = s.clamp(0.0, 1.0);
-    let tail = (s / 0.45).min(1.0).powf(0.65);
+    // The tail tapers over the last 30% of the body: a level trunk keeps the skin's
+    // bitangent horizontal, so a horizontal grating condition holds along it.
+    let tail = (s / 0.3).min(1.0).powf(0.65);
     let neck = 1.0 - 0.12 * (-((s - 0.86) / 0.03).powi(2)).exp();
     // Circular snout: with d = (1 − s)/0.07, 1 − (1 − d)² = d(2 − d), exactly 0 at s = 1 so
     // the tip ring collapses to one point (a clean triangle fan).
@@ -962,7 +1028,7 @@ mod tests {
     }
 
     #[test]
-    fn obj_round_trip_is_exact() {
+    fn obj_round_trip_keeps_every_vertex() {
         let d = tmp_dir("roundtrip");
         for m in [
             Mesh::plane(1.5, 3),
@@ -975,7 +1041,23 @@ mod tests {
             assert_eq!(back.triangle_count(), m.triangle_count());
             for (ta, tb) in m.indices.chunks_exact(3).zip(back.indices.chunks_exact(3)) {
                 for k in 0..3 {
-                    assert_eq!(m.vertices[ta[k] as usize], back.vertices[tb[k] as usize]);
+                    let (a, b) = (m.vertices[ta[k] as usize], back.vertices[tb[k] as usize]);
+                    // Positions and UVs are exact; the loader re-normalises directions,
+                    // which may move them by an ulp.
+                    assert_eq!(
+                        (a.position, a.uv, a.tangent[3]),
+                        (b.position, b.uv, b.tangent[3])
+                    );
+                    let close =
+                        |x: [f32; 3], y: [f32; 3]| (0..3).all(|i| (x[i] - y[i]).abs() <= 1e-6);
+                    assert!(close(a.normal, b.normal), "{a:?} vs {b:?}");
+                    assert!(
+                        close(
+                            [a.tangent[0], a.tangent[1], a.tangent[2]],
+                            [b.tangent[0], b.tangent[1], b.tangent[2]]
+                        ),
+                        "{a:?} vs {b:?}"
+                    );
                 }
             }
         }

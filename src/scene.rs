@@ -115,6 +115,13 @@ pub struct MeshSpec {
     /// Uniform scale (> 0).
     #[serde(default = "one")]
     pub scale: f32,
+    /// Flat skin scales ([`Mesh::scales`]) rolled about the bitangent by up to this many
+    /// degrees. With both scale angles 0 the mesh keeps smooth shading.
+    #[serde(default)]
+    pub scale_roll_deg: f32,
+    /// Flat skin scales pitched about the tangent by up to this many degrees.
+    #[serde(default)]
+    pub scale_pitch_deg: f32,
 }
 
 fn one() -> f32 {
@@ -129,6 +136,8 @@ impl Default for MeshSpec {
             translate: [0.0; 3],
             rotate_deg: [0.0; 3],
             scale: 1.0,
+            scale_roll_deg: 0.0,
+            scale_pitch_deg: 0.0,
         }
     }
 }
@@ -168,6 +177,9 @@ impl MeshSpec {
     /// normals and tangents, so draw it with an identity model matrix.
     pub fn load(&self) -> Result<Mesh> {
         let mut mesh = self.load_untransformed()?;
+        if self.scale_roll_deg > 0.0 || self.scale_pitch_deg > 0.0 {
+            mesh = mesh.scales(self.scale_roll_deg, self.scale_pitch_deg, 1);
+        }
         mesh.transform(self.model_matrix());
         Ok(mesh)
     }
@@ -401,6 +413,14 @@ impl Scene {
         finite3("[mesh] translate", m.translate)?;
         finite3("[mesh] rotate_deg", m.rotate_deg)?;
         positive("[mesh] scale", m.scale)?;
+        for (name, a) in [
+            ("scale_roll_deg", m.scale_roll_deg),
+            ("scale_pitch_deg", m.scale_pitch_deg),
+        ] {
+            if !(0.0..=45.0).contains(&a) {
+                return Err(format!("[mesh] {name} = {a}: expected 0 to 45 degrees"));
+            }
+        }
 
         let o = &self.output;
         for (what, v) in [("width", o.width), ("height", o.height)] {
@@ -443,21 +463,39 @@ mod tests {
     use super::*;
 
     #[test]
-    fn embedded_default_parses_and_equals_the_section_defaults() {
+    fn embedded_default_parses_and_keeps_general_section_defaults() {
         let parsed = Scene::from_toml_str(DEFAULT_SCENE_TOML, Path::new("x/default.toml"))
             .expect("embedded default scene");
-        assert_eq!(parsed.camera, Camera::default());
-        assert_eq!(parsed.light, Light::default());
-        assert_eq!(parsed.mesh, MeshSpec::default());
-        assert_eq!(parsed.material, Material::default());
-        assert_eq!(parsed.output, Output::default());
-        assert_eq!(parsed.texture, None);
         assert_eq!(Scene::default(), parsed);
-        // An empty file is the default scene too.
+        assert_eq!(parsed.material, Material::default());
+        assert_eq!(parsed.texture, None);
+        // The default scene sets up its own diffraction geometry (see the file); a scene
+        // that leaves a section out gets general-purpose defaults instead.
+        let empty = Scene::from_toml_str("", Path::new("e.toml")).unwrap();
+        assert_eq!(empty.camera, Camera::default());
+        assert_eq!(empty.light, Light::default());
+        assert_eq!(empty.mesh, MeshSpec::default());
+        assert_eq!(empty.output, Output::default());
         assert_eq!(
-            Scene::from_toml_str("", Path::new("e.toml")).unwrap(),
-            parsed
+            parsed.mesh,
+            MeshSpec {
+                scale_roll_deg: 10.0,
+                ..MeshSpec::default()
+            }
         );
+        assert_eq!(
+            parsed.output,
+            Output {
+                exposure: 60.0,
+                ..Output::default()
+            }
+        );
+        // Light and camera in one vertical plane at 45° on either side: ωi + ωr is vertical,
+        // so v = 0 wherever the skin's bitangent is horizontal.
+        let wi = parsed.light.towards_light();
+        let wr = (parsed.camera.eye() - Vec3::from(parsed.camera.target)).normalize();
+        let s = wi + wr;
+        assert!(s.x.abs() < 1e-3 && s.z.abs() < 1e-3, "{s}");
     }
 
     #[test]
