@@ -13,10 +13,12 @@ pub mod colour;
 pub mod error;
 pub mod eval;
 pub mod fsutil;
+pub mod gpu;
 pub mod heightfield;
 pub mod image_io;
 pub mod material;
 pub mod mesh;
+pub mod render;
 pub mod scene;
 pub mod spectrum;
 

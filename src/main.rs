@@ -15,6 +15,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// Render a scene (default: the embedded snake) or a BRDF map on the GPU.
+    Render(diffract::render::RenderArgs),
     /// Evaluate the BRDF for a CSV of directions and wavelengths (reference or model).
     Brdf(diffract::brdf::query::BrdfArgs),
     /// Generate a test grating height field (PNG or .f32 with a .toml sidecar).
@@ -26,6 +28,7 @@ enum Command {
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match &cli.command {
+        Command::Render(a) => diffract::render::run(a),
         Command::Brdf(a) => diffract::brdf::query::run(a),
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),

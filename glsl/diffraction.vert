@@ -1,0 +1,57 @@
+#version 450
+// Thesis Algorithm 2 (vertex diffraction shader): the tangent frame (N, T, B) from the
+// vertex normal and tangent via the model matrix, ωi and ωr projected into it, and the
+// clip-space position p = P·C⁻¹·M·p_local (eq. 1.2).
+#include "interface.glsl"
+
+layout(location = 0) in vec3 inPosition;
+layout(location = 1) in vec3 inNormal;
+layout(location = 2) in vec4 inTangent; // w = ±1: handedness, B = w·(N × T) (mesh.rs)
+layout(location = 3) in vec2 inUv;
+
+layout(push_constant) uniform Transforms {
+    mat4 model;    // M
+    mat4 viewProj; // P·C⁻¹ (Vulkan clip space)
+} transforms;
+
+layout(location = 0) out vec3 outWi;
+layout(location = 1) out vec3 outWr;
+layout(location = 2) out vec2 outUv;
+
+// projectVectorOnTo(): coordinates of v in the orthonormal frame (T, B, N).
+vec3 projectVectorOnTo(vec3 v, vec3 t, vec3 b, vec3 n) {
+    return vec3(dot(v, t), dot(v, b), dot(v, n));
+}
+
+vec3 safeNormalize(vec3 v, vec3 fallback) {
+    float l = length(v);
+    return l > 1e-20 ? v / l : fallback;
+}
+
+void main() {
+    // Lines 2–5. Normals transform with the inverse transpose, so non-uniform scale keeps
+    // them perpendicular; T is re-orthogonalised against N so the frame stays orthonormal.
+    mat3 m = mat3(transforms.model);
+    vec3 n = safeNormalize(transpose(inverse(m)) * inNormal, vec3(0.0, 0.0, 1.0));
+    vec3 t = m * inTangent.xyz;
+    vec3 anyPerp = normalize(cross(n, abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    t = safeNormalize(t - n * dot(n, t), anyPerp);
+    // MODEL §1 has B = N × T; a mirrored UV map (w = −1) mirrors the grating with the texture.
+    vec3 b = (inTangent.w < 0.0 ? -1.0 : 1.0) * cross(n, t);
+
+    // Lines 6–10: ωr towards the eye, ωi towards the (directional) light.
+    vec4 position = transforms.model * vec4(inPosition, 1.0);
+    vec3 viewerDir = params.eyeWorld.xyz - position.xyz / position.w;
+    vec3 lightDir = -safeNormalize(params.lightDirWorld.xyz, vec3(0.0, 0.0, -1.0));
+    outWi = safeNormalize(projectVectorOnTo(lightDir, t, b, n), vec3(0.0, 0.0, 1.0));
+    // Line 10 normalises ωr per vertex; it is normalised per fragment instead, because
+    // eye − position is linear in the position: interpolated unnormalised it is the exact
+    // per-pixel direction on flat triangles, while normalised vectors interpolate wrongly
+    // (and diffraction lobes are only ~0.005 wide in u).
+    outWr = projectVectorOnTo(viewerDir, t, b, n);
+    // OBJ texture coordinates have v up; texture rows are stored top first.
+    outUv = vec2(inUv.x, 1.0 - inUv.y);
+
+    // Line 11.
+    gl_Position = transforms.viewProj * position;
+}

@@ -1,0 +1,62 @@
+// Shared interface of the diffraction shaders: specialisation constants (MODEL §7: one
+// SPIR-V module, one pipeline per feature set), descriptor bindings and constants.
+// Included by diffraction.vert, brdfmap.vert and diffraction.frag; the Rust side mirrors the
+// layout in src/render.rs (`ParamsUbo`) and src/gpu/pipeline.rs (`Variant`).
+#ifndef INTERFACE_GLSL
+#define INTERFACE_GLSL
+
+// --- specialisation constants --------------------------------------------------------
+layout(constant_id = 0) const int TERMS = 8;           // highest term index T (terms 0..T)
+layout(constant_id = 1) const int WINDOW_RADIUS = 1;   // gather radius R: (2R+1)² taps
+layout(constant_id = 2) const int LAMBDA_STEP_NM = 5;  // Δλ; divides 400 nm
+layout(constant_id = 3) const int EXPANSION = 0;       // EXPANSION_TAYLOR / _CHEBYSHEV
+layout(constant_id = 4) const bool SHADOWING = true;   // Stam's V-cavity S
+layout(constant_id = 5) const bool FRESNEL = true;     // Schlick R/R0
+layout(constant_id = 6) const bool TEXTURE_BLENDING = false; // thesis Algorithm 4
+layout(constant_id = 7) const int STORAGE = 0;         // STORAGE_RG32F / _RG16F / _UNORM16
+layout(constant_id = 8) const int OUTPUT_MODE = 0;     // MODE_MESH / _MAP_XYZ / _MAP_SPECTRAL
+
+const int EXPANSION_TAYLOR = 0;
+const int EXPANSION_CHEBYSHEV = 1;
+const int STORAGE_RG32F = 0;
+const int STORAGE_RG16F = 1;
+const int STORAGE_UNORM16 = 2;
+const int MODE_MESH = 0;
+const int MODE_MAP_XYZ = 1;
+const int MODE_MAP_SPECTRAL = 2;
+
+const int LAMBDA_MIN_NM = 380;
+const int LAMBDA_MAX_NM = 780;
+// Samples of the trapezoid rule over [380, 780] nm (MODEL §5).
+const int LAMBDA_COUNT = (LAMBDA_MAX_NM - LAMBDA_MIN_NM) / LAMBDA_STEP_NM + 1;
+// Capacity of the per-term decode table; Material::validate caps T at 64.
+const int MAX_TERMS = 65;
+const float PI = 3.14159265358979;
+
+// --- descriptor set 0 ----------------------------------------------------------------
+layout(set = 0, binding = 0, std140) uniform Params {
+    vec4 eyeWorld;        // xyz: eye position in world space (mesh mode)
+    vec4 lightDirWorld;   // xyz: direction the light travels, world space (mesh mode)
+    vec4 lighting;        // x: light intensity, y: exposure, z: w_diffuse (Algorithm 4)
+    vec4 mapWi;           // xyz: ωi of a BRDF map (tangent space), w: λ in µm (spectral map)
+    vec4 mapInfo;         // x: map size S in pixels
+    ivec4 spectrumSize;   // x: N_x, y: N_y, z: b_x = floor(N_x/2), w: b_y = floor(N_y/2)
+    ivec4 band;           // x0, y0, width, height of the stored texels
+    vec4 lookup;          // x: dH (µm), y: 1/(2σx²), z: 1/(2σy²), w: Chebyshev half range A (µm)
+    vec4 shading;         // x: Schlick R0
+    // Per term: value = (x + stored.r * y, z + stored.g * w) (thesis eq. 1.1 inverted).
+    vec4 decode[MAX_TERMS];
+} params;
+
+// The DFT terms (Algorithm 1): one layer per term, the cropped band only.
+layout(set = 0, binding = 1) uniform sampler2DArray dftTerms;
+
+// Per spectral sample j: xyz = CIE weight of ColourTable::weights[j], w = λ_j in nm.
+layout(set = 0, binding = 2, std430) readonly buffer ColourWeights {
+    vec4 colourWeights[];
+};
+
+// Surface texture of Algorithm 4 (a 1×1 white dummy when the scene has none).
+layout(set = 0, binding = 3) uniform sampler2D surfaceTexture;
+
+#endif

@@ -1,0 +1,590 @@
+//! The headless Vulkan device layer: loader, instance (with the Khronos validation layer and
+//! a debug messenger when asked), physical-device choice, one graphics queue, the
+//! gpu-allocator instance, object naming and one-shot command submission.
+//!
+//! Ownership is a chain of `Arc`s so destruction order is enforced by the types: every
+//! resource holds an `Arc<Device>`, the device holds an `Arc<Instance>`, and each `Drop`
+//! destroys its own handle before the fields it depends on are released.
+
+use std::ffi::{c_void, CStr, CString};
+use std::mem::ManuallyDrop;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
+
+use crate::{Error, Result};
+
+const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
+/// `pMessageIdName` of messages from the Vulkan loader itself.
+const LOADER_MESSAGE_ID: &str = "Loader Message";
+
+/// Counts validation WARNING/ERROR messages (the "canary" of wgpu's test suite): tests fail
+/// when it is non-zero. The first few messages are kept for the failure report.
+#[derive(Debug, Default)]
+pub struct Canary {
+    count: AtomicUsize,
+    messages: Mutex<Vec<String>>,
+}
+
+impl Canary {
+    /// Messages seen so far.
+    pub fn count(&self) -> usize {
+        self.count.load(Ordering::SeqCst)
+    }
+
+    /// Text of the first messages (at most 16).
+    pub fn messages(&self) -> Vec<String> {
+        lock(&self.messages).clone()
+    }
+
+    fn record(&self, text: String) {
+        self.count.fetch_add(1, Ordering::SeqCst);
+        let mut m = lock(&self.messages);
+        if m.len() < 16 {
+            m.push(text);
+        }
+    }
+}
+
+/// Locks a mutex, recovering the data if a panicking thread poisoned it (the guarded data
+/// here stays consistent across a panic: counters and append-only lists).
+fn lock<T>(m: &Mutex<T>) -> MutexGuard<'_, T> {
+    m.lock().unwrap_or_else(|p| p.into_inner())
+}
+
+/// Debug-utils callback: prints the message and feeds the canary.
+///
+/// # Safety
+/// Called by the Vulkan loader with a valid callback-data pointer and the `user_data` given
+/// at messenger creation, which points at the `Canary` owned by the live [`Instance`].
+unsafe extern "system" fn debug_callback(
+    severity: vk::DebugUtilsMessageSeverityFlagsEXT,
+    types: vk::DebugUtilsMessageTypeFlagsEXT,
+    data: *const vk::DebugUtilsMessengerCallbackDataEXT<'_>,
+    user_data: *mut c_void,
+) -> vk::Bool32 {
+    // SAFETY: the loader passes a valid pointer (or null, handled) for the duration of the
+    // call; its strings are NUL-terminated per the VkDebugUtilsMessengerCallbackDataEXT rules.
+    let (id, msg) = match unsafe { data.as_ref() } {
+        Some(d) => unsafe {
+            (
+                d.message_id_name_as_c_str()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+                d.message_as_c_str()
+                    .map(|s| s.to_string_lossy().into_owned())
+                    .unwrap_or_default(),
+            )
+        },
+        None => (String::new(), String::new()),
+    };
+    let text = format!("[vulkan {severity:?} {types:?}] {id}: {msg}");
+    eprintln!("{text}");
+    // Suppressed: "Loader Message" reports problems of *other* installed drivers (e.g. an
+    // NVIDIA ICD without graphics support inside a compute container) through the same
+    // messenger. They say nothing about this program's API use, and a missing driver
+    // surfaces as an error of its own (NoVulkan).
+    if id == LOADER_MESSAGE_ID {
+        return vk::FALSE;
+    }
+    // SAFETY: user_data is `Arc::as_ptr` of the Canary the Instance keeps alive until after
+    // the messenger is destroyed.
+    if let Some(canary) = unsafe { (user_data as *const Canary).as_ref() } {
+        canary.record(text);
+    }
+    vk::FALSE
+}
+
+/// Loader + instance + optional debug messenger.
+pub struct Instance {
+    entry: ash::Entry,
+    pub(crate) raw: ash::Instance,
+    messenger: Option<(ash::ext::debug_utils::Instance, vk::DebugUtilsMessengerEXT)>,
+    debug_utils_enabled: bool,
+    canary: Arc<Canary>,
+}
+
+impl Instance {
+    /// Loads Vulkan and creates an instance. With `validation`, the Khronos validation layer
+    /// (with synchronisation validation when available) and a WARNING/ERROR messenger are
+    /// enabled; a missing layer is an error then, not a silent downgrade.
+    pub fn new(validation: bool) -> Result<Arc<Self>> {
+        // SAFETY: loading the system Vulkan library runs its initialisers; we trust the
+        // installed loader like any Vulkan application does.
+        let entry = unsafe { ash::Entry::load() }
+            .map_err(|e| Error::NoVulkan(format!("cannot load the Vulkan loader: {e}")))?;
+
+        // SAFETY: entry is a loaded Vulkan entry point table.
+        let version = unsafe { entry.try_enumerate_instance_version() }
+            .map_err(Error::vk("vkEnumerateInstanceVersion"))?
+            .unwrap_or(vk::API_VERSION_1_0);
+        if version < vk::API_VERSION_1_1 {
+            return Err(Error::NoVulkan(format!(
+                "the Vulkan loader supports only version {}.{}; 1.1 is needed",
+                vk::api_version_major(version),
+                vk::api_version_minor(version)
+            )));
+        }
+
+        // SAFETY: plain enumeration calls on a loaded entry.
+        let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }
+            .map_err(Error::vk("vkEnumerateInstanceExtensionProperties"))?;
+        let has_ext = |list: &[vk::ExtensionProperties], name: &CStr| {
+            list.iter()
+                .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == name))
+        };
+        let debug_utils_enabled = has_ext(&extensions, ash::ext::debug_utils::NAME);
+        if validation && !debug_utils_enabled {
+            return Err(Error::invalid(
+                "validation",
+                "VK_EXT_debug_utils is not available, so validation messages cannot be collected",
+            ));
+        }
+
+        let mut layers: Vec<*const i8> = Vec::new();
+        let mut ext_names: Vec<*const i8> = Vec::new();
+        if debug_utils_enabled {
+            ext_names.push(ash::ext::debug_utils::NAME.as_ptr());
+        }
+        let mut sync_validation = false;
+        if validation {
+            // SAFETY: plain enumeration call on a loaded entry.
+            let available = unsafe { entry.enumerate_instance_layer_properties() }
+                .map_err(Error::vk("vkEnumerateInstanceLayerProperties"))?;
+            if !available
+                .iter()
+                .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER))
+            {
+                return Err(Error::invalid(
+                    "validation",
+                    "VK_LAYER_KHRONOS_validation is not installed (e.g. apt install vulkan-validationlayers)",
+                ));
+            }
+            layers.push(VALIDATION_LAYER.as_ptr());
+            // SAFETY: enumeration of the extensions a present layer provides.
+            let layer_exts =
+                unsafe { entry.enumerate_instance_extension_properties(Some(VALIDATION_LAYER)) }
+                    .map_err(Error::vk("vkEnumerateInstanceExtensionProperties"))?;
+            if has_ext(&layer_exts, ash::ext::validation_features::NAME) {
+                ext_names.push(ash::ext::validation_features::NAME.as_ptr());
+                sync_validation = true;
+            }
+        }
+
+        let canary = Arc::new(Canary::default());
+        let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
+            .message_severity(
+                vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                    | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+            )
+            .message_type(
+                vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                    | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+            )
+            .pfn_user_callback(Some(debug_callback))
+            .user_data(Arc::as_ptr(&canary) as *mut c_void);
+        let enabled_features = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
+        let mut validation_features =
+            vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled_features);
+
+        let app = vk::ApplicationInfo::default()
+            .application_name(c"diffract")
+            .application_version(1)
+            .engine_name(c"diffract")
+            .api_version(vk::API_VERSION_1_1);
+        let mut create_info = vk::InstanceCreateInfo::default()
+            .application_info(&app)
+            .enabled_layer_names(&layers)
+            .enabled_extension_names(&ext_names);
+        if validation {
+            // Chained so that messages of vkCreateInstance/vkDestroyInstance are caught too.
+            create_info = create_info.push_next(&mut messenger_info);
+            if sync_validation {
+                create_info = create_info.push_next(&mut validation_features);
+            }
+        }
+        // SAFETY: every pointer in create_info (names, chained structs) outlives this call.
+        let raw = unsafe { entry.create_instance(&create_info, None) }.map_err(|e| match e {
+            vk::Result::ERROR_INCOMPATIBLE_DRIVER => Error::NoVulkan(
+                "the Vulkan loader found no usable driver (vkCreateInstance: \
+                 VK_ERROR_INCOMPATIBLE_DRIVER)"
+                    .into(),
+            ),
+            e => Error::vk("vkCreateInstance")(e),
+        })?;
+
+        let mut instance = Instance {
+            entry,
+            raw,
+            messenger: None,
+            debug_utils_enabled,
+            canary,
+        };
+        if validation {
+            let loader = ash::ext::debug_utils::Instance::new(&instance.entry, &instance.raw);
+            // messenger_info was consumed by the chain only as a pointer; reuse its fields.
+            let info = vk::DebugUtilsMessengerCreateInfoEXT {
+                p_next: std::ptr::null(),
+                ..messenger_info
+            };
+            // SAFETY: the instance is live and the callback's user_data (the canary) lives
+            // as long as `instance`, which destroys the messenger first in Drop.
+            let m = unsafe { loader.create_debug_utils_messenger(&info, None) }
+                .map_err(Error::vk("vkCreateDebugUtilsMessengerEXT"))?;
+            instance.messenger = Some((loader, m));
+        }
+        Ok(Arc::new(instance))
+    }
+
+    /// The validation canary (counts WARNING/ERROR messages).
+    pub fn canary(&self) -> &Arc<Canary> {
+        &self.canary
+    }
+}
+
+impl Drop for Instance {
+    fn drop(&mut self) {
+        if let Some((loader, m)) = self.messenger.take() {
+            // SAFETY: created from this instance, destroyed once; no callbacks are pending
+            // because all devices (which hold an Arc to us) are gone.
+            unsafe { loader.destroy_debug_utils_messenger(m, None) };
+        }
+        // SAFETY: every child object was destroyed: devices and resources keep an Arc to
+        // this instance, so this runs only after them.
+        unsafe { self.raw.destroy_instance(None) };
+    }
+}
+
+/// What we know about the chosen physical device.
+#[derive(Debug, Clone)]
+pub struct DeviceInfo {
+    /// `deviceName` of the driver.
+    pub name: String,
+    pub device_type: vk::PhysicalDeviceType,
+    /// Nanoseconds per timestamp tick.
+    pub timestamp_period: f64,
+    /// Valid bits of timestamps on the graphics queue; 0 means no timestamps.
+    pub timestamp_valid_bits: u32,
+    /// Largest 2D image side.
+    pub max_image_dimension_2d: u32,
+    /// Largest number of image array layers.
+    pub max_image_array_layers: u32,
+}
+
+/// A logical device with one graphics queue, a command pool and the memory allocator.
+pub struct Device {
+    pub(crate) raw: ash::Device,
+    pub(crate) physical: vk::PhysicalDevice,
+    pub(crate) queue: vk::Queue,
+    pub(crate) queue_family: u32,
+    pub info: DeviceInfo,
+    command_pool: vk::CommandPool,
+    /// The command pool and the queue must be externally synchronised (Vulkan spec, "Threading
+    /// Behavior"); `Device` is shared through `Arc`, so submissions take this lock.
+    submit_lock: Mutex<()>,
+    allocator: ManuallyDrop<Mutex<Allocator>>,
+    debug: Option<ash::ext::debug_utils::Device>,
+    /// Kept last: the instance must outlive the device.
+    instance: Arc<Instance>,
+}
+
+/// Preference order of device types: discrete, integrated, virtual, CPU (lavapipe), other.
+fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
+    match t {
+        vk::PhysicalDeviceType::DISCRETE_GPU => 0,
+        vk::PhysicalDeviceType::INTEGRATED_GPU => 1,
+        vk::PhysicalDeviceType::VIRTUAL_GPU => 2,
+        vk::PhysicalDeviceType::CPU => 3,
+        _ => 4,
+    }
+}
+
+impl Device {
+    /// Creates an instance (see [`Instance::new`]) and a device on the preferred GPU.
+    pub fn new(validation: bool) -> Result<Arc<Self>> {
+        let instance = Instance::new(validation)?;
+        Self::on(instance)
+    }
+
+    /// Picks a physical device with a graphics queue and Vulkan ≥ 1.1 and creates the
+    /// logical device on it.
+    pub fn on(instance: Arc<Instance>) -> Result<Arc<Self>> {
+        let inst = &instance.raw;
+        // SAFETY: inst is a live instance.
+        let physicals = unsafe { inst.enumerate_physical_devices() }
+            .map_err(Error::vk("vkEnumeratePhysicalDevices"))?;
+        let mut best: Option<(u32, vk::PhysicalDevice, u32, vk::PhysicalDeviceProperties)> = None;
+        for pd in physicals {
+            // SAFETY: pd was enumerated from this instance.
+            let props = unsafe { inst.get_physical_device_properties(pd) };
+            if props.api_version < vk::API_VERSION_1_1 {
+                continue;
+            }
+            // SAFETY: as above.
+            let families = unsafe { inst.get_physical_device_queue_family_properties(pd) };
+            let Some(family) = families
+                .iter()
+                .position(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
+            else {
+                continue;
+            };
+            let rank = type_rank(props.device_type);
+            if best.as_ref().is_none_or(|b| rank < b.0) {
+                best = Some((rank, pd, family as u32, props));
+            }
+        }
+        let Some((_, physical, queue_family, props)) = best else {
+            return Err(Error::NoVulkan(
+                "no Vulkan 1.1 device with a graphics queue was found".into(),
+            ));
+        };
+        // SAFETY: physical is a valid handle of this instance.
+        let families = unsafe { inst.get_physical_device_queue_family_properties(physical) };
+        let timestamp_valid_bits = if props.limits.timestamp_compute_and_graphics == vk::TRUE {
+            families[queue_family as usize].timestamp_valid_bits
+        } else {
+            0
+        };
+        let name = props
+            .device_name_as_c_str()
+            .map(|s| s.to_string_lossy().into_owned())
+            .unwrap_or_else(|_| "unnamed device".into());
+
+        let priorities = [1.0f32];
+        let queue_info = [vk::DeviceQueueCreateInfo::default()
+            .queue_family_index(queue_family)
+            .queue_priorities(&priorities)];
+        let create_info = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
+        // SAFETY: create_info and its arrays outlive the call; no extensions or features
+        // beyond Vulkan 1.0 core are requested.
+        let raw = unsafe { inst.create_device(physical, &create_info, None) }
+            .map_err(Error::vk("vkCreateDevice"))?;
+        // SAFETY: one queue of this family was requested above.
+        let queue = unsafe { raw.get_device_queue(queue_family, 0) };
+
+        // The default settings already log leaks on shutdown; make sure they stay on.
+        let mut debug_settings = gpu_allocator::AllocatorDebugSettings::default();
+        debug_settings.log_leaks_on_shutdown = true;
+        let allocator = Allocator::new(&AllocatorCreateDesc {
+            instance: inst.clone(),
+            device: raw.clone(),
+            physical_device: physical,
+            debug_settings,
+            buffer_device_address: false,
+            allocation_sizes: Default::default(),
+        });
+        let allocator = match allocator {
+            Ok(a) => a,
+            Err(e) => {
+                // SAFETY: nothing was created on the device yet.
+                unsafe { raw.destroy_device(None) };
+                return Err(e.into());
+            }
+        };
+
+        let pool_info = vk::CommandPoolCreateInfo::default()
+            .queue_family_index(queue_family)
+            .flags(vk::CommandPoolCreateFlags::TRANSIENT);
+        // SAFETY: raw is a live device; the family index is valid.
+        let command_pool = match unsafe { raw.create_command_pool(&pool_info, None) } {
+            Ok(p) => p,
+            Err(e) => {
+                drop(allocator);
+                // SAFETY: the allocator (which frees its blocks) is gone; nothing else lives.
+                unsafe { raw.destroy_device(None) };
+                return Err(Error::vk("vkCreateCommandPool")(e));
+            }
+        };
+
+        let debug = instance
+            .debug_utils_enabled
+            .then(|| ash::ext::debug_utils::Device::new(inst, &raw));
+        let device = Device {
+            raw,
+            physical,
+            queue,
+            queue_family,
+            info: DeviceInfo {
+                name,
+                device_type: props.device_type,
+                timestamp_period: props.limits.timestamp_period as f64,
+                timestamp_valid_bits,
+                max_image_dimension_2d: props.limits.max_image_dimension2_d,
+                max_image_array_layers: props.limits.max_image_array_layers,
+            },
+            command_pool,
+            submit_lock: Mutex::new(()),
+            allocator: ManuallyDrop::new(Mutex::new(allocator)),
+            debug,
+            instance,
+        };
+        device.set_name(device.queue, "graphics queue");
+        device.set_name(device.command_pool, "one-shot command pool");
+        Ok(Arc::new(device))
+    }
+
+    /// The `ash` device table.
+    pub fn raw(&self) -> &ash::Device {
+        &self.raw
+    }
+
+    /// The graphics queue family (a swapchain must be presentable from it).
+    pub fn queue_family(&self) -> u32 {
+        self.queue_family
+    }
+
+    /// Validation messages (WARNING/ERROR) seen on this device's instance so far.
+    pub fn validation_messages(&self) -> usize {
+        self.instance.canary.count()
+    }
+
+    /// The first validation messages, for failure reports.
+    pub fn validation_report(&self) -> Vec<String> {
+        self.instance.canary.messages()
+    }
+
+    /// Names a Vulkan object for validation messages and captures (no-op without
+    /// VK_EXT_debug_utils). Naming is best effort: a failure only loses the label.
+    pub fn set_name<H: vk::Handle>(&self, handle: H, name: &str) {
+        let Some(debug) = &self.debug else { return };
+        let Ok(name) = CString::new(name) else { return };
+        let info = vk::DebugUtilsObjectNameInfoEXT::default()
+            .object_handle(handle)
+            .object_name(&name);
+        // SAFETY: handle belongs to this device and name outlives the call.
+        let _ = unsafe { debug.set_debug_utils_object_name(&info) };
+    }
+
+    /// Opens a labelled region in a command buffer (shown by captures and validation).
+    pub fn begin_label(&self, cb: vk::CommandBuffer, label: &str) {
+        let Some(debug) = &self.debug else { return };
+        let Ok(label) = CString::new(label) else {
+            return;
+        };
+        let info = vk::DebugUtilsLabelEXT::default().label_name(&label);
+        // SAFETY: cb is in the recording state (callers only label while recording).
+        unsafe { debug.cmd_begin_debug_utils_label(cb, &info) };
+    }
+
+    /// Closes the region opened by [`Device::begin_label`].
+    pub fn end_label(&self, cb: vk::CommandBuffer) {
+        let Some(debug) = &self.debug else { return };
+        // SAFETY: matches a begin_label on the same recording command buffer.
+        unsafe { debug.cmd_end_debug_utils_label(cb) };
+    }
+
+    /// Locks the allocator.
+    pub(crate) fn allocator(&self) -> MutexGuard<'_, Allocator> {
+        lock(&self.allocator)
+    }
+
+    /// Whether `format` supports `features` with optimal tiling.
+    pub fn supports_format(&self, format: vk::Format, features: vk::FormatFeatureFlags) -> bool {
+        // SAFETY: physical belongs to the live instance.
+        let props = unsafe {
+            self.instance
+                .raw
+                .get_physical_device_format_properties(self.physical, format)
+        };
+        props.optimal_tiling_features.contains(features)
+    }
+
+    /// Records commands with `record`, submits them and waits for completion. Everything
+    /// the commands used may be destroyed once this returns.
+    pub fn submit_once(
+        &self,
+        label: &str,
+        record: impl FnOnce(vk::CommandBuffer) -> Result<()>,
+    ) -> Result<()> {
+        let _guard = lock(&self.submit_lock);
+        let alloc_info = vk::CommandBufferAllocateInfo::default()
+            .command_pool(self.command_pool)
+            .level(vk::CommandBufferLevel::PRIMARY)
+            .command_buffer_count(1);
+        // SAFETY: the pool belongs to this device and is used only under submit_lock.
+        let cb = unsafe { self.raw.allocate_command_buffers(&alloc_info) }
+            .map_err(Error::vk("vkAllocateCommandBuffers"))?[0];
+        let result = self.record_and_wait(cb, label, record);
+        // SAFETY: the submission finished (or was never made), so cb is not pending.
+        unsafe { self.raw.free_command_buffers(self.command_pool, &[cb]) };
+        result
+    }
+
+    fn record_and_wait(
+        &self,
+        cb: vk::CommandBuffer,
+        label: &str,
+        record: impl FnOnce(vk::CommandBuffer) -> Result<()>,
+    ) -> Result<()> {
+        self.set_name(cb, label);
+        let begin = vk::CommandBufferBeginInfo::default()
+            .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT);
+        // SAFETY: cb was just allocated and is in the initial state.
+        unsafe { self.raw.begin_command_buffer(cb, &begin) }
+            .map_err(Error::vk("vkBeginCommandBuffer"))?;
+        self.begin_label(cb, label);
+        record(cb)?;
+        self.end_label(cb);
+        // SAFETY: cb is recording.
+        unsafe { self.raw.end_command_buffer(cb) }.map_err(Error::vk("vkEndCommandBuffer"))?;
+
+        // SAFETY: live device.
+        let fence = unsafe { self.raw.create_fence(&vk::FenceCreateInfo::default(), None) }
+            .map_err(Error::vk("vkCreateFence"))?;
+        self.set_name(fence, label);
+        let cbs = [cb];
+        let submit = [vk::SubmitInfo::default().command_buffers(&cbs)];
+        // SAFETY: cb is executable; the queue is used only under submit_lock (held by the
+        // caller, submit_once) and the fence is unsignalled.
+        let result = unsafe { self.raw.queue_submit(self.queue, &submit, fence) }
+            .map_err(Error::vk("vkQueueSubmit"))
+            .and_then(|()| {
+                // SAFETY: the fence was submitted above.
+                unsafe { self.raw.wait_for_fences(&[fence], true, u64::MAX) }
+                    .map_err(Error::vk("vkWaitForFences"))
+            });
+        if result.is_err() {
+            // Make sure nothing is still running before the caller frees resources.
+            // SAFETY: live device; the error path is already being reported.
+            let _ = unsafe { self.raw.device_wait_idle() };
+        }
+        // SAFETY: the fence is signalled or the device is idle, so it is not in use.
+        unsafe { self.raw.destroy_fence(fence, None) };
+        result
+    }
+}
+
+impl Drop for Device {
+    fn drop(&mut self) {
+        // SAFETY: every resource holds an Arc<Device>, so none is alive any more; waiting
+        // covers any work still queued.
+        unsafe {
+            let _ = self.raw.device_wait_idle();
+            self.raw.destroy_command_pool(self.command_pool, None);
+        }
+        {
+            let alloc = lock(&self.allocator);
+            let report = alloc.generate_report();
+            if !report.allocations.is_empty() {
+                // Resources free their memory explicitly; anything left is a bug to fix.
+                eprintln!(
+                    "diffract: {} GPU allocation(s) leaked: {:?}",
+                    report.allocations.len(),
+                    report
+                        .allocations
+                        .iter()
+                        .map(|a| &a.name)
+                        .collect::<Vec<_>>()
+                );
+            }
+        }
+        // SAFETY: the allocator is dropped exactly once, here, before the device it frees
+        // its memory blocks on.
+        unsafe { ManuallyDrop::drop(&mut self.allocator) };
+        // SAFETY: all child objects are destroyed (see above).
+        unsafe { self.raw.destroy_device(None) };
+    }
+}

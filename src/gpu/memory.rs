@@ -1,0 +1,400 @@
+//! GPU memory objects with RAII: buffers, images (with one view) and samplers. Each owns its
+//! gpu-allocator allocation and frees it explicitly in `Drop` after destroying the handle.
+//! Also the plain-old-data byte views used to fill them. No knowledge of what the bytes mean.
+
+use std::sync::Arc;
+
+use ash::vk;
+use gpu_allocator::vulkan::{Allocation, AllocationCreateDesc, AllocationScheme};
+use gpu_allocator::MemoryLocation;
+
+use super::context::Device;
+use crate::{Error, Result};
+
+/// Types whose every byte is initialised data (no padding, no pointers), so a slice of them
+/// may be viewed as bytes.
+///
+/// # Safety
+/// Implementors must be `repr(C)` (or primitive) without padding bytes.
+pub unsafe trait Pod: Copy {}
+
+// SAFETY: primitives and arrays of primitives have no padding.
+unsafe impl Pod for u8 {}
+// SAFETY: as above.
+unsafe impl Pod for u16 {}
+// SAFETY: as above.
+unsafe impl Pod for u32 {}
+// SAFETY: as above.
+unsafe impl Pod for i32 {}
+// SAFETY: as above.
+unsafe impl Pod for f32 {}
+// SAFETY: arrays of Pod have no padding between elements.
+unsafe impl<T: Pod, const N: usize> Pod for [T; N] {}
+
+/// The bytes of a slice of plain-old-data values.
+pub fn bytes_of<T: Pod>(data: &[T]) -> &[u8] {
+    // SAFETY: T: Pod has no padding, so all size_of_val bytes are initialised; u8 has
+    // alignment 1 and the lifetime is tied to `data`.
+    unsafe { std::slice::from_raw_parts(data.as_ptr().cast::<u8>(), std::mem::size_of_val(data)) }
+}
+
+fn allocate(
+    dev: &Device,
+    name: &str,
+    requirements: vk::MemoryRequirements,
+    location: MemoryLocation,
+    linear: bool,
+) -> Result<Allocation> {
+    Ok(dev.allocator().allocate(&AllocationCreateDesc {
+        name,
+        requirements,
+        location,
+        linear,
+        allocation_scheme: AllocationScheme::GpuAllocatorManaged,
+    })?)
+}
+
+fn free(dev: &Device, allocation: Option<Allocation>) {
+    if let Some(a) = allocation {
+        if let Err(e) = dev.allocator().free(a) {
+            eprintln!("diffract: freeing GPU memory failed: {e}");
+        }
+    }
+}
+
+/// A buffer with its own allocation.
+pub struct Buffer {
+    dev: Arc<Device>,
+    pub raw: vk::Buffer,
+    pub size: u64,
+    allocation: Option<Allocation>,
+}
+
+impl Buffer {
+    /// Creates a buffer of `size` bytes in `location` (`CpuToGpu`/`GpuToCpu` are mapped).
+    pub fn new(
+        dev: &Arc<Device>,
+        name: &str,
+        size: u64,
+        usage: vk::BufferUsageFlags,
+        location: MemoryLocation,
+    ) -> Result<Self> {
+        let info = vk::BufferCreateInfo::default()
+            .size(size.max(4))
+            .usage(usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE);
+        // SAFETY: live device, valid create info.
+        let raw =
+            unsafe { dev.raw.create_buffer(&info, None) }.map_err(Error::vk("vkCreateBuffer"))?;
+        let mut buffer = Buffer {
+            dev: dev.clone(),
+            raw,
+            size,
+            allocation: None,
+        };
+        dev.set_name(raw, name);
+        // SAFETY: raw is a live buffer of this device.
+        let req = unsafe { dev.raw.get_buffer_memory_requirements(raw) };
+        let allocation = allocate(dev, name, req, location, true)?;
+        // SAFETY: the allocation satisfies req and is bound once, before any use.
+        unsafe {
+            dev.raw
+                .bind_buffer_memory(raw, allocation.memory(), allocation.offset())
+        }
+        .map_err(Error::vk("vkBindBufferMemory"))?;
+        buffer.allocation = Some(allocation);
+        Ok(buffer)
+    }
+
+    /// A host-visible buffer filled with `data`.
+    pub fn with_data<T: Pod>(
+        dev: &Arc<Device>,
+        name: &str,
+        usage: vk::BufferUsageFlags,
+        data: &[T],
+    ) -> Result<Self> {
+        let bytes = bytes_of(data);
+        let mut b = Self::new(
+            dev,
+            name,
+            bytes.len() as u64,
+            usage,
+            MemoryLocation::CpuToGpu,
+        )?;
+        b.write(bytes)?;
+        Ok(b)
+    }
+
+    /// Copies `bytes` to the start of a mapped buffer.
+    pub fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        let slice = self
+            .allocation
+            .as_mut()
+            .and_then(|a| a.mapped_slice_mut())
+            .ok_or_else(|| Error::invalid("buffer write", "the buffer is not host-visible"))?;
+        if bytes.len() > slice.len() {
+            return Err(Error::invalid(
+                "buffer write",
+                format!("{} bytes into a {}-byte buffer", bytes.len(), slice.len()),
+            ));
+        }
+        slice[..bytes.len()].copy_from_slice(bytes);
+        Ok(())
+    }
+
+    /// The contents of a mapped buffer (valid after the GPU writes are complete and made
+    /// visible to the host).
+    pub fn mapped(&self) -> Result<&[u8]> {
+        let slice = self
+            .allocation
+            .as_ref()
+            .and_then(|a| a.mapped_slice())
+            .ok_or_else(|| Error::invalid("buffer read", "the buffer is not host-visible"))?;
+        Ok(&slice[..(self.size as usize).min(slice.len())])
+    }
+}
+
+impl Drop for Buffer {
+    fn drop(&mut self) {
+        // SAFETY: users finish GPU work (submit_once waits) before dropping resources.
+        unsafe { self.dev.raw.destroy_buffer(self.raw, None) };
+        free(&self.dev, self.allocation.take());
+    }
+}
+
+/// How to create an [`Image`].
+#[derive(Debug, Clone, Copy)]
+pub struct ImageDesc {
+    pub format: vk::Format,
+    pub width: u32,
+    pub height: u32,
+    /// Array layers (1 for a plain 2D image).
+    pub layers: u32,
+    pub usage: vk::ImageUsageFlags,
+    pub aspect: vk::ImageAspectFlags,
+    /// `TYPE_2D` or `TYPE_2D_ARRAY`.
+    pub view_type: vk::ImageViewType,
+}
+
+/// A 2D (array) image with one view covering all layers, in GPU memory.
+pub struct Image {
+    dev: Arc<Device>,
+    pub raw: vk::Image,
+    pub view: vk::ImageView,
+    pub desc: ImageDesc,
+    allocation: Option<Allocation>,
+}
+
+impl Image {
+    pub fn new(dev: &Arc<Device>, name: &str, desc: ImageDesc) -> Result<Self> {
+        let info = vk::ImageCreateInfo::default()
+            .image_type(vk::ImageType::TYPE_2D)
+            .format(desc.format)
+            .extent(vk::Extent3D {
+                width: desc.width,
+                height: desc.height,
+                depth: 1,
+            })
+            .mip_levels(1)
+            .array_layers(desc.layers)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .tiling(vk::ImageTiling::OPTIMAL)
+            .usage(desc.usage)
+            .sharing_mode(vk::SharingMode::EXCLUSIVE)
+            .initial_layout(vk::ImageLayout::UNDEFINED);
+        // SAFETY: live device; callers checked format support and limits.
+        let raw =
+            unsafe { dev.raw.create_image(&info, None) }.map_err(Error::vk("vkCreateImage"))?;
+        let mut image = Image {
+            dev: dev.clone(),
+            raw,
+            view: vk::ImageView::null(),
+            desc,
+            allocation: None,
+        };
+        dev.set_name(raw, name);
+        // SAFETY: raw is a live image of this device.
+        let req = unsafe { dev.raw.get_image_memory_requirements(raw) };
+        let allocation = allocate(dev, name, req, MemoryLocation::GpuOnly, false)?;
+        // SAFETY: the allocation satisfies req and is bound once, before any use.
+        unsafe {
+            dev.raw
+                .bind_image_memory(raw, allocation.memory(), allocation.offset())
+        }
+        .map_err(Error::vk("vkBindImageMemory"))?;
+        image.allocation = Some(allocation);
+        let view_info = vk::ImageViewCreateInfo::default()
+            .image(raw)
+            .view_type(desc.view_type)
+            .format(desc.format)
+            .subresource_range(image.range());
+        // SAFETY: the image is bound to memory; the range lies within it.
+        image.view = unsafe { dev.raw.create_image_view(&view_info, None) }
+            .map_err(Error::vk("vkCreateImageView"))?;
+        dev.set_name(image.view, name);
+        Ok(image)
+    }
+
+    /// All mip levels and layers of the image.
+    pub fn range(&self) -> vk::ImageSubresourceRange {
+        vk::ImageSubresourceRange {
+            aspect_mask: self.desc.aspect,
+            base_mip_level: 0,
+            level_count: 1,
+            base_array_layer: 0,
+            layer_count: self.desc.layers,
+        }
+    }
+
+    /// Creates a sampled image and fills it from `bytes` (tightly packed texels of
+    /// `texel_bytes` each, layer after layer) through a staging buffer; the image ends in
+    /// `SHADER_READ_ONLY_OPTIMAL`.
+    pub fn sampled_with_data(
+        dev: &Arc<Device>,
+        name: &str,
+        mut desc: ImageDesc,
+        texel_bytes: usize,
+        bytes: &[u8],
+    ) -> Result<Self> {
+        let expected =
+            desc.width as usize * desc.height as usize * desc.layers as usize * texel_bytes;
+        if bytes.len() != expected {
+            // The copy would read past the staging buffer (or leave texels undefined).
+            return Err(Error::invalid(
+                "image upload",
+                format!(
+                    "{name}: {} bytes for {}×{}×{} texels of {texel_bytes} bytes",
+                    bytes.len(),
+                    desc.width,
+                    desc.height,
+                    desc.layers
+                ),
+            ));
+        }
+        desc.usage |= vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST;
+        let image = Image::new(dev, name, desc)?;
+        let staging = Buffer::with_data(
+            dev,
+            &format!("{name} staging"),
+            vk::BufferUsageFlags::TRANSFER_SRC,
+            bytes,
+        )?;
+        let range = image.range();
+        dev.submit_once(&format!("upload {name}"), |cb| {
+            let to_dst = vk::ImageMemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::empty())
+                .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .old_layout(vk::ImageLayout::UNDEFINED)
+                .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .image(image.raw)
+                .subresource_range(range);
+            let region = vk::BufferImageCopy::default()
+                .image_subresource(vk::ImageSubresourceLayers {
+                    aspect_mask: desc.aspect,
+                    mip_level: 0,
+                    base_array_layer: 0,
+                    layer_count: desc.layers,
+                })
+                .image_extent(vk::Extent3D {
+                    width: desc.width,
+                    height: desc.height,
+                    depth: 1,
+                });
+            let to_read = vk::ImageMemoryBarrier::default()
+                .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+                .dst_access_mask(vk::AccessFlags::SHADER_READ)
+                .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+                .new_layout(vk::ImageLayout::SHADER_READ_ONLY_OPTIMAL)
+                .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+                .image(image.raw)
+                .subresource_range(range);
+            // SAFETY: cb is recording; the staging buffer holds width·height·layers texels
+            // (checked above) and outlives the submission.
+            unsafe {
+                dev.raw.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::TOP_OF_PIPE,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[to_dst],
+                );
+                dev.raw.cmd_copy_buffer_to_image(
+                    cb,
+                    staging.raw,
+                    image.raw,
+                    vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                    &[region],
+                );
+                dev.raw.cmd_pipeline_barrier(
+                    cb,
+                    vk::PipelineStageFlags::TRANSFER,
+                    vk::PipelineStageFlags::FRAGMENT_SHADER,
+                    vk::DependencyFlags::empty(),
+                    &[],
+                    &[],
+                    &[to_read],
+                );
+            }
+            Ok(())
+        })?;
+        Ok(image)
+    }
+}
+
+impl Drop for Image {
+    fn drop(&mut self) {
+        // SAFETY: GPU work using the image finished (submit_once waits); view before image.
+        unsafe {
+            if self.view != vk::ImageView::null() {
+                self.dev.raw.destroy_image_view(self.view, None);
+            }
+            self.dev.raw.destroy_image(self.raw, None);
+        }
+        free(&self.dev, self.allocation.take());
+    }
+}
+
+/// A sampler.
+pub struct Sampler {
+    dev: Arc<Device>,
+    pub raw: vk::Sampler,
+}
+
+impl Sampler {
+    /// `filter` for both magnification and minification, `address` on every axis.
+    pub fn new(
+        dev: &Arc<Device>,
+        name: &str,
+        filter: vk::Filter,
+        address: vk::SamplerAddressMode,
+    ) -> Result<Self> {
+        let info = vk::SamplerCreateInfo::default()
+            .mag_filter(filter)
+            .min_filter(filter)
+            .mipmap_mode(vk::SamplerMipmapMode::NEAREST)
+            .address_mode_u(address)
+            .address_mode_v(address)
+            .address_mode_w(address)
+            .max_lod(0.0);
+        // SAFETY: live device, valid create info.
+        let raw =
+            unsafe { dev.raw.create_sampler(&info, None) }.map_err(Error::vk("vkCreateSampler"))?;
+        dev.set_name(raw, name);
+        Ok(Sampler {
+            dev: dev.clone(),
+            raw,
+        })
+    }
+}
+
+impl Drop for Sampler {
+    fn drop(&mut self) {
+        // SAFETY: no pending GPU work uses the sampler (submissions are waited on).
+        unsafe { self.dev.raw.destroy_sampler(self.raw, None) };
+    }
+}

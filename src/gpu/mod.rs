@@ -1,0 +1,32 @@
+//! Everything `ash`: the headless device layer ([`context`]), memory objects ([`memory`]),
+//! texel storage formats ([`formats`]), layouts/descriptors/pipelines ([`pipeline`]), render
+//! targets ([`target`]), GPU timestamps ([`timer`]) and the SPIR-V compiled by `build.rs`.
+//!
+//! This module knows Vulkan, not physics: what the bindings and specialisation constants
+//! mean is decided by `render.rs` and `glsl/`. Every object is named (debug utils), owned by
+//! an RAII type that destroys it in reverse creation order, and every allocation is freed
+//! explicitly.
+#![warn(unsafe_op_in_unsafe_fn)]
+
+pub mod context;
+pub mod formats;
+pub mod memory;
+pub mod pipeline;
+pub mod target;
+pub mod timer;
+
+pub use context::{Canary, Device, DeviceInfo, Instance};
+pub use formats::StorageFormat;
+
+/// SPIR-V modules compiled from `glsl/` by `build.rs` (bytes; `ash::util::read_spv` copies
+/// them into aligned words, so the byte alignment of `include_bytes!` does not matter).
+pub mod shaders {
+    /// Thesis Algorithm 2.
+    pub const DIFFRACTION_VERT: &[u8] =
+        include_bytes!(concat!(env!("OUT_DIR"), "/diffraction.vert.spv"));
+    /// Full-screen triangle for BRDF maps.
+    pub const BRDFMAP_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/brdfmap.vert.spv"));
+    /// Thesis Algorithms 3 and 4.
+    pub const DIFFRACTION_FRAG: &[u8] =
+        include_bytes!(concat!(env!("OUT_DIR"), "/diffraction.frag.spv"));
+}

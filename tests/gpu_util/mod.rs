@@ -1,0 +1,121 @@
+//! Shared helpers of the GPU tests: a validated renderer (or a loud skip when the machine
+//! has no Vulkan at all), the validation canary check, and materials for small fast cases.
+#![allow(dead_code)]
+
+use diffract::material::{Material, PreparedMaterial};
+use diffract::render::Renderer;
+use diffract::spectrum::Expansion;
+use diffract::Error;
+
+/// A renderer with validation ON. `None` (with a printed notice) only when no Vulkan loader
+/// or device exists; any other failure (e.g. a missing validation layer) fails the test.
+/// With `DIFFRACT_REQUIRE_VULKAN=1` (CI on a machine that has Vulkan) a missing device
+/// fails too.
+pub fn renderer() -> Option<Renderer> {
+    match Renderer::new(true) {
+        Ok(r) => Some(r),
+        Err(Error::NoVulkan(msg))
+            if std::env::var("DIFFRACT_REQUIRE_VULKAN").is_ok_and(|v| v == "1") =>
+        {
+            panic!("DIFFRACT_REQUIRE_VULKAN=1 but {msg}")
+        }
+        Err(Error::NoVulkan(msg)) => {
+            eprintln!("SKIPPED: no Vulkan device on this machine ({msg})");
+            None
+        }
+        Err(e) => panic!("cannot create a validated renderer: {e}"),
+    }
+}
+
+/// Fails if the validation layer reported anything.
+pub fn assert_no_validation(r: &Renderer) {
+    assert_eq!(
+        r.validation_messages(),
+        0,
+        "validation messages: {:#?}",
+        r.validation_report()
+    );
+}
+
+/// A small material: few terms and a coarse λ step so lavapipe renders in well under a second.
+pub fn small_material(
+    heightfield: &str,
+    expansion: Expansion,
+    terms: usize,
+    radius: usize,
+) -> Material {
+    Material {
+        heightfield: heightfield.into(),
+        expansion,
+        terms,
+        window_radius: radius,
+        lambda_step_nm: 10,
+        ..Material::default()
+    }
+}
+
+pub fn prepare(m: &Material) -> PreparedMaterial {
+    m.prepare(None)
+        .unwrap_or_else(|e| panic!("preparing {}: {e}", m.heightfield))
+}
+
+/// ωr of map pixel (i, j) exactly as the fragment shader computes it (float32), or `None`
+/// outside the unit disk.
+pub fn map_direction(i: u32, j: u32, size: u32) -> Option<[f64; 3]> {
+    let s = size as f32;
+    let x = 2.0 * (i as f32 + 0.5) / s - 1.0;
+    let y = 1.0 - 2.0 * (j as f32 + 0.5) / s;
+    let r2 = x * x + y * y;
+    (r2 < 1.0).then(|| [x as f64, y as f64, (1.0 - r2).sqrt() as f64])
+}
+
+/// ωi as the renderer uploads it (f64 direction rounded to float32).
+pub fn uploaded_direction(theta_deg: f64, phi_deg: f64) -> [f64; 3] {
+    diffract::brdf::direction(theta_deg, phi_deg).map(|c| c as f32 as f64)
+}
+
+/// Map pixel containing direction (x, y) of the disk.
+pub fn pixel_of(x: f64, y: f64, size: u32) -> (u32, u32) {
+    let s = size as f64;
+    let i = (((x + 1.0) * s / 2.0).floor() as i64).clamp(0, size as i64 - 1);
+    let j = (((1.0 - y) * s / 2.0).floor() as i64).clamp(0, size as i64 - 1);
+    (i as u32, j as u32)
+}
+
+/// Light polar angle (φ = 0) whose mirror direction is exactly the centre of pixel `i` of
+/// the middle row of an odd-sized map: there `u = v = 0` in float32 too, so the specular
+/// peak and (for gratings along x) the diffraction orders along the row are sampled on
+/// their peaks instead of on the far tails of the coherence window.
+pub fn theta_for_specular_pixel(i: u32, size: u32) -> f64 {
+    assert!(size % 2 == 1, "the middle row has y = 0 only for odd sizes");
+    let x = map_direction(i, size / 2, size).expect("pixel inside the disk")[0];
+    (-x).asin().to_degrees()
+}
+
+/// About `n` pixels of an S×S map worth checking: the centre, the specular pixel, every
+/// other pixel of its row (where a grating along x diffracts), near-grazing pixels by the
+/// disk edge, and a deterministic scatter.
+pub fn sample_pixels(size: u32, wi: [f64; 3], n: usize) -> Vec<(u32, u32)> {
+    let (spec_col, spec_row) = pixel_of(-wi[0], -wi[1], size);
+    let mut px = vec![(size / 2, size / 2), (spec_col, spec_row)];
+    for i in (0..size).step_by(2) {
+        px.push((i, spec_row));
+    }
+    for k in 0..6 {
+        let a = k as f64 * std::f64::consts::PI / 3.0 + 0.3;
+        px.push(pixel_of(0.975 * a.cos(), 0.975 * a.sin(), size));
+    }
+    let mut state = 0x2545_f491_u64;
+    for _ in 0..n {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        let i = ((state >> 33) % size as u64) as u32;
+        let j = ((state >> 17) % size as u64) as u32;
+        px.push((i, j));
+    }
+    px.retain(|&(i, j)| map_direction(i, j, size).is_some());
+    px.sort_unstable();
+    px.dedup();
+    px
+}
