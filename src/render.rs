@@ -263,6 +263,12 @@ impl Renderer {
         self.dev.validation_messages()
     }
 
+    /// The validation canary, which stays readable after the renderer is dropped: teardown
+    /// messages (objects left alive at vkDestroyDevice) land there too.
+    pub fn canary(&self) -> std::sync::Arc<crate::gpu::Canary> {
+        self.dev.canary()
+    }
+
     /// The first validation messages, for reports.
     pub fn validation_report(&self) -> Vec<String> {
         self.dev.validation_report()

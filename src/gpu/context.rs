@@ -20,6 +20,15 @@ const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
 /// `pMessageIdName` of messages from the Vulkan loader itself.
 const LOADER_MESSAGE_ID: &str = "Loader Message";
 
+/// GPU allocations found still alive when a [`Device`] was destroyed, over the whole
+/// process (gpu-allocator's report at teardown). Tests assert it stays 0.
+static LEAKED_ALLOCATIONS: AtomicUsize = AtomicUsize::new(0);
+
+/// Allocations leaked by devices destroyed so far in this process.
+pub fn leaked_allocations() -> usize {
+    LEAKED_ALLOCATIONS.load(Ordering::SeqCst)
+}
+
 /// Counts validation WARNING/ERROR messages (the "canary" of wgpu's test suite): tests fail
 /// when it is non-zero. The first few messages are kept for the failure report.
 #[derive(Debug, Default)]
@@ -436,6 +445,12 @@ impl Device {
         self.queue_family
     }
 
+    /// The instance's validation canary; it outlives the device, so messages raised while
+    /// the device is destroyed (objects left alive) can still be checked.
+    pub fn canary(&self) -> Arc<Canary> {
+        Arc::clone(&self.instance.canary)
+    }
+
     /// Validation messages (WARNING/ERROR) seen on this device's instance so far.
     pub fn validation_messages(&self) -> usize {
         self.instance.canary.count()
@@ -570,6 +585,7 @@ impl Drop for Device {
             let report = alloc.generate_report();
             if !report.allocations.is_empty() {
                 // Resources free their memory explicitly; anything left is a bug to fix.
+                LEAKED_ALLOCATIONS.fetch_add(report.allocations.len(), Ordering::SeqCst);
                 eprintln!(
                     "diffract: {} GPU allocation(s) leaked: {:?}",
                     report.allocations.len(),
