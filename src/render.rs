@@ -812,6 +812,10 @@ pub struct RenderArgs {
     /// BRDF map: also write an sRGB PNG beside the EXR output.
     #[arg(long)]
     pub png: bool,
+    /// Exposure (linear multiplier before the sRGB curve): overrides the scene's; for BRDF
+    /// maps it scales the PNG only (the EXR keeps the raw values).
+    #[arg(long)]
+    pub exposure: Option<f32>,
     /// Storage format of the DFT terms on the GPU.
     #[arg(long, value_enum, default_value_t = StorageFormat::Rg32f)]
     pub storage: StorageFormat,
@@ -838,6 +842,18 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         Some(p) => Scene::load(p)?,
         None => Scene::default_scene(),
     };
+    if let Some(e) = args.exposure {
+        if !(e.is_finite() && e > 0.0) {
+            return Err(Error::invalid(
+                "exposure",
+                format!("{e}; must be finite and > 0"),
+            ));
+        }
+        scene.output.exposure = e;
+    }
+    // The device first: a machine without Vulkan fails before the term precompute.
+    let mut renderer = Renderer::new(validation_requested())?;
+    renderer.set_storage_format(args.storage);
     let material = args.material.apply(scene.material.clone());
     let cache_dir = if args.no_cache {
         None
@@ -847,8 +863,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .or_else(crate::material::default_cache_dir)
     };
     let prepared = material.prepare(cache_dir.as_deref())?;
-    let mut renderer = Renderer::new(validation_requested())?;
-    renderer.set_storage_format(args.storage);
 
     let (frame, what) = if args.brdf_map {
         let frame = renderer.render_brdf_map(
@@ -908,6 +922,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 /// Writes a BRDF map: an EXR holds the raw channels (XYZ or ρ); a PNG shows XYZ as sRGB
 /// (or ρ as grey). `--png` with an EXR output adds the PNG beside it.
 fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
+    let exposure = args.exposure.unwrap_or(1.0);
     let ext = args
         .out
         .extension()
@@ -928,10 +943,22 @@ fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
             crate::image_io::write_exr(&args.out, frame.width, frame.height, &frame.rgb)?;
             if args.png {
                 let png = args.out.with_extension("png");
-                crate::image_io::write_png_srgb(&png, frame.width, frame.height, &viewable(), 1.0)?;
+                crate::image_io::write_png_srgb(
+                    &png,
+                    frame.width,
+                    frame.height,
+                    &viewable(),
+                    exposure,
+                )?;
             }
             Ok(())
         }
-        _ => crate::image_io::write_image(&args.out, frame.width, frame.height, &viewable(), 1.0),
+        _ => crate::image_io::write_image(
+            &args.out,
+            frame.width,
+            frame.height,
+            &viewable(),
+            exposure,
+        ),
     }
 }
