@@ -144,20 +144,21 @@ pub struct PreparedMaterial {
 }
 
 impl Material {
+    /// What to precompute for this material: its expansion, `T` and `R`, for wavelengths
+    /// from 380 nm, cropped to the reachable band.
+    pub fn term_request(&self) -> TermRequest {
+        TermRequest {
+            expansion: self.expansion,
+            max_term: self.terms,
+            lambda_min_um: crate::colour::LAMBDA_MIN_NM as f64 * 1e-3,
+            window_radius: self.window_radius,
+            full_band: false,
+        }
+    }
+
     /// Checks every numeric field for sense.
     pub fn validate(&self) -> Result<()> {
-        if self.terms > 64 {
-            return Err(Error::invalid(
-                "terms",
-                format!("{}; at most 64", self.terms),
-            ));
-        }
-        if self.window_radius > 8 {
-            return Err(Error::invalid(
-                "window radius",
-                format!("{}; at most 8 texels", self.window_radius),
-            ));
-        }
+        self.term_request().validate()?;
         if !(self.coherence_um.is_finite() && self.coherence_um > 0.0) {
             return Err(Error::invalid(
                 "coherence length",
@@ -188,17 +189,10 @@ impl Material {
     pub fn prepare(&self, cache_dir: Option<&std::path::Path>) -> Result<PreparedMaterial> {
         self.validate()?;
         let heightfield = HeightField::load_source(&self.heightfield, self.dh_um, self.h_max_um)?;
-        let lambda_min_um = crate::colour::LAMBDA_MIN_NM as f64 * 1e-3;
-        if let Some(w) = heightfield.nyquist_warning(lambda_min_um) {
+        let req = self.term_request();
+        if let Some(w) = heightfield.nyquist_warning(req.lambda_min_um) {
             eprintln!("warning: {w}");
         }
-        let req = TermRequest {
-            expansion: self.expansion,
-            max_term: self.terms,
-            lambda_min_um,
-            window_radius: self.window_radius,
-            full_band: false,
-        };
         let stack = spectrum::cache::terms_cached(&heightfield, &req, cache_dir)?;
         let window = Window::new(
             heightfield.nx(),

@@ -106,6 +106,35 @@ pub fn gain(wi: [f64; 3], wr: [f64; 3], shading: &Shading) -> f64 {
     }
 }
 
+/// `ρ_λ = C(ωi, ωr)·|P̂|²`, where `power` gives `|P̂|²` for `(u, v, w)`; `power` is not
+/// called where `C = 0` (a direction below the horizon).
+pub(crate) fn spectral(
+    wi: [f64; 3],
+    wr: [f64; 3],
+    shading: &Shading,
+    power: impl FnOnce([f64; 3]) -> f64,
+) -> f64 {
+    let c = gain(wi, wr, shading);
+    if c == 0.0 {
+        return 0.0;
+    }
+    c * power(uvw(wi, wr))
+}
+
+/// `XYZ = C(ωi, ωr)·Σ_λ |P̂|² w_λ`, where `integrated` gives the spectral sum for `(u, v, w)`.
+pub(crate) fn integrated(
+    wi: [f64; 3],
+    wr: [f64; 3],
+    shading: &Shading,
+    integrated: impl FnOnce([f64; 3]) -> [f64; 3],
+) -> [f64; 3] {
+    let c = gain(wi, wr, shading);
+    if c == 0.0 {
+        return [0.0; 3];
+    }
+    integrated(uvw(wi, wr)).map(|x| x * c)
+}
+
 /// Stam's V-cavity shadowing/masking `S = min(1, 2(N·H)(N·ωr)/(ωr·H), 2(N·H)(N·ωi)/(ωr·H))`.
 fn shadowing(n_h: f64, ci: f64, cr: f64, cos_rh: f64) -> f64 {
     if cos_rh <= 0.0 {

@@ -9,7 +9,7 @@ use crate::colour::ColourTable;
 use crate::spectrum::num_complex::Complex64;
 use crate::spectrum::{lookup_coord, windowed, Expansion, TermStack, Window};
 
-use super::{bessel, gain, uvw, Shading};
+use super::{bessel, integrated, spectral, Shading};
 
 /// The windowed, normalised transform `P̂(ku, kv)` assembled from terms `0..=terms`
 /// (clamped to the stack), at wavelength `lambda_um`.
@@ -63,11 +63,9 @@ pub fn rho(
     wr: [f64; 3],
     lambda_nm: f64,
 ) -> f64 {
-    let c = gain(wi, wr, shading);
-    if c == 0.0 {
-        return 0.0;
-    }
-    c * p_hat(stack, terms, window, uvw(wi, wr), lambda_nm * 1e-3).norm_sqr()
+    spectral(wi, wr, shading, |d| {
+        p_hat(stack, terms, window, d, lambda_nm * 1e-3).norm_sqr()
+    })
 }
 
 /// CIE XYZ of the reflected D65 light, integrated over `table`'s wavelengths.
@@ -80,11 +78,7 @@ pub fn xyz(
     wi: [f64; 3],
     wr: [f64; 3],
 ) -> [f64; 3] {
-    let c = gain(wi, wr, shading);
-    if c == 0.0 {
-        return [0.0; 3];
-    }
-    let d = uvw(wi, wr);
-    let s = table.integrate(|l| p_hat(stack, terms, window, d, l * 1e-3).norm_sqr());
-    s.map(|x| x * c)
+    integrated(wi, wr, shading, |d| {
+        table.integrate(|l| p_hat(stack, terms, window, d, l * 1e-3).norm_sqr())
+    })
 }

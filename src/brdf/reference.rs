@@ -9,7 +9,7 @@ use crate::colour::ColourTable;
 use crate::heightfield::HeightField;
 use crate::spectrum::num_complex::Complex64;
 
-use super::{gain, uvw, Shading};
+use super::{integrated, spectral, Shading};
 
 /// Half-width of the spatial window sum in units of `σs`.
 ///
@@ -78,12 +78,9 @@ pub fn rho(
     wr: [f64; 3],
     lambda_nm: f64,
 ) -> f64 {
-    let c = gain(wi, wr, shading);
-    if c == 0.0 {
-        return 0.0;
-    }
-    let h = centred(hf);
-    c * p_hat_ref(hf, &h, coherence_um / 4.0, uvw(wi, wr), lambda_nm * 1e-3).norm_sqr()
+    spectral(wi, wr, shading, |d| {
+        p_hat_ref(hf, &centred(hf), coherence_um / 4.0, d, lambda_nm * 1e-3).norm_sqr()
+    })
 }
 
 /// CIE XYZ by direct summation at every wavelength of `table` (use a 1 nm table for the
@@ -96,21 +93,17 @@ pub fn xyz(
     wi: [f64; 3],
     wr: [f64; 3],
 ) -> [f64; 3] {
-    let c = gain(wi, wr, shading);
-    if c == 0.0 {
-        return [0.0; 3];
-    }
-    let h = centred(hf);
-    let d = uvw(wi, wr);
-    let sigma = coherence_um / 4.0;
-    table
-        .lambdas_nm
-        .par_iter()
-        .zip(&table.weights)
-        .map(|(l, w)| {
-            let r = p_hat_ref(hf, &h, sigma, d, l * 1e-3).norm_sqr();
-            [r * w[0], r * w[1], r * w[2]]
-        })
-        .reduce(|| [0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
-        .map(|x| x * c)
+    integrated(wi, wr, shading, |d| {
+        let h = centred(hf);
+        let sigma = coherence_um / 4.0;
+        table
+            .lambdas_nm
+            .par_iter()
+            .zip(&table.weights)
+            .map(|(l, w)| {
+                let r = p_hat_ref(hf, &h, sigma, d, l * 1e-3).norm_sqr();
+                [r * w[0], r * w[1], r * w[2]]
+            })
+            .reduce(|| [0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
+    })
 }
