@@ -93,6 +93,31 @@ pub fn write_exr(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Resu
     })
 }
 
+/// Image file formats diffract writes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OutputFormat {
+    /// 8-bit sRGB PNG.
+    Png,
+    /// float32 linear OpenEXR.
+    Exr,
+}
+
+/// The format a path's extension asks for, so callers can reject a bad name before any
+/// work is done.
+pub fn output_format(path: &Path) -> Result<OutputFormat> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("png") => Ok(OutputFormat::Png),
+        Some("exr") => Ok(OutputFormat::Exr),
+        _ => Err(image_err(
+            path,
+            "unknown output format: use a .png (8-bit sRGB) or .exr (float linear) file name",
+        )),
+    }
+}
+
 /// Writes PNG (8-bit sRGB) or EXR (float32 linear, scaled by `exposure` too, so both show
 /// the same picture) chosen by the extension of `path` (case-insensitive).
 pub fn write_image(
@@ -102,20 +127,13 @@ pub fn write_image(
     rgb: &[[f32; 3]],
     exposure: f32,
 ) -> Result<()> {
-    let ext = path
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
-    match ext.as_deref() {
-        Some("png") => write_png_srgb(path, width, height, rgb, exposure),
-        Some("exr") => {
+    match output_format(path)? {
+        OutputFormat::Png => write_png_srgb(path, width, height, rgb, exposure),
+        OutputFormat::Exr => {
             check_exposure(exposure)?;
             let scaled: Vec<[f32; 3]> = rgb.iter().map(|p| p.map(|c| c * exposure)).collect();
             write_exr(path, width, height, &scaled)
         }
-        _ => Err(image_err(
-            path,
-            "unknown output format: use a .png (8-bit sRGB) or .exr (float linear) file name",
-        )),
     }
 }
 

@@ -851,6 +851,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
         scene.output.exposure = e;
     }
+    crate::image_io::output_format(&args.out)?;
     // The device first: a machine without Vulkan fails before the term precompute.
     let mut renderer = Renderer::new(validation_requested())?;
     renderer.set_storage_format(args.storage);
@@ -923,10 +924,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 /// (or ρ as grey). `--png` with an EXR output adds the PNG beside it.
 fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
     let exposure = args.exposure.unwrap_or(1.0);
-    let ext = args
-        .out
-        .extension()
-        .map(|e| e.to_string_lossy().to_ascii_lowercase());
     let viewable = || -> Vec<[f32; 3]> {
         if args.lambda_nm.is_some() {
             frame.rgb.clone()
@@ -938,8 +935,8 @@ fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
                 .collect()
         }
     };
-    match ext.as_deref() {
-        Some("exr") => {
+    match crate::image_io::output_format(&args.out)? {
+        crate::image_io::OutputFormat::Exr => {
             crate::image_io::write_exr(&args.out, frame.width, frame.height, &frame.rgb)?;
             if args.png {
                 let png = args.out.with_extension("png");
