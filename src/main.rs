@@ -23,6 +23,8 @@ enum Command {
     Heightfield(diffract::heightfield::HeightfieldArgs),
     /// Grating-equation experiment (MODEL §8): period estimated from first-order peaks.
     EvalGrating(diffract::eval::EvalArgs),
+    /// Shader variants on the GPU: error against the f64 reference together with GPU time.
+    Profile(diffract::profile::ProfileArgs),
 }
 
 fn main() -> ExitCode {
@@ -32,6 +34,7 @@ fn main() -> ExitCode {
         Command::Brdf(a) => diffract::brdf::query::run(a),
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),
+        Command::Profile(a) => diffract::profile::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
