@@ -151,6 +151,9 @@ pub struct ProfileSetup {
     pub cache_dir: Option<PathBuf>,
 }
 
+/// Scored pixels and the reference XYZ at each.
+type Samples = (Vec<(u32, u32)>, Vec<[f64; 3]>);
+
 /// Pixels to score: the brightest `n/2` of `map` (where the diffraction is) and `n − n/2`
 /// spread evenly over the rest of the disk (where errors in dark regions would show).
 fn pick_pixels(map: &[[f32; 3]], size: u32, n: usize) -> Vec<(u32, u32)> {
@@ -186,7 +189,8 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
     }
     let wi = direction(setup.theta_i_deg, setup.phi_i_deg);
     let mut reports = Vec::with_capacity(setup.variants.len());
-    let mut samples: Option<(Vec<(u32, u32)>, Vec<[f64; 3]>)> = None;
+    // Scored pixels and their reference XYZ, fixed by the first variant's map.
+    let mut samples: Option<Samples> = None;
     let table_1nm = ColourTable::new(1)?;
     for variant in &setup.variants {
         let material = variant.material(&setup.base);
