@@ -151,29 +151,23 @@ fn open_as(path: &Path, format: image::ImageFormat, name: &str) -> Result<image:
         .map_err(|e| image_err(path, format!("cannot decode {name}: {e}")))
 }
 
+/// Interleaved RGB samples → `(width, height, pixels)`.
+fn rgb_pixels<T: Copy>((w, h): (u32, u32), raw: Vec<T>) -> (u32, u32, Vec<[T; 3]>) {
+    let px = raw.chunks_exact(3).map(|c| [c[0], c[1], c[2]]).collect();
+    (w, h, px)
+}
+
 /// Reads an OpenEXR file as linear RGB floats (alpha dropped): `(width, height, pixels)`.
 pub fn read_exr(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
     let img = open_as(path, image::ImageFormat::OpenExr, "OpenEXR")?.into_rgb32f();
-    let (w, h) = img.dimensions();
-    let px = img
-        .into_raw()
-        .chunks_exact(3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect();
-    Ok((w, h, px))
+    Ok(rgb_pixels(img.dimensions(), img.into_raw()))
 }
 
 /// Reads a PNG as 8-bit RGB (grey is expanded, alpha dropped, 16-bit reduced):
 /// `(width, height, pixels)`. Values are the stored (sRGB-encoded) bytes.
 pub fn read_png_rgb8(path: &Path) -> Result<(u32, u32, Vec<[u8; 3]>)> {
     let img = open_as(path, image::ImageFormat::Png, "PNG")?.into_rgb8();
-    let (w, h) = img.dimensions();
-    let px = img
-        .into_raw()
-        .chunks_exact(3)
-        .map(|c| [c[0], c[1], c[2]])
-        .collect();
-    Ok((w, h, px))
+    Ok(rgb_pixels(img.dimensions(), img.into_raw()))
 }
 
 /// Differences between two linear sRGB images of the same size.

@@ -182,6 +182,16 @@ enum Geometry<'a> {
     },
 }
 
+/// Map pixel `(i, j)` of an `S×S` BRDF map → `ωr`, exactly as the fragment shader computes
+/// it in float32 (README: BRDF maps); `None` outside the unit disk.
+pub fn map_direction(i: u32, j: u32, size: u32) -> Option<[f64; 3]> {
+    let s = size as f32;
+    let x = 2.0 * (i as f32 + 0.5) / s - 1.0;
+    let y = 1.0 - 2.0 * (j as f32 + 0.5) / s;
+    let r2 = x * x + y * y;
+    (r2 < 1.0).then(|| [x as f64, y as f64, (1.0 - r2).sqrt() as f64])
+}
+
 /// Owns the GPU device and what every frame shares (shaders, layouts, samplers).
 pub struct Renderer {
     storage: StorageFormat,
@@ -957,5 +967,20 @@ fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
             &viewable(),
             exposure,
         ),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn map_direction_is_inside_the_disk_and_symmetric() {
+        assert!(map_direction(0, 0, 64).is_none());
+        let c = map_direction(32, 31, 64).unwrap();
+        assert!(c[2] > 0.99);
+        let a = map_direction(10, 20, 64).unwrap();
+        let b = map_direction(53, 43, 64).unwrap();
+        assert!((a[0] + b[0]).abs() < 1e-6 && (a[1] + b[1]).abs() < 1e-6);
     }
 }

@@ -61,13 +61,7 @@ pub fn prepare(m: &Material) -> PreparedMaterial {
 
 /// ωr of map pixel (i, j) exactly as the fragment shader computes it (float32), or `None`
 /// outside the unit disk.
-pub fn map_direction(i: u32, j: u32, size: u32) -> Option<[f64; 3]> {
-    let s = size as f32;
-    let x = 2.0 * (i as f32 + 0.5) / s - 1.0;
-    let y = 1.0 - 2.0 * (j as f32 + 0.5) / s;
-    let r2 = x * x + y * y;
-    (r2 < 1.0).then(|| [x as f64, y as f64, (1.0 - r2).sqrt() as f64])
-}
+pub use diffract::render::map_direction;
 
 /// ωi as the renderer uploads it (f64 direction rounded to float32).
 pub fn uploaded_direction(theta_deg: f64, phi_deg: f64) -> [f64; 3] {
