@@ -178,6 +178,8 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
         ));
     }
     let wi = direction(setup.theta_i_deg, setup.phi_i_deg);
+    // ωi as uploaded (float32), so the model sees what the shader saw.
+    let wi32 = wi.map(|c| c as f32 as f64);
     let mut reports = Vec::with_capacity(setup.variants.len());
     // Scored pixels and their reference XYZ, fixed by the first variant's map.
     let mut samples: Option<Samples> = None;
@@ -233,8 +235,6 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             .iter()
             .map(|&(i, j)| {
                 let wr = map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
-                // ωi as uploaded (float32), so the model sees what the shader saw.
-                let wi32 = wi.map(|c| c as f32 as f64);
                 model::xyz(
                     &prepared.stack,
                     material.terms,
