@@ -1,7 +1,8 @@
 // Shared interface of the diffraction shaders: specialisation constants (MODEL §7: one
-// SPIR-V module, one pipeline per feature set), descriptor bindings and constants.
-// Included by diffraction.vert, brdfmap.vert and diffraction.frag; the Rust side mirrors the
-// layout in src/render.rs (`ParamsUbo`) and src/gpu/pipeline.rs (`Variant`).
+// SPIR-V module per variant, one pipeline per feature set), the descriptor bindings every
+// variant has (0, 2, 3) and constants. Binding 1 (and 4 onwards) belong to the variant:
+// flss.frag's DFT terms, the table variants' G tables. Included by every stage; the Rust side
+// mirrors the layout in src/render/mod.rs (`ParamsUbo`) and src/render/variant/.
 #ifndef INTERFACE_GLSL
 #define INTERFACE_GLSL
 
@@ -15,6 +16,7 @@ layout(constant_id = 5) const bool FRESNEL = true;     // Schlick R/R0
 layout(constant_id = 6) const bool TEXTURE_BLENDING = false; // thesis Algorithm 4
 layout(constant_id = 7) const int STORAGE = 0;         // STORAGE_RG32F / _RG16F / _UNORM16
 layout(constant_id = 8) const int OUTPUT_MODE = 0;     // MODE_MESH / _MAP_XYZ / _MAP_SPECTRAL
+layout(constant_id = 9) const int TABLE_TERMS = 16;    // table variants: coefficients K
 
 const int EXPANSION_TAYLOR = 0;
 const int EXPANSION_CHEBYSHEV = 1;
@@ -47,9 +49,6 @@ layout(set = 0, binding = 0, std140) uniform Params {
     // Per term: value = (x + stored.r * y, z + stored.g * w) (thesis eq. 1.1 inverted).
     vec4 decode[MAX_TERMS];
 } params;
-
-// The DFT terms (Algorithm 1): one layer per term, the cropped band only.
-layout(set = 0, binding = 1) uniform sampler2DArray dftTerms;
 
 // Per spectral sample j: xyz = CIE weight of ColourTable::weights[j], w = λ_j in nm.
 layout(set = 0, binding = 2, std430) readonly buffer ColourWeights {

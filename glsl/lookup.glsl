@@ -5,6 +5,9 @@
 #define LOOKUP_GLSL
 #include "interface.glsl"
 
+// The DFT terms (Algorithm 1): one layer per term, the cropped band only.
+layout(set = 0, binding = 1) uniform sampler2DArray dftTerms;
+
 // Eq. 1.8: fractional texel q = b + u·N·dH/λ of frequency (u/λ, v/λ), full-spectrum index.
 vec2 getLookupCoords(vec2 uv, float lambdaUm) {
     vec2 n = vec2(params.spectrumSize.xy);

@@ -25,6 +25,8 @@ enum Command {
     EvalGrating(diffract::eval::EvalArgs),
     /// Shader variants on the GPU: error against the f64 reference together with GPU time.
     Profile(diffract::profile::ProfileArgs),
+    /// List the shader variants: per-pixel fetches, memory, the default.
+    Variants,
 }
 
 fn main() -> ExitCode {
@@ -35,6 +37,10 @@ fn main() -> ExitCode {
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),
+        Command::Variants => {
+            print!("{}", diffract::render::variant::list());
+            Ok(())
+        }
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -1,57 +1,71 @@
 //! Error-versus-time profiling of shader variants (MODEL §6–7): every variant renders the
-//! same BRDF map on the GPU, is timed with GPU timestamps, and is scored at sampled pixels
-//! against the f64 reference (direct sum, 1 nm) and against the f64 model of the same
-//! variant, which separates approximation error from float32 and driver error.
+//! same BRDF map (and, optionally, a mesh view) on the GPU, is timed with GPU timestamps
+//! (median of several frames after a warm-up frame that also builds its tables), and is
+//! scored at sampled pixels against the f64 reference (direct sum, 1 nm) and against the f64
+//! model of the same variant (FLSS in f64, or the f64 table with the GPU's interpolation),
+//! which separates approximation error from float32 and driver error.
 //!
 //! Metrics per variant (MODEL §6): relative L2 of linear XYZ over the sampled pixels, max
-//! |ΔY|, and mean / max CIEDE2000 of the colours after scaling so the brightest reference
-//! sample has `Y = 1`.
+//! |ΔY|, and CIEDE2000 (p50, p99, mean, max) of the colours after scaling so the brightest
+//! reference sample has `Y = 1`.
 
 use std::path::PathBuf;
+
+use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::brdf::{direction, model, reference};
 use crate::colour::{delta_e2000, xyz_to_lab, ColourTable};
 use crate::gpu::StorageFormat;
 use crate::material::{default_cache_dir, Material, MaterialArgs};
-use crate::render::{map_direction, Renderer};
+use crate::render::{map_direction, Renderer, TableArgs, TableOptions, VariantKind};
+use crate::scene::Scene;
 use crate::spectrum::Expansion;
 use crate::{Error, Result};
 
-/// One shader variant: the numerical choices of a material plus the term storage format.
+/// One profiled configuration: a variant with its numerical choices (FLSS: the material's
+/// expansion, `T`, `R`, `Δλ` and term storage; tables: their sampling options).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Variant {
     pub name: String,
+    pub kind: VariantKind,
     pub expansion: Expansion,
     pub terms: usize,
     pub window_radius: usize,
     pub lambda_step_nm: u32,
     pub storage: StorageFormat,
+    pub table: TableOptions,
 }
 
 impl Variant {
-    /// `base` with this variant's numerical choices.
+    /// `base` with this variant's numerical choices (FLSS reads them; the table variants
+    /// read only the height field and coherence length).
     pub fn material(&self, base: &Material) -> Material {
-        Material {
-            expansion: self.expansion,
-            terms: self.terms,
-            window_radius: self.window_radius,
-            lambda_step_nm: self.lambda_step_nm,
-            ..base.clone()
+        match self.kind {
+            VariantKind::Flss => Material {
+                expansion: self.expansion,
+                terms: self.terms,
+                window_radius: self.window_radius,
+                lambda_step_nm: self.lambda_step_nm,
+                ..base.clone()
+            },
+            _ => base.clone(),
         }
     }
 }
 
-/// The standard set: the thesis setting (Taylor, R = 1), the default, larger R, Chebyshev,
-/// the compact storage formats, and coarser and finer wavelength steps. `terms` is T of the Taylor
-/// variants; Chebyshev gets about two thirds of it (it converges faster, README).
-pub fn standard_variants(terms: usize) -> Vec<Variant> {
+/// The FLSS set: the thesis setting (Taylor, R = 1), the default, larger R, Chebyshev, the
+/// compact storage formats, and coarser and finer wavelength steps. `terms` is T of the
+/// Taylor variants; Chebyshev gets about two thirds of it (it converges faster, README).
+pub fn flss_variants(terms: usize) -> Vec<Variant> {
     let v = |name: &str, expansion, terms, r, step, storage| Variant {
         name: name.to_string(),
+        kind: VariantKind::Flss,
         expansion,
         terms,
         window_radius: r,
         lambda_step_nm: step,
         storage,
+        table: TableOptions::default(),
     };
     let cheb = (2 * terms).div_ceil(3);
     use Expansion::{Chebyshev, Taylor};
@@ -68,6 +82,44 @@ pub fn standard_variants(terms: usize) -> Vec<Variant> {
     ]
 }
 
+/// The pre-integrated set with `table` as the base options: each table variant at its
+/// defaults, plus `chebyshev-w` with its spectrum integrated at 1 nm and `volume` in
+/// float16.
+pub fn table_variants(table: &TableOptions) -> Vec<Variant> {
+    let v = |name: &str, kind, table: TableOptions| Variant {
+        name: name.to_string(),
+        kind,
+        expansion: Expansion::Taylor,
+        terms: 0,
+        window_radius: 0,
+        lambda_step_nm: table.step_nm,
+        storage: StorageFormat::Rg32f,
+        table,
+    };
+    let fine = TableOptions {
+        step_nm: 1,
+        ..*table
+    };
+    let half = TableOptions {
+        format: crate::render::TableFormat::Rgba16f,
+        ..*table
+    };
+    vec![
+        v("dhillon", VariantKind::Dhillon, *table),
+        v("chebyshev-w", VariantKind::ChebyshevW, *table),
+        v("chebyshev-w 1nm", VariantKind::ChebyshevW, fine),
+        v("volume", VariantKind::Volume, *table),
+        v("volume rgba16f", VariantKind::Volume, half),
+    ]
+}
+
+/// Every variant: [`flss_variants`] then [`table_variants`].
+pub fn standard_variants(terms: usize) -> Vec<Variant> {
+    let mut v = flss_variants(terms);
+    v.extend(table_variants(&TableOptions::default()));
+    v
+}
+
 /// Errors of one set of XYZ samples against another (MODEL §6).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ErrorStats {
@@ -78,13 +130,17 @@ pub struct ErrorStats {
     /// Mean and largest CIEDE2000 after scaling by `1 / max Y_ref`.
     pub mean_de: f64,
     pub max_de: f64,
+    /// Median and 99th percentile of the same CIEDE2000 values.
+    pub p50_de: f64,
+    pub p99_de: f64,
 }
 
 /// Compares `xyz` with `reference` sample by sample.
 pub fn error_stats(xyz: &[[f64; 3]], reference: &[[f64; 3]]) -> ErrorStats {
     let y_max = reference.iter().map(|r| r[1]).fold(0.0, f64::max);
     let scale = if y_max > 0.0 { 1.0 / y_max } else { 1.0 };
-    let (mut diff2, mut ref2, mut max_abs_y, mut sum_de, mut max_de) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    let (mut diff2, mut ref2, mut max_abs_y) = (0.0, 0.0, 0.0);
+    let mut des = Vec::with_capacity(xyz.len());
     for (a, r) in xyz.iter().zip(reference) {
         for c in 0..3 {
             diff2 += (a[c] - r[c]).powi(2);
@@ -95,10 +151,17 @@ pub fn error_stats(xyz: &[[f64; 3]], reference: &[[f64; 3]]) -> ErrorStats {
             xyz_to_lab(a.map(|v| (v * scale).max(0.0))),
             xyz_to_lab(r.map(|v| (v * scale).max(0.0))),
         );
-        sum_de += de;
-        max_de = f64::max(max_de, de);
+        des.push(de);
     }
     let n = xyz.len().max(1) as f64;
+    des.sort_by(f64::total_cmp);
+    let pct = |p: f64| {
+        if des.is_empty() {
+            0.0
+        } else {
+            des[((p * (des.len() - 1) as f64).round() as usize).min(des.len() - 1)]
+        }
+    };
     ErrorStats {
         rel_l2: if ref2 > 0.0 {
             (diff2 / ref2).sqrt()
@@ -106,8 +169,10 @@ pub fn error_stats(xyz: &[[f64; 3]], reference: &[[f64; 3]]) -> ErrorStats {
             diff2.sqrt()
         },
         max_abs_y,
-        mean_de: sum_de / n,
-        max_de,
+        mean_de: des.iter().sum::<f64>() / n,
+        max_de: des.last().copied().unwrap_or(0.0),
+        p50_de: pct(0.5),
+        p99_de: pct(0.99),
     }
 }
 
@@ -115,10 +180,20 @@ pub fn error_stats(xyz: &[[f64; 3]], reference: &[[f64; 3]]) -> ErrorStats {
 #[derive(Debug, Clone, PartialEq)]
 pub struct VariantReport {
     pub variant: Variant,
-    /// Fastest GPU time over the repeats (ms); `None` where the device has no timestamps.
+    /// Median GPU time of the map frames after the warm-up (ms); `None` without timestamps.
     pub gpu_ms: Option<f64>,
-    /// Fastest wall time of a frame (ms), upload and readback included.
+    /// Median wall time of a map frame after the warm-up (ms), upload and readback included.
     pub wall_ms: f64,
+    /// Building and uploading the variant's resources (ms): table build or term upload.
+    pub build_ms: f64,
+    /// GPU memory of the variant's resources (bytes).
+    pub gpu_bytes: usize,
+    /// Texel fetches per pixel.
+    pub fetches: usize,
+    /// The variant's own description of its settings.
+    pub detail: String,
+    /// Median GPU time of the mesh view (ms), when profiled.
+    pub mesh_gpu_ms: Option<f64>,
     /// GPU against the f64 reference.
     pub vs_reference: ErrorStats,
     /// GPU against the f64 model of the same variant (float32 and driver error only).
@@ -134,19 +209,23 @@ pub struct ProfileSetup {
     pub phi_i_deg: f64,
     /// BRDF map side in pixels.
     pub size: u32,
-    /// Pixels scored: half the brightest of the first variant's map, half spread evenly.
+    /// Pixels scored, spread evenly over the disk (where errors in dark regions show).
     pub pixels: usize,
-    /// Frames per variant; the fastest is reported.
-    pub repeats: usize,
+    /// Pixels scored among the brightest of the first variant's map (where diffraction is).
+    pub brightest: usize,
+    /// Frames per variant after a warm-up frame; the median is reported.
+    pub frames: usize,
+    /// A mesh view timed per variant (not scored), when given.
+    pub mesh: Option<Scene>,
     pub cache_dir: Option<PathBuf>,
 }
 
 /// Scored pixels and the reference XYZ at each.
 type Samples = (Vec<(u32, u32)>, Vec<[f64; 3]>);
 
-/// Pixels to score: the brightest `n/2` of `map` (where the diffraction is) and `n − n/2`
-/// spread evenly over the rest of the disk (where errors in dark regions would show).
-fn pick_pixels(map: &[[f32; 3]], size: u32, n: usize) -> Vec<(u32, u32)> {
+/// Pixels to score: the `bright` brightest of `map` and `spread` more spread evenly over the
+/// rest of the disk, each at most once.
+fn pick_pixels(map: &[[f32; 3]], size: u32, bright: usize, spread: usize) -> Vec<(u32, u32)> {
     let mut inside: Vec<(u32, u32, f32)> = (0..size * size)
         .filter_map(|k| {
             let (i, j) = (k % size, k / size);
@@ -154,132 +233,241 @@ fn pick_pixels(map: &[[f32; 3]], size: u32, n: usize) -> Vec<(u32, u32)> {
         })
         .collect();
     inside.sort_by(|a, b| b.2.total_cmp(&a.2));
-    let bright = (n / 2).min(inside.len());
+    let bright = bright.min(inside.len());
     let mut picked: Vec<(u32, u32)> = inside[..bright].iter().map(|p| (p.0, p.1)).collect();
     let rest = &inside[bright..];
-    let spread = (n - bright).min(rest.len());
+    let spread = spread.min(rest.len());
+    let mut order: Vec<(u32, u32)> = rest.iter().map(|p| (p.0, p.1)).collect();
+    order.sort_unstable_by_key(|&(i, j)| (j, i));
     for s in 0..spread {
-        let p = rest[s * rest.len() / spread];
-        picked.push((p.0, p.1));
+        picked.push(order[s * order.len() / spread]);
     }
     picked
 }
 
+fn median(mut v: Vec<f64>) -> Option<f64> {
+    if v.is_empty() {
+        return None;
+    }
+    v.sort_by(f64::total_cmp);
+    let n = v.len();
+    Some(if n % 2 == 1 {
+        v[n / 2]
+    } else {
+        0.5 * (v[n / 2 - 1] + v[n / 2])
+    })
+}
+
+fn bar(len: usize, msg: &str) -> ProgressBar {
+    let b = ProgressBar::new(len as u64).with_message(msg.to_string());
+    b.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {eta} left")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    b
+}
+
 /// Renders and scores every variant. The reference (1 nm, direct sum) is computed once at
-/// the sampled pixels, so its cost is `pixels × N² × 401` complex exponentials.
+/// the sampled pixels, so its cost is `pixels × N² × 401` complex multiply-adds.
 pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<VariantReport>> {
     if setup.variants.is_empty() {
         return Err(Error::invalid("variants", "none to profile"));
     }
-    if setup.pixels == 0 || setup.repeats == 0 {
+    if setup.pixels + setup.brightest == 0 || setup.frames == 0 {
         return Err(Error::invalid(
             "profile",
-            "pixels and repeats must be at least 1",
+            "at least one scored pixel and one frame are needed",
         ));
     }
     let wi = direction(setup.theta_i_deg, setup.phi_i_deg);
-    // ωi as uploaded (float32), so the model sees what the shader saw.
+    // ωi as uploaded (float32), so the models see what the shader saw.
     let wi32 = wi.map(|c| c as f32 as f64);
     let mut reports = Vec::with_capacity(setup.variants.len());
     // Scored pixels and their reference XYZ, fixed by the first variant's map.
     let mut samples: Option<Samples> = None;
     let table_1nm = ColourTable::new(1)?;
+    renderer.set_keep_models(true);
+    renderer.set_cache_dir(setup.cache_dir.clone());
+    let progress = bar(setup.variants.len(), "profile");
     for variant in &setup.variants {
+        progress.set_message(format!("profile: {}", variant.name));
         let material = variant.material(&setup.base);
         let prepared = material.prepare(setup.cache_dir.as_deref())?;
+        renderer.set_variant(variant.kind);
         renderer.set_storage_format(variant.storage);
-        let mut best_gpu: Option<f64> = None;
-        let mut best_wall = f64::INFINITY;
-        let mut frame = None;
-        for _ in 0..setup.repeats {
-            let f = renderer.render_brdf_map(
+        renderer.set_table_options(variant.table);
+        let map = |r: &mut Renderer| {
+            r.render_brdf_map(
                 &prepared,
                 setup.theta_i_deg,
                 setup.phi_i_deg,
                 setup.size,
                 None,
-            )?;
-            best_gpu = match (best_gpu, f.gpu_ms) {
-                (Some(a), Some(b)) => Some(a.min(b)),
-                (a, b) => a.or(b),
-            };
-            best_wall = best_wall.min(f.wall_ms);
-            frame = Some(f);
-        }
-        let Some(frame) = frame else {
-            continue;
+            )
         };
-        let (pixels, refs) = samples.get_or_insert_with(|| {
-            let pixels = pick_pixels(&frame.rgb, setup.size, setup.pixels);
-            let refs = pixels
-                .iter()
-                .map(|&(i, j)| {
-                    let wr = map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
-                    reference::xyz(
-                        &prepared.heightfield,
-                        material.coherence_um,
-                        &prepared.shading,
-                        &table_1nm,
-                        wi,
-                        wr,
-                    )
-                })
-                .collect();
-            (pixels, refs)
-        });
-        let gpu: Vec<[f64; 3]> = pixels
+        // The warm-up frame builds (or uploads) the variant's resources.
+        let mut frame = map(renderer)?;
+        let (mut gpu, mut wall) = (Vec::new(), Vec::new());
+        for _ in 0..setup.frames {
+            frame = map(renderer)?;
+            gpu.extend(frame.gpu_ms);
+            wall.push(frame.wall_ms);
+        }
+        let (pixels, refs) = match &samples {
+            Some(s) => s.clone(),
+            None => {
+                let pixels = pick_pixels(&frame.rgb, setup.size, setup.brightest, setup.pixels);
+                let wrs: Vec<[f64; 3]> = pixels
+                    .iter()
+                    .map(|&(i, j)| map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]))
+                    .collect();
+                let rb = bar(wrs.len(), "f64 reference at 1 nm");
+                let refs = reference::xyz_many(
+                    &prepared.heightfield,
+                    material.coherence_um,
+                    &prepared.shading,
+                    &table_1nm,
+                    wi,
+                    &wrs,
+                    &|| rb.inc(1),
+                );
+                rb.finish_and_clear();
+                samples = Some((pixels, refs));
+                samples.clone().unwrap_or_default()
+            }
+        };
+        let gpu_xyz: Vec<[f64; 3]> = pixels
             .iter()
             .map(|&(i, j)| frame.at(i, j).map(f64::from))
             .collect();
-        let modelled: Vec<[f64; 3]> = pixels
-            .iter()
-            .map(|&(i, j)| {
-                let wr = map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
-                model::xyz(
-                    &prepared.stack,
-                    material.terms,
-                    &prepared.window,
-                    &prepared.shading,
-                    &prepared.colour,
-                    wi32,
-                    wr,
-                )
-            })
-            .collect();
+        let wr_of =
+            |&(i, j): &(u32, u32)| map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
+        let modelled: Vec<[f64; 3]> = match renderer.table_model() {
+            Some(t) => pixels
+                .iter()
+                .map(|p| t.xyz(&prepared.shading, wi32, wr_of(p)))
+                .collect(),
+            None => pixels
+                .iter()
+                .map(|p| {
+                    model::xyz(
+                        &prepared.stack,
+                        material.terms,
+                        &prepared.window,
+                        &prepared.shading,
+                        &prepared.colour,
+                        wi32,
+                        wr_of(p),
+                    )
+                })
+                .collect(),
+        };
+        let mesh_gpu_ms = match &setup.mesh {
+            Some(scene) => {
+                renderer.render_scene(scene, &prepared)?;
+                let mut t = Vec::new();
+                for _ in 0..setup.frames {
+                    t.extend(renderer.render_scene(scene, &prepared)?.gpu_ms);
+                }
+                median(t)
+            }
+            None => None,
+        };
+        let v = &frame.variant;
         reports.push(VariantReport {
             variant: variant.clone(),
-            gpu_ms: best_gpu,
-            wall_ms: best_wall,
-            vs_reference: error_stats(&gpu, refs),
-            vs_model: error_stats(&gpu, &modelled),
+            gpu_ms: median(gpu),
+            wall_ms: median(wall).unwrap_or(frame.wall_ms),
+            build_ms: v.build_ms,
+            gpu_bytes: v.gpu_bytes,
+            fetches: v.fetches,
+            detail: v.name.clone(),
+            mesh_gpu_ms,
+            vs_reference: error_stats(&gpu_xyz, &refs),
+            vs_model: error_stats(&gpu_xyz, &modelled),
         });
+        progress.inc(1);
     }
+    progress.finish_and_clear();
+    renderer.set_keep_models(false);
     Ok(reports)
+}
+
+fn ms(v: Option<f64>) -> String {
+    v.map_or("n/a".into(), |g| format!("{g:.2}"))
 }
 
 /// Formats the reports as a Markdown table.
 pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport]) -> String {
+    let mesh = setup.mesh.as_ref().map_or(String::new(), |s| {
+        format!("; mesh view {}×{}", s.output.width, s.output.height)
+    });
     let mut s = format!(
-        "device: {device}; BRDF map {}² at θi = {}°, φi = {}°, {} scored pixels, best of {}; reference: f64 direct sum at 1 nm\n\n",
-        setup.size, setup.theta_i_deg, setup.phi_i_deg, setup.pixels, setup.repeats
+        "device: {device}; BRDF map {}² at θi = {}°, φi = {}°{mesh}; {} scored pixels ({} brightest + {} spread); GPU ms = median of {} frames after a warm-up; reference: f64 direct sum at 1 nm\n\n",
+        setup.size,
+        setup.theta_i_deg,
+        setup.phi_i_deg,
+        setup.brightest + setup.pixels,
+        setup.brightest,
+        setup.pixels,
+        setup.frames
     );
-    s.push_str("| variant | T | GPU ms | wall ms | rel L2 vs ref | max ΔY vs ref | mean ΔE | max ΔE | rel L2 vs f64 model |\n");
-    s.push_str("|---|---|---|---|---|---|---|---|---|\n");
+    s.push_str("| variant | fetches/px | build ms | GPU MB | GPU ms | mesh GPU ms | rel L2 vs ref | max ΔY vs ref | ΔE p50 | ΔE p99 | max ΔE | rel L2 vs f64 model |\n");
+    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
     for r in reports {
-        let gpu = r.gpu_ms.map_or("n/a".into(), |g| format!("{g:.2}"));
+        let e = &r.vs_reference;
         s.push_str(&format!(
-            "| {} | {} | {gpu} | {:.1} | {:.2e} | {:.2e} | {:.3} | {:.3} | {:.2e} |\n",
+            "| {} | {} | {:.0} | {:.1} | {} | {} | {:.2e} | {:.2e} | {:.3} | {:.3} | {:.3} | {:.2e} |\n",
             r.variant.name,
-            r.variant.terms,
+            r.fetches,
+            r.build_ms,
+            r.gpu_bytes as f64 / 1e6,
+            ms(r.gpu_ms),
+            ms(r.mesh_gpu_ms),
+            e.rel_l2,
+            e.max_abs_y,
+            e.p50_de,
+            e.p99_de,
+            e.max_de,
+            r.vs_model.rel_l2
+        ));
+    }
+    s
+}
+
+/// The CSV of the reports: the columns of the first profiler, then the new ones.
+pub fn format_csv(reports: &[VariantReport]) -> String {
+    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model\n");
+    let opt = |v: Option<f64>| v.map_or(String::new(), |g| g.to_string());
+    for r in reports {
+        let v = &r.variant;
+        csv.push_str(&format!(
+            "{},{},{},{},{},{:?},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            v.name,
+            v.expansion,
+            v.terms,
+            v.window_radius,
+            v.lambda_step_nm,
+            v.storage,
+            opt(r.gpu_ms),
             r.wall_ms,
             r.vs_reference.rel_l2,
             r.vs_reference.max_abs_y,
             r.vs_reference.mean_de,
             r.vs_reference.max_de,
-            r.vs_model.rel_l2
+            r.vs_model.rel_l2,
+            v.kind,
+            r.detail.replace(',', ";"),
+            r.fetches,
+            r.build_ms,
+            r.gpu_bytes,
+            opt(r.mesh_gpu_ms),
+            r.vs_reference.p50_de,
+            r.vs_reference.p99_de,
+            r.vs_model.p99_de
         ));
     }
-    s
+    csv
 }
 
 /// `diffract profile` options.
@@ -287,9 +475,12 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
 pub struct ProfileArgs {
     #[command(flatten)]
     pub material: MaterialArgs,
-    /// Taylor terms T of the standard variants (Chebyshev gets ⌈2T/3⌉).
+    /// Taylor terms T of the FLSS variants (Chebyshev gets ⌈2T/3⌉).
     #[arg(long = "variant-terms", default_value_t = 30)]
     pub variant_terms: usize,
+    /// Profile only these (comma-separated names from the table; default: all).
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
     /// Polar angle of the light (degrees).
     #[arg(long, default_value_t = 60.0)]
     pub theta_i: f64,
@@ -299,15 +490,27 @@ pub struct ProfileArgs {
     /// BRDF map side in pixels.
     #[arg(long, default_value_t = 128)]
     pub size: u32,
-    /// Pixels scored against the reference (each costs N²·401 complex exponentials).
-    #[arg(long, default_value_t = 16)]
+    /// Pixels scored against the reference, spread over the map (each costs N²·401
+    /// complex multiply-adds).
+    #[arg(long, default_value_t = 1024)]
     pub pixels: usize,
-    /// Frames per variant (the fastest is reported).
-    #[arg(long, default_value_t = 3)]
-    pub repeats: usize,
+    /// Pixels scored among the brightest of the map.
+    #[arg(long, default_value_t = 64)]
+    pub brightest: usize,
+    /// Frames per variant after the warm-up (the median is reported).
+    #[arg(long, default_value_t = 5)]
+    pub frames: usize,
+    /// Side of the mesh view (the default scene) timed per variant; 0: none.
+    #[arg(long, default_value_t = 128)]
+    pub mesh_size: u32,
     /// Also write the table as CSV.
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Also write a PNG plot of error against GPU time (log–log, Pareto front marked).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    #[command(flatten)]
+    pub table: TableArgs,
     /// Directory of the DFT-term cache.
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
@@ -315,50 +518,79 @@ pub struct ProfileArgs {
 
 /// Runs `diffract profile`.
 pub fn run(args: &ProfileArgs) -> Result<()> {
-    if let Some(p) = &args.csv {
+    for p in args.csv.iter().chain(&args.plot) {
         if p.file_name().is_none() {
             return Err(Error::invalid(
-                "csv",
+                "output",
                 format!("{} is not a file", p.display()),
             ));
         }
     }
+    let mut variants = flss_variants(args.variant_terms);
+    variants.extend(table_variants(&args.table.options()));
+    if !args.only.is_empty() {
+        for name in &args.only {
+            if !variants.iter().any(|v| &v.name == name) {
+                let names: Vec<&str> = variants.iter().map(|v| v.name.as_str()).collect();
+                return Err(Error::invalid(
+                    "only",
+                    format!(
+                        "'{name}' is not a profiled variant; expected one of: {}",
+                        names.join(", ")
+                    ),
+                ));
+            }
+        }
+        variants.retain(|v| args.only.contains(&v.name));
+    }
     let mut renderer = Renderer::new(crate::render::validation_requested())?;
     let base = args.material.apply(Material::default());
+    let mesh = (args.mesh_size > 0).then(|| {
+        let mut s = Scene::default_scene();
+        s.output.width = args.mesh_size;
+        s.output.height = args.mesh_size;
+        s
+    });
     let setup = ProfileSetup {
         base,
-        variants: standard_variants(args.variant_terms),
+        variants,
         theta_i_deg: args.theta_i,
         phi_i_deg: args.phi_i,
         size: args.size,
         pixels: args.pixels,
-        repeats: args.repeats,
+        brightest: args.brightest,
+        frames: args.frames,
+        mesh,
         cache_dir: args.cache_dir.clone().or_else(default_cache_dir),
     };
     let reports = profile(&mut renderer, &setup)?;
     print!("{}", format_table(renderer.device_name(), &setup, &reports));
     if let Some(path) = &args.csv {
-        let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model\n");
-        for r in &reports {
-            let v = &r.variant;
-            csv.push_str(&format!(
-                "{},{},{},{},{},{:?},{},{},{},{},{},{},{}\n",
-                v.name,
-                v.expansion,
-                v.terms,
-                v.window_radius,
-                v.lambda_step_nm,
-                v.storage,
-                r.gpu_ms.map_or(String::new(), |g| g.to_string()),
-                r.wall_ms,
-                r.vs_reference.rel_l2,
-                r.vs_reference.max_abs_y,
-                r.vs_reference.mean_de,
-                r.vs_reference.max_de,
-                r.vs_model.rel_l2
-            ));
-        }
-        crate::fsutil::write_atomic(path, csv.as_bytes())?;
+        crate::fsutil::write_atomic(path, format_csv(&reports).as_bytes())?;
+    }
+    if let Some(path) = &args.plot {
+        let points: Vec<crate::plot::Point> = reports
+            .iter()
+            .filter_map(|r| {
+                r.gpu_ms.map(|t| crate::plot::Point {
+                    label: r.variant.name.clone(),
+                    time_ms: t,
+                    error: r.vs_reference.rel_l2,
+                })
+            })
+            .collect();
+        crate::plot::error_vs_time(
+            path,
+            &format!(
+                "diffract profile: {} at θi = {}°, {}² map, {}",
+                setup.base.heightfield,
+                setup.theta_i_deg,
+                setup.size,
+                renderer.device_name()
+            ),
+            "relative L2 error of XYZ vs the f64 reference at 1 nm",
+            &points,
+        )?;
     }
     let n = renderer.validation_messages();
     if n > 0 {

@@ -6,7 +6,8 @@ mod gpu_util;
 
 use diffract::heightfield::HeightField;
 use diffract::material::Material;
-use diffract::profile::{profile, standard_variants, ProfileSetup};
+use diffract::profile::{flss_variants, profile, table_variants, ProfileSetup};
+use diffract::render::TableOptions;
 
 #[test]
 fn variants_report_error_and_time() {
@@ -33,12 +34,21 @@ fn variants_report_error_and_time() {
             heightfield: path.to_string_lossy().into_owned(),
             ..Material::default()
         },
-        variants: standard_variants(12),
+        variants: flss_variants(12)
+            .into_iter()
+            .chain(table_variants(&TableOptions {
+                texel_uv: Some(0.02),
+                step_nm: 20,
+                ..TableOptions::default()
+            }))
+            .collect(),
         theta_i_deg: 50.0,
         phi_i_deg: 0.0,
         size: 32,
-        pixels: 8,
-        repeats: 1,
+        pixels: 4,
+        brightest: 4,
+        frames: 1,
+        mesh: None,
         cache_dir: None,
     };
     let reports = profile(&mut r, &setup).unwrap();
@@ -52,9 +62,24 @@ fn variants_report_error_and_time() {
         assert!(rep.wall_ms > 0.0 && rep.gpu_ms.is_none_or(|g| g > 0.0));
         for e in [rep.vs_reference, rep.vs_model] {
             assert!(e.rel_l2.is_finite() && e.max_de.is_finite() && e.mean_de <= e.max_de);
+            assert!(e.p50_de <= e.p99_de && e.p99_de <= e.max_de);
         }
+        assert!(rep.build_ms > 0.0 && rep.gpu_bytes > 0 && rep.fetches > 0);
     }
-    let by = |name: &str| reports.iter().find(|r| r.variant.name == name).unwrap();
+    // The stable table representations reproduce their f64 tables in float32.
+    for name in ["chebyshev-w", "chebyshev-w 1nm", "volume"] {
+        assert!(by_name(&reports, name).vs_model.rel_l2 < 1e-4, "{name}");
+    }
+    assert!(
+        by_name(&reports, "volume rgba16f").vs_model.rel_l2
+            > by_name(&reports, "volume").vs_model.rel_l2
+    );
+    let csv = diffract::profile::format_csv(&reports);
+    assert_eq!(csv.lines().count(), reports.len() + 1);
+    assert!(csv.starts_with(
+        "variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref"
+    ));
+    let by = |name: &str| by_name(&reports, name);
     // float32 RG32F tracks its own f64 model closely; the compact formats less so.
     assert!(
         by("taylor R=2").vs_model.rel_l2 < 1e-3,
@@ -74,4 +99,14 @@ fn variants_report_error_and_time() {
     assert!(by("taylor R=2 10nm").vs_reference.rel_l2 > by("taylor R=2").vs_reference.rel_l2);
     assert!(by("taylor R=2 1nm").vs_reference.rel_l2 < 0.5 * by("taylor R=2").vs_reference.rel_l2);
     let _ = std::fs::remove_dir_all(dir);
+}
+
+fn by_name<'a>(
+    reports: &'a [diffract::profile::VariantReport],
+    name: &str,
+) -> &'a diffract::profile::VariantReport {
+    reports
+        .iter()
+        .find(|r| r.variant.name == name)
+        .unwrap_or_else(|| panic!("no variant {name}"))
 }

@@ -10,6 +10,8 @@ pub mod bessel;
 pub mod model;
 pub mod query;
 pub mod reference;
+pub mod table;
+pub mod table_cache;
 
 /// Switches and constants of the gain factor `C(ωi, ωr)`.
 #[derive(Debug, Clone, Copy, PartialEq)]

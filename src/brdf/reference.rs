@@ -107,3 +107,85 @@ pub fn xyz(
             .reduce(|| [0.0; 3], |a, b| [a[0] + b[0], a[1] + b[1], a[2] + b[2]])
     })
 }
+
+/// The reference XYZ at many view directions under one light, in parallel over directions:
+/// the same direct sum as [`xyz`], but when the height field has few distinct heights (8-
+/// and 16-bit images have at most 65 536) each wavelength computes `exp(i·s·h)` once per
+/// height level instead of once per sample. Same numbers, several times faster; `progress`
+/// is called once per finished direction.
+pub fn xyz_many(
+    hf: &HeightField,
+    coherence_um: f64,
+    shading: &Shading,
+    table: &ColourTable,
+    wi: [f64; 3],
+    wrs: &[[f64; 3]],
+    progress: &(dyn Fn() + Sync),
+) -> Vec<[f64; 3]> {
+    let h = centred(hf);
+    let mut levels = h.clone();
+    levels.sort_by(f64::total_cmp);
+    levels.dedup();
+    let quantised = levels.len() <= h.len() / 4;
+    let index: Vec<u32> = if quantised {
+        h.iter()
+            .map(|x| levels.partition_point(|l| l < x) as u32)
+            .collect()
+    } else {
+        Vec::new()
+    };
+    let sigma = coherence_um / 4.0;
+    wrs.par_iter()
+        .map(|&wr| {
+            let xyz = integrated(wi, wr, shading, |d| {
+                let mut acc = [0.0; 3];
+                let mut phase = vec![Complex64::new(0.0, 0.0); levels.len()];
+                for (l, w) in table.lambdas_nm.iter().zip(&table.weights) {
+                    let lambda_um = l * 1e-3;
+                    let r = if quantised {
+                        let k = 2.0 * std::f64::consts::PI / lambda_um;
+                        for (p, h) in phase.iter_mut().zip(&levels) {
+                            let (s, c) = (k * d[2] * h).sin_cos();
+                            *p = Complex64::new(c, s);
+                        }
+                        p_hat_levels(hf, &index, &phase, sigma, d, lambda_um).norm_sqr()
+                    } else {
+                        p_hat_ref(hf, &h, sigma, d, lambda_um).norm_sqr()
+                    };
+                    for c in 0..3 {
+                        acc[c] += r * w[c];
+                    }
+                }
+                acc
+            });
+            progress();
+            xyz
+        })
+        .collect()
+}
+
+/// [`p_hat_ref`] with `exp(i·k·w·h)` looked up per height level.
+fn p_hat_levels(
+    hf: &HeightField,
+    index: &[u32],
+    phase: &[Complex64],
+    sigma_um: f64,
+    d: [f64; 3],
+    lambda_um: f64,
+) -> Complex64 {
+    let k = 2.0 * std::f64::consts::PI / lambda_um;
+    let (gx, sx) = folded_axis(hf.nx(), hf.dh_um(), sigma_um, k * d[0]);
+    let (gy, sy) = folded_axis(hf.ny(), hf.dh_um(), sigma_um, k * d[1]);
+    let mut acc = Complex64::new(0.0, 0.0);
+    for (r, row) in index.chunks_exact(hf.nx()).enumerate() {
+        if gy[r].norm_sqr() == 0.0 {
+            continue;
+        }
+        let mut row_acc = Complex64::new(0.0, 0.0);
+        for (c, &l) in row.iter().enumerate() {
+            row_acc += gx[c] * phase[l as usize];
+        }
+        acc += gy[r] * row_acc;
+    }
+    acc / (sx * sy)
+}

@@ -279,6 +279,8 @@ pub struct DeviceInfo {
     pub timestamp_valid_bits: u32,
     /// Largest 2D image side.
     pub max_image_dimension_2d: u32,
+    /// Largest side of a 3D image.
+    pub max_image_dimension_3d: u32,
     /// Largest number of image array layers.
     pub max_image_array_layers: u32,
 }
@@ -422,6 +424,7 @@ impl Device {
                 timestamp_period: props.limits.timestamp_period as f64,
                 timestamp_valid_bits,
                 max_image_dimension_2d: props.limits.max_image_dimension2_d,
+                max_image_dimension_3d: props.limits.max_image_dimension3_d,
                 max_image_array_layers: props.limits.max_image_array_layers,
             },
             command_pool,

@@ -168,15 +168,39 @@ pub struct ImageDesc {
     pub format: vk::Format,
     pub width: u32,
     pub height: u32,
-    /// Array layers (1 for a plain 2D image).
+    /// Array layers (1 for a plain 2D image), or the depth of a 3D image.
     pub layers: u32,
     pub usage: vk::ImageUsageFlags,
     pub aspect: vk::ImageAspectFlags,
-    /// `TYPE_2D` or `TYPE_2D_ARRAY`.
+    /// `TYPE_2D`, `TYPE_2D_ARRAY` or `TYPE_3D`.
     pub view_type: vk::ImageViewType,
 }
 
-/// A 2D (array) image with one view covering all layers, in GPU memory.
+impl ImageDesc {
+    fn is_3d(&self) -> bool {
+        self.view_type == vk::ImageViewType::TYPE_3D
+    }
+
+    /// Extent of mip level 0 (depth 1 unless 3D).
+    fn extent(&self) -> vk::Extent3D {
+        vk::Extent3D {
+            width: self.width,
+            height: self.height,
+            depth: if self.is_3d() { self.layers } else { 1 },
+        }
+    }
+
+    /// Array layers of the image (1 for 3D).
+    fn array_layers(&self) -> u32 {
+        if self.is_3d() {
+            1
+        } else {
+            self.layers
+        }
+    }
+}
+
+/// A 2D (array) or 3D image with one view covering all of it, in GPU memory.
 pub struct Image {
     dev: Arc<Device>,
     pub raw: vk::Image,
@@ -187,16 +211,17 @@ pub struct Image {
 
 impl Image {
     pub fn new(dev: &Arc<Device>, name: &str, desc: ImageDesc) -> Result<Self> {
+        let image_type = if desc.is_3d() {
+            vk::ImageType::TYPE_3D
+        } else {
+            vk::ImageType::TYPE_2D
+        };
         let info = vk::ImageCreateInfo::default()
-            .image_type(vk::ImageType::TYPE_2D)
+            .image_type(image_type)
             .format(desc.format)
-            .extent(vk::Extent3D {
-                width: desc.width,
-                height: desc.height,
-                depth: 1,
-            })
+            .extent(desc.extent())
             .mip_levels(1)
-            .array_layers(desc.layers)
+            .array_layers(desc.array_layers())
             .samples(vk::SampleCountFlags::TYPE_1)
             .tiling(vk::ImageTiling::OPTIMAL)
             .usage(desc.usage)
@@ -242,7 +267,7 @@ impl Image {
             base_mip_level: 0,
             level_count: 1,
             base_array_layer: 0,
-            layer_count: self.desc.layers,
+            layer_count: self.desc.array_layers(),
         }
     }
 
@@ -295,13 +320,9 @@ impl Image {
                     aspect_mask: desc.aspect,
                     mip_level: 0,
                     base_array_layer: 0,
-                    layer_count: desc.layers,
+                    layer_count: desc.array_layers(),
                 })
-                .image_extent(vk::Extent3D {
-                    width: desc.width,
-                    height: desc.height,
-                    depth: 1,
-                });
+                .image_extent(desc.extent());
             let to_read = vk::ImageMemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
                 .dst_access_mask(vk::AccessFlags::SHADER_READ)

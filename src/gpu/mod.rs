@@ -26,7 +26,13 @@ pub mod shaders {
         include_bytes!(concat!(env!("OUT_DIR"), "/diffraction.vert.spv"));
     /// Full-screen triangle for BRDF maps.
     pub const BRDFMAP_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/brdfmap.vert.spv"));
-    /// Thesis Algorithms 3 and 4.
-    pub const DIFFRACTION_FRAG: &[u8] =
-        include_bytes!(concat!(env!("OUT_DIR"), "/diffraction.frag.spv"));
+    /// Variant `flss`: thesis Algorithms 3 and 4.
+    pub const FLSS_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/flss.frag.spv"));
+    /// Variant `volume`: G(u, v, w) in a 3D texture.
+    pub const VOLUME_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/volume.frag.spv"));
+    /// Variant `chebyshev-w`: Chebyshev coefficient planes in w, Clenshaw.
+    pub const CHEBYSHEV_W_FRAG: &[u8] =
+        include_bytes!(concat!(env!("OUT_DIR"), "/chebyshev_w.frag.spv"));
+    /// Variant `dhillon`: planes of the powers of w, Horner.
+    pub const DHILLON_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/dhillon.frag.spv"));
 }

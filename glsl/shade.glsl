@@ -1,0 +1,70 @@
+// main() of every fragment variant: thesis Algorithm 4 (texture blending) on meshes, and
+// BRDF maps (thesis §5). The including variant defines
+//   vec3 diffractionXyz(vec3 wi, vec3 wr)        — C(ωi, ωr)·Σ_λ |P̂|² weights (XYZ)
+// and, with SPECTRAL_MODE defined,
+//   float spectralPower(vec3 uvw, float lambdaUm) — |P̂|² at one wavelength.
+// Output is linear (RGB, or XYZ / ρ for maps); the sRGB curve is applied on the CPU.
+#ifndef SHADE_GLSL
+#define SHADE_GLSL
+#include "interface.glsl"
+#include "gain.glsl"
+#include "colour.glsl"
+
+layout(location = 0) in vec3 inWi;
+layout(location = 1) in vec3 inWr;
+layout(location = 2) in vec2 inUv;
+
+layout(location = 0) out vec4 outColour;
+
+vec3 safeNormalize(vec3 v) {
+    float l = length(v);
+    return l > 1e-20 ? v / l : vec3(0.0, 0.0, 1.0);
+}
+
+vec3 finiteOrZero(vec3 c) {
+    return (any(isnan(c)) || any(isinf(c))) ? vec3(0.0) : c;
+}
+
+void main() {
+    if (OUTPUT_MODE == MODE_MESH) {
+        vec3 wi = safeNormalize(inWi);
+        vec3 wr = safeNormalize(inWr);
+        vec3 cDiffraction = xyzToLinearSrgb(diffractionXyz(wi, wr));  // line 28, eq. 1.10
+        vec3 c = cDiffraction;
+        if (TEXTURE_BLENDING) {
+            vec3 cTexture = texture(surfaceTexture, inUv).rgb;
+            vec3 h = safeNormalize(wi + wr);
+            float f = schlickFresnel(clamp(dot(wr, h), 0.0, 1.0));
+            c = textureBlend(cDiffraction, cTexture, f, params.lighting.z);
+        }
+        // Irradiance of the directional light on the surface, then the camera's exposure.
+        float irradiance = max(wi.z, 0.0) * params.lighting.x;
+        outColour = vec4(finiteOrZero(c * irradiance * params.lighting.y), 1.0);
+        return;
+    }
+
+    // BRDF map: pixel (i, j), row j from the top, is ωr = (x, y, √(1 − x² − y²)).
+    float s = params.mapInfo.x;
+    float x = 2.0 * gl_FragCoord.x / s - 1.0;
+    float y = 1.0 - 2.0 * gl_FragCoord.y / s;
+    float r2 = x * x + y * y;
+    if (r2 >= 1.0) {
+        outColour = vec4(0.0, 0.0, 0.0, 1.0);
+        return;
+    }
+    vec3 wr = vec3(x, y, sqrt(1.0 - r2));
+    vec3 wi = params.mapWi.xyz;
+#ifdef SPECTRAL_MODE
+    if (OUTPUT_MODE == MODE_MAP_SPECTRAL) {
+        float rho = gainFactor(wi, wr);
+        if (rho > 0.0) {
+            rho *= spectralPower(-wi - wr, params.mapWi.w);
+        }
+        outColour = vec4(finiteOrZero(vec3(rho)), 1.0);
+        return;
+    }
+#endif
+    outColour = vec4(finiteOrZero(diffractionXyz(wi, wr)), 1.0);
+}
+
+#endif

@@ -1,0 +1,791 @@
+//! Pre-integrated tables (MODEL §7). With the height field, the coherence window, D65 and
+//! the CIE functions fixed, the colour is `XYZ(ωi, ωr) = C(ωi, ωr) · G(u, v, w)`, where
+//!
+//! `G(u, v, w) = Σ_λ |P̂_λ(ku, kv; w)|² · weights(λ)`
+//!
+//! depends on three scalars only. This module computes `G` in f64 on a grid over the region
+//! of `(u, v, w)` a scene can reach — exactly, from the windowed spectrum of `exp(i·s·h)` at
+//! `s = k·w` (one FFT of the phase field gives the whole `(u, v)` plane of one `s`), with
+//! the Gaussian window untruncated (6σ) — so no series and no cancellation reach the GPU.
+//! It also holds the f64 CPU models of the three stored representations, which interpolate
+//! exactly as the GPU variants do: [`Volume`] (trilinear in `(u, v, w)`), [`ChebyshevW`]
+//! (bilinear coefficients of a Chebyshev series in `w`, Clenshaw) and [`Dhillon`]
+//! (bilinear coefficients of powers of `w`, Horner). No Vulkan here.
+
+use std::sync::Arc;
+
+use rayon::prelude::*;
+use rustfft::{Fft, FftPlanner};
+
+use crate::colour::ColourTable;
+use crate::heightfield::HeightField;
+use crate::spectrum::num_complex::Complex64;
+use crate::{Error, Result};
+
+use super::{integrated, Shading};
+
+/// Largest number of grid nodes along `u` or `v`.
+pub const MAX_NODES_UV: usize = 4096;
+/// Largest number of `w` nodes (slices or coefficients).
+pub const MAX_NODES_W: usize = 64;
+/// Largest table, in f64 samples of G (`nu·nv·nw·3`): bounds CPU memory of a build.
+pub const MAX_SAMPLES: usize = 120_000_000;
+
+/// An axis-aligned box of `(u, v, w)`: what a scene or a BRDF map can reach.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Region {
+    /// Lower corner `(u, v, w)`.
+    pub lo: [f64; 3],
+    /// Upper corner `(u, v, w)`.
+    pub hi: [f64; 3],
+}
+
+impl Region {
+    /// Everything physically possible: `u, v ∈ [−2, 2]`, `w ∈ [−2, 0]` (MODEL §1).
+    pub const ALL: Region = Region {
+        lo: [-2.0, -2.0, -2.0],
+        hi: [2.0, 2.0, 0.0],
+    };
+
+    /// A BRDF map under light `wi`: `ωr` covers the upper hemisphere, so `(u, v)` covers the
+    /// unit disk around `−ωi.xy` and `w ∈ [−cosθi − 1, −cosθi]`.
+    pub fn brdf_map(wi: [f64; 3]) -> Region {
+        Region {
+            lo: [-wi[0] - 1.0, -wi[1] - 1.0, -wi[2] - 1.0],
+            hi: [-wi[0] + 1.0, -wi[1] + 1.0, -wi[2]],
+        }
+        .clamped()
+    }
+
+    /// The bounding box of `points`, widened by `margin` on every side (fragments
+    /// interpolate between vertices and renormalise, so they stray slightly outside).
+    /// `None` without points.
+    pub fn around(points: impl IntoIterator<Item = [f64; 3]>, margin: f64) -> Option<Region> {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        let mut any = false;
+        for p in points {
+            if !p.iter().all(|c| c.is_finite()) {
+                continue;
+            }
+            any = true;
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a] - margin);
+                hi[a] = hi[a].max(p[a] + margin);
+            }
+        }
+        any.then(|| Region { lo, hi }.clamped())
+    }
+
+    fn clamped(self) -> Region {
+        let mut r = self;
+        for a in 0..3 {
+            r.lo[a] = r.lo[a].clamp(Self::ALL.lo[a], Self::ALL.hi[a]);
+            r.hi[a] = r.hi[a].clamp(Self::ALL.lo[a], Self::ALL.hi[a]);
+            // A degenerate axis (one reachable value) still needs two nodes to interpolate.
+            if r.hi[a] - r.lo[a] < 1e-3 {
+                let mid = 0.5 * (r.lo[a] + r.hi[a]);
+                r.lo[a] = mid - 5e-4;
+                r.hi[a] = mid + 5e-4;
+            }
+        }
+        r
+    }
+
+    /// Whether `p` lies inside (inclusive).
+    pub fn contains(&self, p: [f64; 3]) -> bool {
+        (0..3).all(|a| p[a] >= self.lo[a] && p[a] <= self.hi[a])
+    }
+
+    /// Edge lengths.
+    pub fn extent(&self) -> [f64; 3] {
+        [
+            self.hi[0] - self.lo[0],
+            self.hi[1] - self.lo[1],
+            self.hi[2] - self.lo[2],
+        ]
+    }
+}
+
+/// How to sample `G`: the region, the `(u, v)` node spacing, the number of `w` nodes and the
+/// wavelength step of the offline spectral integral.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TableSpec {
+    pub region: Region,
+    /// Node spacing in `u` and `v`.
+    pub texel_uv: f64,
+    /// Nodes along `w` (slices of a volume, coefficients of a series).
+    pub w_nodes: usize,
+    /// Wavelength step of the offline integral (nm; divides 400).
+    pub step_nm: u32,
+}
+
+impl TableSpec {
+    /// The default `(u, v)` spacing: half the width of the coherence lobe,
+    /// `λ/(2πσs)` at 550 nm (MODEL §7: about 0.005 in `u` for 65 µm).
+    pub fn default_texel(coherence_um: f64) -> f64 {
+        let sigma_s = coherence_um / 4.0;
+        0.5 * 0.55 / (2.0 * std::f64::consts::PI * sigma_s)
+    }
+
+    /// Nodes along `u` and `v` (both ends included).
+    pub fn uv_nodes(&self) -> Result<(usize, usize)> {
+        if !(self.texel_uv.is_finite() && self.texel_uv > 0.0) {
+            return Err(Error::invalid(
+                "table texel",
+                format!("{}; must be a positive spacing in u and v", self.texel_uv),
+            ));
+        }
+        let e = self.region.extent();
+        let n = |len: f64| (len / self.texel_uv).ceil() as usize + 1;
+        let (nu, nv) = (n(e[0]).max(2), n(e[1]).max(2));
+        if nu > MAX_NODES_UV || nv > MAX_NODES_UV {
+            return Err(Error::invalid(
+                "table texel",
+                format!(
+                    "{} needs {nu}×{nv} nodes over u ∈ [{:.3}, {:.3}], v ∈ [{:.3}, {:.3}]; at most {MAX_NODES_UV} a side: use a coarser spacing or a smaller region",
+                    self.texel_uv, self.region.lo[0], self.region.hi[0], self.region.lo[1], self.region.hi[1]
+                ),
+            ));
+        }
+        Ok((nu, nv))
+    }
+
+    /// Checks the node counts and the size of the build.
+    pub fn validate(&self) -> Result<(usize, usize)> {
+        let (nu, nv) = self.uv_nodes()?;
+        if !(2..=MAX_NODES_W).contains(&self.w_nodes) {
+            return Err(Error::invalid(
+                "table w nodes",
+                format!("{}; expected 2..={MAX_NODES_W}", self.w_nodes),
+            ));
+        }
+        let samples = nu * nv * self.w_nodes * 3;
+        if samples > MAX_SAMPLES {
+            return Err(Error::invalid(
+                "table size",
+                format!(
+                    "{nu}×{nv}×{} nodes ({:.0} MB in f64) exceed the {:.0} MB build limit: use a coarser texel, fewer w nodes or a smaller region",
+                    self.w_nodes,
+                    samples as f64 * 8e-6,
+                    MAX_SAMPLES as f64 * 8e-6
+                ),
+            ));
+        }
+        ColourTable::new(self.step_nm)?;
+        Ok((nu, nv))
+    }
+}
+
+/// `G` sampled on the `(u, v)` nodes of a spec, one slice per `w` node.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Slices {
+    pub nu: usize,
+    pub nv: usize,
+    /// The `w` of each slice.
+    pub w: Vec<f64>,
+    /// `data[k][j·nu + i]` = XYZ of `G(u_i, v_j, w_k)`.
+    pub data: Vec<Vec<[f64; 3]>>,
+}
+
+/// Samples `G(u_i, v_j, w)` for every `w` in `w_nodes` (MODEL §7, exact in f64).
+///
+/// For each `(w, λ)`: the phase field `exp(i·s·h)` with `s = 2πw/λ` (mean-centred `h`) is
+/// transformed with the `+i` convention and `1/(N_x N_y)`, and the Gaussian window (MODEL §3,
+/// `σt = N·dH/(2πσs)` texels, summed to 6σt) is applied at the lookups
+/// `q = b + (u, v)·N·dH/λ` of the whole grid as two separable passes. `|P̂|²` times the
+/// wavelength's XYZ weight is accumulated per slice. `progress` is called once per
+/// finished `(w, λ)` pair.
+pub fn sample_g(
+    hf: &HeightField,
+    coherence_um: f64,
+    spec: &TableSpec,
+    w_nodes: &[f64],
+    progress: &(dyn Fn() + Sync),
+) -> Result<Slices> {
+    let (nu, nv) = spec.validate()?;
+    if !(coherence_um.is_finite() && coherence_um > 0.0) {
+        return Err(Error::invalid(
+            "coherence length",
+            format!("{coherence_um} µm; must be positive"),
+        ));
+    }
+    let colour = ColourTable::new(spec.step_nm)?;
+    let r = &spec.region;
+    let u: Vec<f64> = (0..nu)
+        .map(|i| r.lo[0] + r.extent()[0] * i as f64 / (nu - 1) as f64)
+        .collect();
+    let v: Vec<f64> = (0..nv)
+        .map(|j| r.lo[1] + r.extent()[1] * j as f64 / (nv - 1) as f64)
+        .collect();
+    let spectrum = PhaseSpectrum::new(hf, coherence_um);
+    let data = w_nodes
+        .iter()
+        .map(|&w| {
+            colour
+                .lambdas_nm
+                .par_iter()
+                .zip(&colour.weights)
+                .fold(
+                    || vec![[0.0f64; 3]; nu * nv],
+                    |mut acc, (&l, wt)| {
+                        spectrum.accumulate(&u, &v, w, l * 1e-3, *wt, &mut acc);
+                        progress();
+                        acc
+                    },
+                )
+                .reduce(
+                    || vec![[0.0f64; 3]; nu * nv],
+                    |mut a, b| {
+                        for (x, y) in a.iter_mut().zip(&b) {
+                            for c in 0..3 {
+                                x[c] += y[c];
+                            }
+                        }
+                        a
+                    },
+                )
+        })
+        .collect();
+    Ok(Slices {
+        nu,
+        nv,
+        w: w_nodes.to_vec(),
+        data,
+    })
+}
+
+/// The windowed spectrum of `exp(i·s·h)` of one height field, evaluated on grids.
+struct PhaseSpectrum {
+    nx: usize,
+    ny: usize,
+    dh_um: f64,
+    /// Mean-centred heights, row-major.
+    heights: Vec<f64>,
+    /// Gaussian window std in texels along x and y.
+    sigma: [f64; 2],
+    row_fft: Arc<dyn Fft<f64>>,
+    col_fft: Arc<dyn Fft<f64>>,
+}
+
+impl PhaseSpectrum {
+    fn new(hf: &HeightField, coherence_um: f64) -> Self {
+        let mean = hf.mean();
+        let sigma_s = coherence_um / 4.0;
+        let s = |n: usize| n as f64 * hf.dh_um() / (2.0 * std::f64::consts::PI * sigma_s);
+        let mut planner = FftPlanner::new();
+        Self {
+            nx: hf.nx(),
+            ny: hf.ny(),
+            dh_um: hf.dh_um(),
+            heights: hf.heights_um().iter().map(|h| h - mean).collect(),
+            sigma: [s(hf.nx()), s(hf.ny())],
+            row_fft: planner.plan_fft_inverse(hf.nx()),
+            col_fft: planner.plan_fft_inverse(hf.ny()),
+        }
+    }
+
+    /// Adds `|P̂_λ(u_i, v_j; w)|² · weight` to `acc[j·nu + i]`.
+    fn accumulate(
+        &self,
+        u: &[f64],
+        v: &[f64],
+        w: f64,
+        lambda_um: f64,
+        weight: [f64; 3],
+        acc: &mut [[f64; 3]],
+    ) {
+        let (nx, ny) = (self.nx, self.ny);
+        let s = 2.0 * std::f64::consts::PI * w / lambda_um;
+        // Lookup positions (thesis eq. 1.8), increasing with u and v.
+        let qx: Vec<f64> = u
+            .iter()
+            .map(|u| (nx / 2) as f64 + u * nx as f64 * self.dh_um / lambda_um)
+            .collect();
+        let qy: Vec<f64> = v
+            .iter()
+            .map(|v| (ny / 2) as f64 + v * ny as f64 * self.dh_um / lambda_um)
+            .collect();
+        let rx = (6.0 * self.sigma[0]).ceil() as i64;
+        let ry = (6.0 * self.sigma[1]).ceil() as i64;
+        let cx0 = qx[0].floor() as i64 - rx;
+        let cx1 = qx[qx.len() - 1].floor() as i64 + rx;
+        let cy0 = qy[0].floor() as i64 - ry;
+        let cy1 = qy[qy.len() - 1].floor() as i64 + ry;
+        let cols = (cx1 - cx0 + 1) as usize;
+        let rows = (cy1 - cy0 + 1) as usize;
+
+        // Rows: the x transform of every row of the phase field.
+        let mut field: Vec<Complex64> = self
+            .heights
+            .iter()
+            .map(|h| Complex64::from_polar(1.0, s * h))
+            .collect();
+        for row in field.chunks_exact_mut(nx) {
+            self.row_fft.process(row);
+        }
+        // Columns: only the frequencies the lookups reach. Shifted texel t holds frequency
+        // t − b, i.e. FFT bin (t − b) mod N; the spectrum is periodic, so t wraps too.
+        let bin = |t: i64, n: usize| (t - (n / 2) as i64).rem_euclid(n as i64) as usize;
+        let norm = 1.0 / (nx * ny) as f64;
+        let mut spectrum = vec![Complex64::new(0.0, 0.0); rows * cols];
+        let mut column = vec![Complex64::new(0.0, 0.0); ny];
+        for c in 0..cols {
+            let fx = bin(cx0 + c as i64, nx);
+            for (r, z) in column.iter_mut().enumerate() {
+                *z = field[r * nx + fx];
+            }
+            self.col_fft.process(&mut column);
+            for r in 0..rows {
+                spectrum[r * cols + c] = column[bin(cy0 + r as i64, ny)] * norm;
+            }
+        }
+
+        // Separable Gaussian window: first along x for every needed row, then along y.
+        let gauss = |d: f64, sigma: f64| (-d * d / (2.0 * sigma * sigma)).exp();
+        let nu = u.len();
+        let mut xpass = vec![Complex64::new(0.0, 0.0); rows * nu];
+        for (i, &q) in qx.iter().enumerate() {
+            let a = q.floor() as i64;
+            let taps: Vec<(usize, f64)> = (a - rx..=a + rx)
+                .map(|t| ((t - cx0) as usize, gauss(t as f64 - q, self.sigma[0])))
+                .collect();
+            for r in 0..rows {
+                let line = &spectrum[r * cols..(r + 1) * cols];
+                let mut sum = Complex64::new(0.0, 0.0);
+                for &(c, g) in &taps {
+                    sum += line[c] * g;
+                }
+                xpass[r * nu + i] = sum;
+            }
+        }
+        for (j, &q) in qy.iter().enumerate() {
+            let a = q.floor() as i64;
+            let out = &mut acc[j * nu..(j + 1) * nu];
+            // The taps of one lookup add as complex numbers; |P̂|² comes after.
+            let mut p = vec![Complex64::new(0.0, 0.0); nu];
+            for t in a - ry..=a + ry {
+                let g = gauss(t as f64 - q, self.sigma[1]);
+                let r = (t - cy0) as usize;
+                for (pi, x) in p.iter_mut().zip(&xpass[r * nu..(r + 1) * nu]) {
+                    *pi += x * g;
+                }
+            }
+            for (o, pi) in out.iter_mut().zip(&p) {
+                let power = pi.norm_sqr();
+                for c in 0..3 {
+                    o[c] += power * weight[c];
+                }
+            }
+        }
+    }
+}
+
+/// Uniform `w` nodes over `[lo, hi]`, both ends included (volume slices).
+pub fn uniform_nodes(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    (0..n)
+        .map(|k| lo + (hi - lo) * k as f64 / (n - 1).max(1) as f64)
+        .collect()
+}
+
+/// Chebyshev nodes of the first kind mapped to `[lo, hi]`:
+/// `w_k = mid + half·cos(π(k + ½)/K)`.
+pub fn chebyshev_nodes(lo: f64, hi: f64, k: usize) -> Vec<f64> {
+    let (mid, half) = (0.5 * (lo + hi), 0.5 * (hi - lo));
+    (0..k)
+        .map(|i| mid + half * (std::f64::consts::PI * (i as f64 + 0.5) / k as f64).cos())
+        .collect()
+}
+
+/// Fractional grid position of `x` on `n` nodes spanning `[lo, hi]`, or `None` outside.
+fn grid_pos(x: f64, lo: f64, hi: f64, n: usize) -> Option<(usize, f64)> {
+    if !(x >= lo && x <= hi) {
+        return None;
+    }
+    let t = (x - lo) / (hi - lo) * (n - 1) as f64;
+    let i = (t.floor() as usize).min(n - 2);
+    Some((i, t - i as f64))
+}
+
+/// Bilinear interpolation of `plane` (`nu × nv`, row-major) at `(u, v)` of `region`.
+fn bilinear(
+    plane: &[[f64; 3]],
+    nu: usize,
+    nv: usize,
+    region: &Region,
+    u: f64,
+    v: f64,
+) -> Option<[f64; 3]> {
+    let (i, fx) = grid_pos(u, region.lo[0], region.hi[0], nu)?;
+    let (j, fy) = grid_pos(v, region.lo[1], region.hi[1], nv)?;
+    let at = |i: usize, j: usize| plane[j * nu + i];
+    Some([0, 1, 2].map(|c| {
+        let a = at(i, j)[c] * (1.0 - fx) + at(i + 1, j)[c] * fx;
+        let b = at(i, j + 1)[c] * (1.0 - fx) + at(i + 1, j + 1)[c] * fx;
+        a * (1.0 - fy) + b * fy
+    }))
+}
+
+/// A stored representation of `G` with its CPU model.
+pub trait GTable: Sync {
+    /// The region the table covers.
+    fn region(&self) -> &Region;
+    /// `G(u, v, w)` as the GPU variant computes it (in f64); `None` outside the region,
+    /// where the GPU writes black.
+    fn g(&self, uvw: [f64; 3]) -> Option<[f64; 3]>;
+    /// The stored planes, each `nu × nv` XYZ, in upload order.
+    fn planes(&self) -> &[Vec<[f64; 3]>];
+    /// Nodes along `u` and `v`.
+    fn nodes_uv(&self) -> (usize, usize);
+
+    /// `XYZ = C(ωi, ωr)·G(u, v, w)`; black outside the region.
+    fn xyz(&self, shading: &Shading, wi: [f64; 3], wr: [f64; 3]) -> [f64; 3] {
+        integrated(wi, wr, shading, |d| self.g(d).unwrap_or([0.0; 3]))
+    }
+}
+
+/// `G` in slices at uniform `w` nodes, interpolated trilinearly (the `volume` variant).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Volume {
+    pub region: Region,
+    pub slices: Slices,
+}
+
+impl Volume {
+    /// The `w` nodes of its slices: uniform over the region's `w` range.
+    pub fn nodes(spec: &TableSpec) -> Vec<f64> {
+        uniform_nodes(spec.region.lo[2], spec.region.hi[2], spec.w_nodes)
+    }
+
+    /// Samples `G` at `spec.w_nodes` uniform slices over the region's `w` range.
+    pub fn build(
+        hf: &HeightField,
+        coherence_um: f64,
+        spec: &TableSpec,
+        progress: &(dyn Fn() + Sync),
+    ) -> Result<Self> {
+        let slices = sample_g(hf, coherence_um, spec, &Self::nodes(spec), progress)?;
+        Ok(Self::from_slices(spec.region, slices))
+    }
+
+    /// The volume of samples taken at [`Volume::nodes`].
+    pub fn from_slices(region: Region, slices: Slices) -> Self {
+        Self { region, slices }
+    }
+}
+
+impl GTable for Volume {
+    fn region(&self) -> &Region {
+        &self.region
+    }
+    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+        let s = &self.slices;
+        let r = &self.region;
+        let (k, fz) = grid_pos(w, r.lo[2], r.hi[2], s.data.len())?;
+        let a = bilinear(&s.data[k], s.nu, s.nv, r, u, v)?;
+        let b = bilinear(&s.data[k + 1], s.nu, s.nv, r, u, v)?;
+        Some([0, 1, 2].map(|c| a[c] * (1.0 - fz) + b[c] * fz))
+    }
+    fn planes(&self) -> &[Vec<[f64; 3]>] {
+        &self.slices.data
+    }
+    fn nodes_uv(&self) -> (usize, usize) {
+        (self.slices.nu, self.slices.nv)
+    }
+}
+
+/// `G = Σ_j c_j(u, v) T_j(ŵ)`, `ŵ` the region's `w` range mapped to `[−1, 1]`, coefficients
+/// from `G` at the Chebyshev nodes (the `chebyshev-w` variant).
+#[derive(Debug, Clone, PartialEq)]
+pub struct ChebyshevW {
+    pub region: Region,
+    pub nu: usize,
+    pub nv: usize,
+    /// `coeffs[j][texel]`.
+    pub coeffs: Vec<Vec<[f64; 3]>>,
+}
+
+impl ChebyshevW {
+    /// Samples `G` at `spec.w_nodes` Chebyshev nodes and transforms to coefficients:
+    /// `c_j = (2/K) Σ_k G(w_k) T_j(ŵ_k)`, `c_0` halved.
+    pub fn build(
+        hf: &HeightField,
+        coherence_um: f64,
+        spec: &TableSpec,
+        progress: &(dyn Fn() + Sync),
+    ) -> Result<Self> {
+        let slices = sample_g(hf, coherence_um, spec, &Self::nodes(spec), progress)?;
+        Ok(Self::from_nodes(spec.region, &slices))
+    }
+
+    /// The `w` nodes it samples: the Chebyshev nodes of the region's `w` range.
+    pub fn nodes(spec: &TableSpec) -> Vec<f64> {
+        chebyshev_nodes(spec.region.lo[2], spec.region.hi[2], spec.w_nodes)
+    }
+
+    /// Coefficients from samples at the Chebyshev nodes (as made by [`chebyshev_nodes`]).
+    pub fn from_nodes(region: Region, slices: &Slices) -> Self {
+        let k = slices.data.len();
+        let n = slices.nu * slices.nv;
+        let coeffs = (0..k)
+            .map(|j| {
+                let scale = if j == 0 { 1.0 } else { 2.0 } / k as f64;
+                let t: Vec<f64> = (0..k)
+                    .map(|i| (j as f64 * std::f64::consts::PI * (i as f64 + 0.5) / k as f64).cos())
+                    .collect();
+                (0..n)
+                    .map(|p| {
+                        let mut c = [0.0; 3];
+                        for (sample, ti) in slices.data.iter().map(|s| s[p]).zip(&t) {
+                            for (cc, x) in c.iter_mut().zip(sample) {
+                                *cc += x * ti;
+                            }
+                        }
+                        c.map(|x| x * scale)
+                    })
+                    .collect()
+            })
+            .collect();
+        Self {
+            region,
+            nu: slices.nu,
+            nv: slices.nv,
+            coeffs,
+        }
+    }
+
+    /// `ŵ ∈ [−1, 1]` of `w`.
+    pub fn w_hat(&self, w: f64) -> f64 {
+        let (lo, hi) = (self.region.lo[2], self.region.hi[2]);
+        (2.0 * w - lo - hi) / (hi - lo)
+    }
+
+    /// The largest `|c_j|` (over texels and channels) relative to the largest `|c_0|`, per
+    /// `j`: how fast the series decays.
+    pub fn decay(&self) -> Vec<f64> {
+        let max_of = |c: &Vec<[f64; 3]>| c.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        let c0 = max_of(&self.coeffs[0]).max(f64::MIN_POSITIVE);
+        self.coeffs.iter().map(|c| max_of(c) / c0).collect()
+    }
+}
+
+/// Clenshaw's recurrence for `Σ_j c_j T_j(x)`.
+pub fn clenshaw(c: &[[f64; 3]], x: f64) -> [f64; 3] {
+    let (mut b1, mut b2) = ([0.0; 3], [0.0; 3]);
+    for cj in c.iter().skip(1).rev() {
+        let b0 = [0, 1, 2].map(|ch| cj[ch] + 2.0 * x * b1[ch] - b2[ch]);
+        b2 = b1;
+        b1 = b0;
+    }
+    [0, 1, 2].map(|ch| c[0][ch] + x * b1[ch] - b2[ch])
+}
+
+impl GTable for ChebyshevW {
+    fn region(&self) -> &Region {
+        &self.region
+    }
+    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+        if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
+            return None;
+        }
+        let c: Option<Vec<[f64; 3]>> = self
+            .coeffs
+            .iter()
+            .map(|p| bilinear(p, self.nu, self.nv, &self.region, u, v))
+            .collect();
+        Some(clenshaw(&c?, self.w_hat(w)))
+    }
+    fn planes(&self) -> &[Vec<[f64; 3]>] {
+        &self.coeffs
+    }
+    fn nodes_uv(&self) -> (usize, usize) {
+        (self.nu, self.nv)
+    }
+}
+
+/// `G = Σ_p a_p(u, v)·w^p` (Dhillon et al. 2014: tables of the powers of `w`), here the
+/// Chebyshev interpolant of [`ChebyshevW`] rewritten in powers of `w` itself; Horner at
+/// lookup. Mathematically the same polynomial, numerically the monomial basis: its
+/// conditioning is what this variant measures.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Dhillon {
+    pub region: Region,
+    pub nu: usize,
+    pub nv: usize,
+    /// `powers[p][texel]` = `a_p`.
+    pub powers: Vec<Vec<[f64; 3]>>,
+}
+
+impl Dhillon {
+    /// Samples at Chebyshev nodes (as [`ChebyshevW::build`]) and converts to powers of `w`.
+    pub fn build(
+        hf: &HeightField,
+        coherence_um: f64,
+        spec: &TableSpec,
+        progress: &(dyn Fn() + Sync),
+    ) -> Result<Self> {
+        Ok(Self::from_chebyshev(&ChebyshevW::build(
+            hf,
+            coherence_um,
+            spec,
+            progress,
+        )?))
+    }
+
+    /// Rewrites `Σ_j c_j T_j(αw + β)` as `Σ_p a_p w^p` (`ŵ = αw + β`).
+    pub fn from_chebyshev(cheb: &ChebyshevW) -> Self {
+        let k = cheb.coeffs.len();
+        let (lo, hi) = (cheb.region.lo[2], cheb.region.hi[2]);
+        let alpha = 2.0 / (hi - lo);
+        let beta = -(lo + hi) / (hi - lo);
+        // m[j][p]: coefficient of w^p in T_j(αw + β), by T_{j+1} = 2ŵ T_j − T_{j−1}.
+        let mut m = vec![vec![0.0f64; k]; k];
+        m[0][0] = 1.0;
+        if k > 1 {
+            m[1][0] = beta;
+            m[1][1] = alpha;
+        }
+        for j in 1..k.saturating_sub(1) {
+            for p in 0..k {
+                let mut x = -m[j - 1][p] + 2.0 * beta * m[j][p];
+                if p > 0 {
+                    x += 2.0 * alpha * m[j][p - 1];
+                }
+                m[j + 1][p] = x;
+            }
+        }
+        let n = cheb.nu * cheb.nv;
+        let powers = (0..k)
+            .map(|p| {
+                (0..n)
+                    .map(|t| {
+                        let mut a = [0.0; 3];
+                        for (j, cj) in cheb.coeffs.iter().enumerate() {
+                            for ch in 0..3 {
+                                a[ch] += cj[t][ch] * m[j][p];
+                            }
+                        }
+                        a
+                    })
+                    .collect()
+            })
+            .collect();
+        Self {
+            region: cheb.region,
+            nu: cheb.nu,
+            nv: cheb.nv,
+            powers,
+        }
+    }
+
+    /// Condition number of the monomial sum: `max Σ_p |a_p w^p| / |Σ_p a_p w^p|` over the
+    /// texels, at the `w` of the region's ends, for the Y channel where `G` is not tiny.
+    /// Multiplied by float32's 6e-8 it estimates the relative rounding error.
+    pub fn conditioning(&self) -> f64 {
+        let mut worst: f64 = 1.0;
+        let n = self.nu * self.nv;
+        let g_max = (0..n)
+            .map(|t| self.powers[0][t][1].abs())
+            .fold(0.0f64, f64::max);
+        for w in [self.region.lo[2], self.region.hi[2]] {
+            for t in 0..n {
+                let (mut sum, mut abs, mut wp) = (0.0, 0.0, 1.0);
+                for p in &self.powers {
+                    sum += p[t][1] * wp;
+                    abs += (p[t][1] * wp).abs();
+                    wp *= w;
+                }
+                if sum.abs() > 1e-3 * g_max && sum.abs() > 0.0 {
+                    worst = worst.max(abs / sum.abs());
+                }
+            }
+        }
+        worst
+    }
+}
+
+impl GTable for Dhillon {
+    fn region(&self) -> &Region {
+        &self.region
+    }
+    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+        if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
+            return None;
+        }
+        let mut acc = [0.0; 3];
+        for p in self.powers.iter().rev() {
+            let a = bilinear(p, self.nu, self.nv, &self.region, u, v)?;
+            acc = [0, 1, 2].map(|c| acc[c] * w + a[c]);
+        }
+        Some(acc)
+    }
+    fn planes(&self) -> &[Vec<[f64; 3]>] {
+        &self.powers
+    }
+    fn nodes_uv(&self) -> (usize, usize) {
+        (self.nu, self.nv)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn clenshaw_matches_the_cosine_form() {
+        let c: Vec<[f64; 3]> = (0..7)
+            .map(|j| [1.0 / (j + 1) as f64, j as f64, 0.5])
+            .collect();
+        for x in [-1.0, -0.3, 0.0, 0.7, 1.0f64] {
+            let th = x.acos();
+            let want: f64 = c
+                .iter()
+                .enumerate()
+                .map(|(j, cj)| cj[0] * (j as f64 * th).cos())
+                .sum();
+            assert!((clenshaw(&c, x)[0] - want).abs() < 1e-12);
+        }
+    }
+
+    #[test]
+    fn chebyshev_and_powers_reproduce_a_polynomial_in_w() {
+        // G = 1 + 2w − w³ on one texel pair: K = 5 nodes reproduce it exactly.
+        let region = Region {
+            lo: [0.0, 0.0, -1.7],
+            hi: [1.0, 1.0, -0.4],
+        };
+        let nodes = chebyshev_nodes(-1.7, -0.4, 5);
+        let f = |w: f64| 1.0 + 2.0 * w - w * w * w;
+        let slices = Slices {
+            nu: 2,
+            nv: 2,
+            w: nodes.clone(),
+            data: nodes
+                .iter()
+                .map(|&w| vec![[f(w), 2.0 * f(w), 0.0]; 4])
+                .collect(),
+        };
+        let cheb = ChebyshevW::from_nodes(region, &slices);
+        let dh = Dhillon::from_chebyshev(&cheb);
+        for w in [-1.7, -1.2, -0.9, -0.4] {
+            let a = cheb.g([0.3, 0.6, w]).unwrap();
+            let b = dh.g([0.3, 0.6, w]).unwrap();
+            assert!((a[0] - f(w)).abs() < 1e-12 && (a[1] - 2.0 * f(w)).abs() < 1e-12);
+            assert!((b[0] - f(w)).abs() < 1e-10, "{} vs {}", b[0], f(w));
+        }
+        assert!(cheb.g([0.3, 0.6, -0.3]).is_none());
+        assert!(dh.powers[3][0][0] + 1.0 < 1e-9);
+    }
+
+    #[test]
+    fn brdf_map_region_covers_every_pixel_direction() {
+        let wi = super::super::direction(60.0, 20.0);
+        let r = Region::brdf_map(wi);
+        for k in 0..200 {
+            let a = k as f64 * 0.1;
+            let rad = (k % 10) as f64 / 10.0;
+            let wr = [rad * a.cos(), rad * a.sin(), (1.0 - rad * rad).sqrt()];
+            assert!(r.contains(super::super::uvw(wi, wr)));
+        }
+    }
+}

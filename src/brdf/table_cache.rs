@@ -1,0 +1,235 @@
+//! The on-disk cache of sampled `G` tables ([`Slices`]): building one at 1 nm takes
+//! minutes on a small CPU, so a render, a profile or a viewer that asks for the same
+//! material, region and sampling again loads it. Same rules as the term cache: a versioned
+//! binary file keyed by a hash of everything the table depends on (every height sample,
+//! grid, `dH`, coherence length, region, `(u, v)` spacing, `w` nodes, wavelength step), a
+//! trailing checksum, atomic writes; a corrupt or stale file is reported and rebuilt.
+//! Samples are stored as float32 (what the GPU receives); headers in f64.
+//!
+//! Layout (little-endian): `"DIFFGTAB"  u32 version  u64 key  u64 nu  u64 nv  u64 nw
+//! nw × f64 w  nu·nv·nw·3 × f32  u64 FNV-1a checksum of every byte before it`.
+
+use std::path::Path;
+
+use super::table::{sample_g, Slices, TableSpec};
+use crate::fsutil::write_atomic;
+use crate::heightfield::HeightField;
+use crate::spectrum::cache::Fnv1a;
+use crate::{Error, Result};
+
+const MAGIC: &[u8; 8] = b"DIFFGTAB";
+/// Bump when the layout or the meaning of `G` changes.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Hash of everything the samples depend on.
+pub fn key(hf: &HeightField, coherence_um: f64, spec: &TableSpec, w_nodes: &[f64]) -> u64 {
+    let mut h = Fnv1a::new();
+    h.bytes(MAGIC);
+    h.u64(u64::from(FORMAT_VERSION));
+    h.u64(hf.nx() as u64);
+    h.u64(hf.ny() as u64);
+    h.u64(hf.dh_um().to_bits());
+    for &v in hf.heights_um() {
+        h.u64(v.to_bits());
+    }
+    h.u64(coherence_um.to_bits());
+    for v in spec.region.lo.iter().chain(&spec.region.hi) {
+        h.u64(v.to_bits());
+    }
+    h.u64(spec.texel_uv.to_bits());
+    h.u64(u64::from(spec.step_nm));
+    for w in w_nodes {
+        h.u64(w.to_bits());
+    }
+    h.finish()
+}
+
+fn encode(s: &Slices, key: u64) -> Vec<u8> {
+    let mut out = Vec::with_capacity(44 + s.w.len() * 8 + s.nu * s.nv * s.w.len() * 12 + 8);
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
+    for v in [key, s.nu as u64, s.nv as u64, s.w.len() as u64] {
+        out.extend_from_slice(&v.to_le_bytes());
+    }
+    for w in &s.w {
+        out.extend_from_slice(&w.to_le_bytes());
+    }
+    for plane in &s.data {
+        for t in plane {
+            for c in t {
+                out.extend_from_slice(&(*c as f32).to_le_bytes());
+            }
+        }
+    }
+    let mut h = Fnv1a::new();
+    h.bytes(&out);
+    out.extend_from_slice(&h.finish().to_le_bytes());
+    out
+}
+
+fn decode(data: &[u8], key: u64, w_nodes: &[f64]) -> std::result::Result<Slices, String> {
+    let u64_at = |i: usize| -> Option<u64> {
+        data.get(i..i + 8)
+            .and_then(|b| b.try_into().ok())
+            .map(u64::from_le_bytes)
+    };
+    if data.len() < 44 || &data[..8] != MAGIC {
+        return Err("not a diffract table file".into());
+    }
+    let version = u32::from_le_bytes([data[8], data[9], data[10], data[11]]);
+    if version != FORMAT_VERSION {
+        return Err(format!(
+            "format version {version}, expected {FORMAT_VERSION}"
+        ));
+    }
+    let (Some(k), Some(nu), Some(nv), Some(nw)) = (u64_at(12), u64_at(20), u64_at(28), u64_at(36))
+    else {
+        return Err("truncated header".into());
+    };
+    if k != key {
+        return Err("stale (another material or sampling)".into());
+    }
+    let (nu, nv, nw) = (nu as usize, nv as usize, nw as usize);
+    if nw != w_nodes.len() || nu > super::table::MAX_NODES_UV || nv > super::table::MAX_NODES_UV {
+        return Err(format!("{nu}×{nv}×{nw} nodes do not match the request"));
+    }
+    let body = 44 + nw * 8;
+    let len = body + nu * nv * nw * 12 + 8;
+    if data.len() != len {
+        return Err(format!("{} bytes, expected {len}", data.len()));
+    }
+    let mut h = Fnv1a::new();
+    h.bytes(&data[..len - 8]);
+    if u64_at(len - 8) != Some(h.finish()) {
+        return Err("checksum mismatch (corrupt file)".into());
+    }
+    let w: Vec<f64> = (0..nw)
+        .filter_map(|i| u64_at(44 + i * 8).map(f64::from_bits))
+        .collect();
+    if w.iter()
+        .zip(w_nodes)
+        .any(|(a, b)| a.to_bits() != b.to_bits())
+    {
+        return Err("w nodes do not match the request".into());
+    }
+    let f32_at = |i: usize| f32::from_le_bytes([data[i], data[i + 1], data[i + 2], data[i + 3]]);
+    let data = (0..nw)
+        .map(|k| {
+            (0..nu * nv)
+                .map(|t| {
+                    let at = body + ((k * nu * nv + t) * 3) * 4;
+                    [0, 1, 2].map(|c| f64::from(f32_at(at + 4 * c)))
+                })
+                .collect()
+        })
+        .collect();
+    Ok(Slices { nu, nv, w, data })
+}
+
+/// [`sample_g`] through the cache in `dir` (none: always build). A valid file
+/// `gtable-{key:016x}.bin` is loaded (`progress` is not called); a missing one is built
+/// and written; a corrupt or stale one is reported on stderr, rebuilt and overwritten.
+/// Failing to write only warns.
+pub fn sample_g_cached(
+    hf: &HeightField,
+    coherence_um: f64,
+    spec: &TableSpec,
+    w_nodes: &[f64],
+    dir: Option<&Path>,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Slices> {
+    let Some(dir) = dir else {
+        return sample_g(hf, coherence_um, spec, w_nodes, progress);
+    };
+    let (nu, nv) = spec.validate()?;
+    let key = key(hf, coherence_um, spec, w_nodes);
+    let path = dir.join(format!("gtable-{key:016x}.bin"));
+    match std::fs::read(&path) {
+        Ok(data) => match decode(&data, key, w_nodes) {
+            Ok(s) if s.nu == nu && s.nv == nv => return Ok(s),
+            Ok(_) => eprintln!(
+                "warning: table cache {}: grid does not match; rebuilding",
+                path.display()
+            ),
+            Err(msg) => eprintln!("warning: table cache {}: {msg}; rebuilding", path.display()),
+        },
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => eprintln!("warning: {}; rebuilding", Error::io(&path, e)),
+    }
+    let s = sample_g(hf, coherence_um, spec, w_nodes, progress)?;
+    let saved = std::fs::create_dir_all(dir)
+        .map_err(|e| Error::io(dir, e))
+        .and_then(|()| write_atomic(&path, &encode(&s, key)));
+    if let Err(e) = saved {
+        eprintln!("warning: could not write the table cache: {e}");
+    }
+    Ok(s)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::table::Region;
+
+    fn setup() -> (HeightField, TableSpec, Vec<f64>) {
+        let n = 32;
+        let h = (0..n * n)
+            .map(|i| 0.1 * ((i % n) as f64 * 0.7).sin())
+            .collect();
+        let hf = HeightField::new(n, n, 0.09, h).unwrap();
+        let spec = TableSpec {
+            region: Region {
+                lo: [-0.2, -0.1, -1.6],
+                hi: [0.2, 0.1, -1.2],
+            },
+            texel_uv: 0.05,
+            w_nodes: 3,
+            step_nm: 100,
+        };
+        (hf, spec, vec![-1.6, -1.4, -1.2])
+    }
+
+    #[test]
+    fn cached_tables_round_trip_and_corruption_is_rebuilt() {
+        let (hf, spec, w) = setup();
+        let dir = std::env::temp_dir().join(format!("diffract-gtab-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let built = sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| ()).unwrap();
+        let loaded = sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| {
+            panic!("a cached table must not be rebuilt")
+        })
+        .unwrap();
+        for (a, b) in built
+            .data
+            .iter()
+            .flatten()
+            .zip(loaded.data.iter().flatten())
+        {
+            for c in 0..3 {
+                assert_eq!(a[c] as f32, b[c] as f32);
+            }
+        }
+        // Flip one sample byte: the checksum catches it and the table is rebuilt.
+        let path = std::fs::read_dir(&dir)
+            .unwrap()
+            .next()
+            .unwrap()
+            .unwrap()
+            .path();
+        let mut bytes = std::fs::read(&path).unwrap();
+        let mid = bytes.len() / 2;
+        bytes[mid] ^= 0x40;
+        std::fs::write(&path, &bytes).unwrap();
+        let k = key(&hf, 65.0, &spec, &w);
+        assert!(decode(&bytes, k, &w).unwrap_err().contains("checksum"));
+        let rebuilt = std::sync::atomic::AtomicUsize::new(0);
+        sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| {
+            rebuilt.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+        })
+        .unwrap();
+        assert!(rebuilt.into_inner() > 0);
+        // Another coherence length is another key.
+        assert_ne!(k, key(&hf, 60.0, &spec, &w));
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -1,0 +1,246 @@
+//! The `diffract render` command: arguments, the choice of variant, output files and the
+//! one-line report.
+
+use std::path::PathBuf;
+
+use super::variant::{TableFormat, TableOptions, VariantKind};
+use super::{Frame, Renderer};
+use crate::gpu::StorageFormat;
+use crate::material::MaterialArgs;
+use crate::scene::Scene;
+use crate::{Error, Result};
+
+/// Table options shared by `render`, `profile` and `view`.
+#[derive(Debug, Clone, clap::Args)]
+pub struct TableArgs {
+    /// Table variants: node spacing in u and v (default: half the coherence lobe).
+    #[arg(long)]
+    pub table_texel: Option<f64>,
+    /// Table variants: nodes along w (default: volume 32, chebyshev-w 16, dhillon 12).
+    #[arg(long)]
+    pub table_w_nodes: Option<usize>,
+    /// Table variants: wavelength step of the offline spectral integral (nm).
+    #[arg(long, default_value_t = 5)]
+    pub table_step_nm: u32,
+    /// Table variants: GPU memory budget (MB); the u/v spacing is coarsened to fit.
+    #[arg(long, default_value_t = 512)]
+    pub table_budget_mb: usize,
+    /// Table variants: texel format.
+    #[arg(long, value_enum, default_value_t = TableFormat::Rgba32f)]
+    pub table_format: TableFormat,
+}
+
+impl TableArgs {
+    pub fn options(&self) -> TableOptions {
+        TableOptions {
+            texel_uv: self.table_texel,
+            w_nodes: self.table_w_nodes,
+            step_nm: self.table_step_nm,
+            budget_bytes: self.table_budget_mb.saturating_mul(1 << 20),
+            format: self.table_format,
+        }
+    }
+}
+
+/// `diffract render`: a scene (or a BRDF map) to an image.
+#[derive(Debug, Clone, clap::Args)]
+pub struct RenderArgs {
+    /// Scene file (TOML); the embedded default scene when omitted.
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Output image: .png (8-bit sRGB) or .exr (linear float).
+    #[arg(short, long, default_value = "diffract.png")]
+    pub out: PathBuf,
+    /// Image width in pixels (overrides the scene).
+    #[arg(long)]
+    pub width: Option<u32>,
+    /// Image height in pixels (overrides the scene).
+    #[arg(long)]
+    pub height: Option<u32>,
+    /// Render a BRDF map (hemisphere of view directions) instead of the scene.
+    #[arg(long)]
+    pub brdf_map: bool,
+    /// BRDF map: polar angle of the light from the normal (degrees).
+    #[arg(long, default_value_t = 30.0)]
+    pub theta_i: f64,
+    /// BRDF map: azimuth of the light from +x, the height-field columns (degrees).
+    #[arg(long, default_value_t = 0.0)]
+    pub phi_i: f64,
+    /// BRDF map side in pixels.
+    #[arg(long, default_value_t = 256)]
+    pub size: u32,
+    /// BRDF map: the spectral reflectance at this wavelength (nm) instead of XYZ colour.
+    #[arg(long)]
+    pub lambda_nm: Option<f64>,
+    /// BRDF map: also write an sRGB PNG beside the EXR output.
+    #[arg(long)]
+    pub png: bool,
+    /// Exposure (linear multiplier before the sRGB curve): overrides the scene's; for BRDF
+    /// maps it scales the PNG only (the EXR keeps the raw values).
+    #[arg(long)]
+    pub exposure: Option<f32>,
+    /// Shader variant (`diffract variants` lists them).
+    #[arg(long, value_enum, default_value_t = VariantKind::Default)]
+    pub variant: VariantKind,
+    /// Storage format of the DFT terms on the GPU (flss).
+    #[arg(long, value_enum, default_value_t = StorageFormat::Rg32f)]
+    pub storage: StorageFormat,
+    #[command(flatten)]
+    pub table: TableArgs,
+    #[command(flatten)]
+    pub material: MaterialArgs,
+    /// Directory of the DFT term cache (default: $DIFFRACT_CACHE or ~/.cache/diffract).
+    #[arg(long)]
+    pub cache_dir: Option<PathBuf>,
+    /// Do not read or write the term cache.
+    #[arg(long)]
+    pub no_cache: bool,
+}
+
+/// Whether to enable Vulkan validation: always in debug builds, or with
+/// `DIFFRACT_VALIDATION=1`.
+pub fn validation_requested() -> bool {
+    cfg!(debug_assertions) || std::env::var("DIFFRACT_VALIDATION").is_ok_and(|v| v == "1")
+}
+
+/// Runs `diffract render`: renders, writes the image(s), prints one line with the device,
+/// GPU and wall time.
+pub fn run(args: &RenderArgs) -> Result<()> {
+    let mut scene = match &args.scene {
+        Some(p) => Scene::load(p)?,
+        None => Scene::default_scene(),
+    };
+    if let Some(e) = args.exposure {
+        if !(e.is_finite() && e > 0.0) {
+            return Err(Error::invalid(
+                "exposure",
+                format!("{e}; must be finite and > 0"),
+            ));
+        }
+        scene.output.exposure = e;
+    }
+    crate::image_io::output_format(&args.out)?;
+    // The device first: a machine without Vulkan fails before the term precompute.
+    let mut renderer = Renderer::new(validation_requested())?;
+    renderer.set_storage_format(args.storage);
+    renderer.set_variant(args.variant);
+    renderer.set_table_options(args.table.options());
+    if args.lambda_nm.is_some() && !args.variant.is_spectral() {
+        return Err(Error::invalid(
+            "variant",
+            format!(
+                "'{}' integrates the spectrum offline and cannot draw one wavelength; use --variant flss with --lambda-nm",
+                args.variant.resolve()
+            ),
+        ));
+    }
+    let material = args.material.apply(scene.material.clone());
+    let cache_dir = if args.no_cache {
+        None
+    } else {
+        args.cache_dir
+            .clone()
+            .or_else(crate::material::default_cache_dir)
+    };
+    renderer.set_cache_dir(cache_dir.clone());
+    let prepared = material.prepare(cache_dir.as_deref())?;
+
+    let (frame, what) = if args.brdf_map {
+        let frame = renderer.render_brdf_map(
+            &prepared,
+            args.theta_i,
+            args.phi_i,
+            args.size,
+            args.lambda_nm,
+        )?;
+        write_map(args, &frame)?;
+        let what = match args.lambda_nm {
+            Some(l) => format!("BRDF map ρ at {l} nm"),
+            None => "BRDF map (XYZ)".to_string(),
+        };
+        (frame, what)
+    } else {
+        if let Some(w) = args.width {
+            scene.output.width = w;
+        }
+        if let Some(h) = args.height {
+            scene.output.height = h;
+        }
+        for (what, v) in [
+            ("width", scene.output.width),
+            ("height", scene.output.height),
+        ] {
+            if !(1..=8192).contains(&v) {
+                return Err(Error::invalid(
+                    "image size",
+                    format!("{what} {v}; expected 1..=8192"),
+                ));
+            }
+        }
+        let frame = renderer.render_scene(&scene, &prepared)?;
+        // The shader already applied the exposure.
+        crate::image_io::write_image(&args.out, frame.width, frame.height, &frame.rgb, 1.0)?;
+        (frame, "scene".to_string())
+    };
+    let gpu = frame
+        .gpu_ms
+        .map_or("n/a".to_string(), |ms| format!("{ms:.2}"));
+    let v = &frame.variant;
+    println!(
+        "{}: {what} {}×{} → {}: variant {}: GPU {gpu} ms, wall {:.1} ms (build {:.1} ms, {:.1} MB, {} fetches/pixel)",
+        renderer.device_name(),
+        frame.width,
+        frame.height,
+        args.out.display(),
+        v.name,
+        frame.wall_ms,
+        v.build_ms,
+        v.gpu_bytes as f64 / 1e6,
+        v.fetches
+    );
+    let n = renderer.validation_messages();
+    if n > 0 {
+        return Err(Error::Validation(n));
+    }
+    Ok(())
+}
+
+/// Writes a BRDF map: an EXR holds the raw channels (XYZ or ρ); a PNG shows XYZ as sRGB
+/// (or ρ as grey). `--png` with an EXR output adds the PNG beside it.
+fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
+    let exposure = args.exposure.unwrap_or(1.0);
+    let viewable = || -> Vec<[f32; 3]> {
+        if args.lambda_nm.is_some() {
+            frame.rgb.clone()
+        } else {
+            frame
+                .rgb
+                .iter()
+                .map(|p| crate::colour::xyz_to_linear_srgb(p.map(|c| c as f64)).map(|c| c as f32))
+                .collect()
+        }
+    };
+    match crate::image_io::output_format(&args.out)? {
+        crate::image_io::OutputFormat::Exr => {
+            crate::image_io::write_exr(&args.out, frame.width, frame.height, &frame.rgb)?;
+            if args.png {
+                let png = args.out.with_extension("png");
+                crate::image_io::write_png_srgb(
+                    &png,
+                    frame.width,
+                    frame.height,
+                    &viewable(),
+                    exposure,
+                )?;
+            }
+            Ok(())
+        }
+        _ => crate::image_io::write_image(
+            &args.out,
+            frame.width,
+            frame.height,
+            &viewable(),
+            exposure,
+        ),
+    }
+}

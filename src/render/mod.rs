@@ -1,0 +1,696 @@
+//! Frames of the diffraction shaders: turns a prepared material (and a scene) into GPU
+//! inputs — the variant's resources ([`variant`]), the colour table, the `Params` uniform
+//! block, the specialisation constants — records one frame into a target ([`frame`]), and
+//! reads the linear result back. The `diffract render` command lives in [`command`].
+//!
+//! This is where physics meets `gpu`: the layouts here mirror `glsl/interface.glsl`. The
+//! renderer knows variants only through their interface; frame recording takes a
+//! [`FrameTarget`](crate::gpu::target::FrameTarget) and does not know whether it draws
+//! offscreen or into a window.
+
+mod command;
+mod frame;
+pub mod variant;
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use ash::vk;
+
+pub use command::{run, validation_requested, RenderArgs, TableArgs};
+pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
+
+use crate::brdf;
+use crate::brdf::table::Region;
+use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
+use crate::gpu::pipeline::{
+    Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
+};
+use crate::gpu::target::OffscreenTarget;
+use crate::gpu::timer::GpuTimer;
+use crate::gpu::{shaders, Device, StorageFormat};
+use crate::material::PreparedMaterial;
+use crate::scene::Scene;
+use crate::{Error, Result};
+use frame::{mesh_vertex_layout, record_frame, Geometry, Transforms};
+use variant::{DrawSetup, PreparedVariant, SPEC_COUNT};
+
+/// Capacity of the shader's per-term decode table (`MAX_TERMS` in interface.glsl).
+pub(crate) const MAX_TERMS: usize = 65;
+/// Largest BRDF map side.
+pub const MAX_MAP_SIZE: u32 = 4096;
+
+/// One rendered image, linear values, row-major from the top row.
+#[derive(Debug, Clone)]
+pub struct Frame {
+    pub width: u32,
+    pub height: u32,
+    /// Linear sRGB (scenes), XYZ (BRDF maps) or `ρ_λ` in all channels (spectral maps).
+    pub rgb: Vec<[f32; 3]>,
+    /// GPU time of the draw from timestamps; `None` where the queue has none.
+    pub gpu_ms: Option<f64>,
+    /// Wall time of the whole call: variant preparation (unless cached), pipeline
+    /// creation, draw and readback.
+    pub wall_ms: f64,
+    /// The variant that drew it.
+    pub variant: VariantStats,
+}
+
+impl Frame {
+    /// Pixel `(x, y)`, `y` from the top.
+    pub fn at(&self, x: u32, y: u32) -> [f32; 3] {
+        self.rgb[(y * self.width + x) as usize]
+    }
+}
+
+/// What the fragment shader writes (`OUTPUT_MODE`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum OutputMode {
+    Mesh = 0,
+    MapXyz = 1,
+    MapSpectral = 2,
+}
+
+/// Mirror of `Params` in glsl/interface.glsl (std140: vec4-sized members only).
+#[repr(C)]
+#[derive(Clone, Copy)]
+pub(crate) struct ParamsUbo {
+    eye_world: [f32; 4],
+    light_dir_world: [f32; 4],
+    lighting: [f32; 4],
+    map_wi: [f32; 4],
+    map_info: [f32; 4],
+    pub spectrum_size: [i32; 4],
+    pub band: [i32; 4],
+    pub lookup: [f32; 4],
+    shading: [f32; 4],
+    pub decode: [[f32; 4]; MAX_TERMS],
+}
+
+// SAFETY: repr(C) of 4-byte scalars in 16-byte groups: no padding.
+unsafe impl Pod for ParamsUbo {}
+
+/// Map pixel `(i, j)` of an `S×S` BRDF map → `ωr`, exactly as the fragment shader computes
+/// it in float32 (README: BRDF maps); `None` outside the unit disk.
+pub fn map_direction(i: u32, j: u32, size: u32) -> Option<[f64; 3]> {
+    let s = size as f32;
+    let x = 2.0 * (i as f32 + 0.5) / s - 1.0;
+    let y = 1.0 - 2.0 * (j as f32 + 0.5) / s;
+    let r2 = x * x + y * y;
+    (r2 < 1.0).then(|| [x as f64, y as f64, (1.0 - r2).sqrt() as f64])
+}
+
+/// Identity of a prepared variant: rebuilt only when one of these changes.
+#[derive(Debug, Clone, PartialEq)]
+struct PreparedKey {
+    kind: VariantKind,
+    material: crate::material::Material,
+    heightfield: (usize, usize, u64, u64),
+    region: Option<[u64; 6]>,
+    storage: StorageFormat,
+    table: TableOptions,
+    keep_model: bool,
+}
+
+/// Owns the GPU device, what every frame shares (vertex shaders, the texture sampler) and
+/// the last prepared variant, which later frames of the same material reuse.
+pub struct Renderer {
+    storage: StorageFormat,
+    variant: VariantKind,
+    table: TableOptions,
+    keep_models: bool,
+    cache_dir: Option<std::path::PathBuf>,
+    prepared: Option<(PreparedKey, Box<dyn PreparedVariant>)>,
+    linear: Sampler,
+    vert_map: ShaderModule,
+    vert_mesh: ShaderModule,
+    /// Last: everything above holds handles of this device.
+    dev: Arc<Device>,
+}
+
+impl Renderer {
+    /// Opens the preferred Vulkan device. `validation` enables the Khronos validation layer;
+    /// its WARNING/ERROR messages are counted in [`Renderer::validation_messages`]. Draws
+    /// with `flss` until [`Renderer::set_variant`] says otherwise.
+    pub fn new(validation: bool) -> Result<Self> {
+        let dev = Device::new(validation)?;
+        Ok(Self {
+            storage: StorageFormat::default(),
+            variant: VariantKind::Flss,
+            table: TableOptions::default(),
+            keep_models: false,
+            cache_dir: None,
+            prepared: None,
+            linear: Sampler::new(
+                &dev,
+                "surface texture (linear)",
+                vk::Filter::LINEAR,
+                vk::SamplerAddressMode::REPEAT,
+            )?,
+            vert_map: ShaderModule::new(&dev, "brdfmap.vert", shaders::BRDFMAP_VERT)?,
+            vert_mesh: ShaderModule::new(&dev, "diffraction.vert", shaders::DIFFRACTION_VERT)?,
+            dev,
+        })
+    }
+
+    /// Name of the Vulkan device in use.
+    pub fn device_name(&self) -> &str {
+        &self.dev.info.name
+    }
+
+    /// The device, for callers that record their own frames (the viewer).
+    pub fn device(&self) -> &Arc<Device> {
+        &self.dev
+    }
+
+    /// Validation WARNING/ERROR messages seen so far (0 without validation).
+    pub fn validation_messages(&self) -> usize {
+        self.dev.validation_messages()
+    }
+
+    /// The validation canary, which stays readable after the renderer is dropped: teardown
+    /// messages (objects left alive at vkDestroyDevice) land there too.
+    pub fn canary(&self) -> std::sync::Arc<crate::gpu::Canary> {
+        self.dev.canary()
+    }
+
+    /// The first validation messages, for reports.
+    pub fn validation_report(&self) -> Vec<String> {
+        self.dev.validation_report()
+    }
+
+    /// Storage format of the DFT terms (flss) for the next frames (default RG32F).
+    pub fn set_storage_format(&mut self, storage: StorageFormat) {
+        self.storage = storage;
+    }
+
+    /// The storage format in use.
+    pub fn storage_format(&self) -> StorageFormat {
+        self.storage
+    }
+
+    /// The variant of the next frames (`default` resolves to [`VariantKind::DEFAULT`]).
+    pub fn set_variant(&mut self, variant: VariantKind) {
+        self.variant = variant.resolve();
+    }
+
+    /// The variant in use.
+    pub fn variant(&self) -> VariantKind {
+        self.variant
+    }
+
+    /// How the table variants sample `G`.
+    pub fn set_table_options(&mut self, table: TableOptions) {
+        self.table = table;
+    }
+
+    /// Where the table variants cache their sampled tables (none: always build).
+    pub fn set_cache_dir(&mut self, dir: Option<std::path::PathBuf>) {
+        self.cache_dir = dir;
+    }
+
+    /// Keep the f64 tables of table variants on the CPU (for [`Renderer::table_model`]);
+    /// off by default, since they take as much memory again as the GPU copy in f64.
+    pub fn set_keep_models(&mut self, keep: bool) {
+        self.keep_models = keep;
+    }
+
+    /// The f64 CPU model of the table the last frame used, if the variant has one and
+    /// [`Renderer::set_keep_models`] was on when it was built.
+    pub fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
+        self.prepared.as_ref().and_then(|(_, v)| v.table_model())
+    }
+
+    /// A BRDF map (thesis §5): an S×S image of the hemisphere of view directions, pixel
+    /// `(i, j)` (row `j` from the top) at `x = 2(i+½)/S − 1`, `y = 1 − 2(j+½)/S`,
+    /// `ωr = (x, y, √(1−x²−y²))`, black outside the unit disk; light from `(θi, φi)`.
+    /// Channels: linear XYZ, or `ρ_λ` in all three with `lambda_nm` (flss only).
+    pub fn render_brdf_map(
+        &mut self,
+        prepared: &PreparedMaterial,
+        theta_i_deg: f64,
+        phi_i_deg: f64,
+        size: u32,
+        lambda_nm: Option<f64>,
+    ) -> Result<Frame> {
+        let start = Instant::now();
+        check_map_args(theta_i_deg, phi_i_deg, size, lambda_nm)?;
+        let wi = brdf::direction(theta_i_deg, phi_i_deg);
+        let output = if lambda_nm.is_some() {
+            OutputMode::MapSpectral
+        } else {
+            OutputMode::MapXyz
+        };
+        // The shader sees ωi in float32: the table must cover what it computes.
+        let wi32 = wi.map(|c| c as f32 as f64);
+        let region = Region::around([Region::brdf_map(wi32).lo, Region::brdf_map(wi32).hi], 1e-5)
+            .unwrap_or(Region::ALL);
+        self.prepare_variant(prepared, region, output)?;
+        let mut params = self.params(prepared);
+        params.map_wi = [
+            wi32[0] as f32,
+            wi32[1] as f32,
+            wi32[2] as f32,
+            lambda_nm.map_or(0.0, |l| (l * 1e-3) as f32),
+        ];
+        params.map_info = [size as f32, 0.0, 0.0, 0.0];
+        let mut frame = self.draw(
+            prepared,
+            &params,
+            output,
+            false,
+            Geometry::FullScreen,
+            (size, size),
+            [0.0; 4],
+            None,
+        )?;
+        frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(frame)
+    }
+
+    /// Renders `scene`'s mesh with the diffraction shader (thesis Algorithms 2–4) using
+    /// `prepared` as the material (callers prepare `scene.material`, possibly overridden).
+    /// Pixels are linear sRGB already multiplied by the light intensity, `cosθi` and the
+    /// scene's exposure; uncovered pixels hold the background colour as given.
+    pub fn render_scene(&mut self, scene: &Scene, prepared: &PreparedMaterial) -> Result<Frame> {
+        let start = Instant::now();
+        // World space: the placement is already applied, so the model matrix is identity.
+        let mesh = scene.mesh.load()?;
+        if mesh.indices.is_empty() {
+            return Err(Error::invalid(
+                "mesh",
+                format!("'{}' has no triangles", mesh.name),
+            ));
+        }
+        let out = &scene.output;
+        let region = scene_region(scene, &mesh).unwrap_or(Region::ALL);
+        self.prepare_variant(prepared, region, OutputMode::Mesh)?;
+        let mut params = self.params(prepared);
+        let eye = scene.camera.eye;
+        params.eye_world = [eye[0], eye[1], eye[2], 1.0];
+        let d = scene.light.direction;
+        params.light_dir_world = [d[0], d[1], d[2], 0.0];
+        let w_diffuse = scene.texture.as_ref().map_or(0.0, |t| t.w_diffuse);
+        params.lighting = [scene.light.intensity, out.exposure, w_diffuse, 0.0];
+        let bg = out.background;
+
+        let texture = match &scene.texture {
+            Some(t) => Some(self.upload_texture(t)?),
+            None => None,
+        };
+        let vertices = Buffer::with_data(
+            &self.dev,
+            &format!("{} vertices", mesh.name),
+            vk::BufferUsageFlags::VERTEX_BUFFER,
+            &mesh.vertices,
+        )?;
+        let indices = Buffer::with_data(
+            &self.dev,
+            &format!("{} indices", mesh.name),
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            &mesh.indices,
+        )?;
+        let transforms = Transforms {
+            model: glam::Mat4::IDENTITY.to_cols_array(),
+            view_proj: scene.camera.view_proj(out.aspect()).to_cols_array(),
+        };
+        let mut frame = self.draw(
+            prepared,
+            &params,
+            OutputMode::Mesh,
+            texture.is_some(),
+            Geometry::Mesh {
+                vertices: &vertices,
+                indices: &indices,
+                index_count: mesh.indices.len() as u32,
+                transforms,
+            },
+            (out.width, out.height),
+            [bg[0], bg[1], bg[2], 1.0],
+            texture.as_ref(),
+        )?;
+        frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(frame)
+    }
+
+    /// Builds (or reuses) the current variant's resources for `prepared` over `region`.
+    fn prepare_variant(
+        &mut self,
+        prepared: &PreparedMaterial,
+        region: Region,
+        output: OutputMode,
+    ) -> Result<()> {
+        variant::require_spectral(self.variant, output)?;
+        let hf = &prepared.heightfield;
+        let (lo, hi) = hf.range();
+        let key = PreparedKey {
+            kind: self.variant,
+            material: prepared.material.clone(),
+            heightfield: (hf.nx(), hf.ny(), lo.to_bits(), hi.to_bits()),
+            // flss reads the whole band whatever the region.
+            region: (self.variant != VariantKind::Flss).then(|| {
+                [
+                    region.lo[0],
+                    region.lo[1],
+                    region.lo[2],
+                    region.hi[0],
+                    region.hi[1],
+                    region.hi[2],
+                ]
+                .map(f64::to_bits)
+            }),
+            storage: self.storage,
+            table: self.table,
+            keep_model: self.keep_models,
+        };
+        if self.prepared.as_ref().is_some_and(|(k, _)| *k == key) {
+            return Ok(());
+        }
+        // Free the old resources before building new ones.
+        self.prepared = None;
+        let setup = DrawSetup {
+            prepared,
+            region,
+            output,
+            storage: self.storage,
+            table: &self.table,
+            keep_model: self.keep_models,
+            cache_dir: self.cache_dir.as_deref(),
+        };
+        let built = self.variant.implementation().prepare(&self.dev, &setup)?;
+        self.prepared = Some((key, built));
+        Ok(())
+    }
+
+    /// Loads a scene texture (sRGB PNG) into an `R8G8B8A8_SRGB` image, so sampling returns
+    /// linear colour.
+    fn upload_texture(&self, spec: &crate::scene::TextureSpec) -> Result<Image> {
+        let (w, h, rgb) = spec.load()?;
+        let max = self.dev.info.max_image_dimension_2d;
+        if w == 0 || h == 0 || w > max || h > max {
+            return Err(Error::Image {
+                path: spec.path.clone(),
+                msg: format!("{w}×{h} texture; each side must be 1..={max} on this device"),
+            });
+        }
+        let bytes: Vec<u8> = rgb.iter().flat_map(|p| [p[0], p[1], p[2], 255]).collect();
+        Image::sampled_with_data(
+            &self.dev,
+            "surface texture",
+            ImageDesc {
+                format: vk::Format::R8G8B8A8_SRGB,
+                width: w,
+                height: h,
+                layers: 1,
+                usage: vk::ImageUsageFlags::SAMPLED,
+                aspect: vk::ImageAspectFlags::COLOR,
+                view_type: vk::ImageViewType::TYPE_2D,
+            },
+            4,
+            &bytes,
+        )
+    }
+
+    /// The shared part of the uniform block plus the variant's; callers fill in the scene
+    /// or map part.
+    fn params(&self, prepared: &PreparedMaterial) -> ParamsUbo {
+        let mut params = ParamsUbo {
+            eye_world: [0.0; 4],
+            light_dir_world: [0.0, 0.0, -1.0, 0.0],
+            lighting: [1.0, 1.0, 0.0, 0.0],
+            map_wi: [0.0, 0.0, 1.0, 0.0],
+            map_info: [0.0; 4],
+            spectrum_size: [0; 4],
+            band: [0; 4],
+            lookup: [0.0; 4],
+            shading: [brdf::schlick_r0(prepared.shading.ior) as f32, 0.0, 0.0, 0.0],
+            decode: [[0.0; 4]; MAX_TERMS],
+        };
+        if let Some((_, v)) = &self.prepared {
+            v.fill_params(&mut params);
+        }
+        params
+    }
+
+    /// Creates the per-frame objects, records and submits one frame, reads it back.
+    #[allow(clippy::too_many_arguments)]
+    fn draw(
+        &mut self,
+        prepared: &PreparedMaterial,
+        params: &ParamsUbo,
+        output: OutputMode,
+        texture_blending: bool,
+        geometry: Geometry<'_>,
+        (width, height): (u32, u32),
+        clear: [f32; 4],
+        texture: Option<&Image>,
+    ) -> Result<Frame> {
+        let dev = &self.dev;
+        let Some((_, variant)) = &self.prepared else {
+            return Err(Error::invalid("variant", "no variant prepared"));
+        };
+        let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
+        let mut bindings = vec![
+            Binding {
+                binding: 0,
+                kind: vk::DescriptorType::UNIFORM_BUFFER,
+                stages,
+            },
+            Binding {
+                binding: 2,
+                kind: vk::DescriptorType::STORAGE_BUFFER,
+                stages: vk::ShaderStageFlags::FRAGMENT,
+            },
+            Binding {
+                binding: 3,
+                kind: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                stages: vk::ShaderStageFlags::FRAGMENT,
+            },
+        ];
+        bindings.extend(variant.bindings());
+        let stats = variant.stats();
+        let layout = PipelineLayout::new(
+            dev,
+            &format!("{} layout", stats.name),
+            &bindings,
+            (
+                vk::ShaderStageFlags::VERTEX,
+                std::mem::size_of::<Transforms>() as u32,
+            ),
+        )?;
+        let ubo = Buffer::with_data(
+            dev,
+            "params",
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            std::slice::from_ref(params),
+        )?;
+        let table = &prepared.colour;
+        let weights: Vec<[f32; 4]> = table
+            .weights
+            .iter()
+            .zip(&table.lambdas_nm)
+            .map(|(w, l)| [w[0] as f32, w[1] as f32, w[2] as f32, *l as f32])
+            .collect();
+        let colour = Buffer::with_data(
+            dev,
+            "colour weights",
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            &weights,
+        )?;
+        // The texture binding is statically used by the shader, so it always needs an
+        // image; a scene without a texture gets 1×1 white (the variant never samples it).
+        let dummy;
+        let texture = match texture {
+            Some(t) => t,
+            None => {
+                dummy = Image::sampled_with_data(
+                    dev,
+                    "no texture (1×1 white)",
+                    ImageDesc {
+                        format: vk::Format::R8G8B8A8_UNORM,
+                        width: 1,
+                        height: 1,
+                        layers: 1,
+                        usage: vk::ImageUsageFlags::SAMPLED,
+                        aspect: vk::ImageAspectFlags::COLOR,
+                        view_type: vk::ImageViewType::TYPE_2D,
+                    },
+                    4,
+                    &[255u8; 4],
+                )?;
+                &dummy
+            }
+        };
+        let mut resources = vec![
+            (0, Resource::Uniform(&ubo)),
+            (2, Resource::Storage(&colour)),
+            (3, Resource::Sampled(texture, &self.linear)),
+        ];
+        resources.extend(variant.resources());
+        let set = DescriptorSet::new(dev, "diffraction set", &layout, &resources)?;
+        let target = OffscreenTarget::new(dev, width, height)?;
+        let (vertex, vertex_layout, depth_test) = match geometry {
+            Geometry::FullScreen => (&self.vert_map, None, false),
+            Geometry::Mesh { .. } => (&self.vert_mesh, Some(mesh_vertex_layout()), true),
+        };
+        let shading = prepared.shading;
+        let mut spec = [0u32; SPEC_COUNT];
+        spec[4] = shading.shadowing as u32;
+        spec[5] = shading.fresnel as u32;
+        spec[6] = texture_blending as u32;
+        spec[8] = output as u32;
+        variant.specialise(&mut spec);
+        let fragment = ShaderModule::new(
+            dev,
+            stats.name.as_str(),
+            self.variant.implementation().fragment_spirv(),
+        )?;
+        let name = format!(
+            "{} {output:?}{}{}{}",
+            variant.pipeline_name(),
+            if shading.fresnel { " fresnel" } else { "" },
+            if shading.shadowing { " shadowing" } else { "" },
+            if texture_blending { " texture" } else { "" },
+        );
+        let pipeline = Pipeline::new(
+            dev,
+            &PipelineDesc {
+                name: &name,
+                vertex,
+                fragment: &fragment,
+                spec: &spec,
+                vertex_layout: vertex_layout.as_ref(),
+                layout: &layout,
+                render_pass: target.render_pass,
+                depth_test,
+            },
+        )?;
+        let timer = GpuTimer::new(dev, "frame timestamps")?;
+        dev.submit_once("diffraction frame", |cb| {
+            if let Some(t) = &timer {
+                t.record_start(cb);
+            }
+            record_frame(
+                dev,
+                cb,
+                &target.frame(),
+                &pipeline,
+                &layout,
+                &set,
+                &geometry,
+                clear,
+            );
+            if let Some(t) = &timer {
+                t.record_end(cb);
+            }
+            target.record_readback(cb);
+            Ok(())
+        })?;
+        let gpu_ms = match &timer {
+            Some(t) => Some(t.elapsed_ms()?),
+            None => None,
+        };
+        let rgb = target
+            .read_rgba()?
+            .into_iter()
+            .map(|p| [p[0], p[1], p[2]])
+            .collect();
+        Ok(Frame {
+            width,
+            height,
+            rgb,
+            gpu_ms,
+            wall_ms: 0.0,
+            variant: stats,
+        })
+    }
+}
+
+/// Range checks of a BRDF map's arguments.
+fn check_map_args(
+    theta_i_deg: f64,
+    phi_i_deg: f64,
+    size: u32,
+    lambda_nm: Option<f64>,
+) -> Result<()> {
+    if size == 0 || size > MAX_MAP_SIZE {
+        return Err(Error::invalid(
+            "BRDF map size",
+            format!("{size}; expected 1..={MAX_MAP_SIZE} pixels"),
+        ));
+    }
+    if !(theta_i_deg.is_finite() && (0.0..=90.0).contains(&theta_i_deg)) {
+        return Err(Error::invalid(
+            "theta-i",
+            format!("{theta_i_deg}°; expected 0..=90° from the normal"),
+        ));
+    }
+    if !phi_i_deg.is_finite() {
+        return Err(Error::invalid("phi-i", format!("{phi_i_deg}°")));
+    }
+    let lo = crate::colour::LAMBDA_MIN_NM as f64;
+    let hi = crate::colour::LAMBDA_MAX_NM as f64;
+    if let Some(l) = lambda_nm {
+        if !(l.is_finite() && (lo..=hi).contains(&l)) {
+            return Err(Error::invalid(
+                "wavelength",
+                format!("{l} nm; expected {lo}..={hi} nm"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The `(u, v, w)` a scene's mesh can reach: the tangent-frame `−ωi − ωr` of every vertex of
+/// a triangle that has a lit, visible vertex (as diffraction.vert computes them), with a
+/// margin for the renormalised interpolation between vertices. `None` when nothing is lit.
+fn scene_region(scene: &Scene, mesh: &crate::mesh::Mesh) -> Option<Region> {
+    use glam::Vec3;
+    let to_light = -Vec3::from(scene.light.direction).normalize_or(Vec3::NEG_Z);
+    let eye = Vec3::from(scene.camera.eye);
+    let uvw: Vec<(bool, [f64; 3])> = mesh
+        .vertices
+        .iter()
+        .map(|v| {
+            let n = Vec3::from(v.normal).normalize_or(Vec3::Z);
+            let t0 = Vec3::new(v.tangent[0], v.tangent[1], v.tangent[2]);
+            let t = (t0 - n * n.dot(t0)).normalize_or(n.any_orthonormal_vector());
+            let b = if v.tangent[3] < 0.0 { -1.0 } else { 1.0 } * n.cross(t);
+            let frame = |d: Vec3| Vec3::new(d.dot(t), d.dot(b), d.dot(n));
+            let wi = frame(to_light).normalize_or(Vec3::Z);
+            let wr = frame(eye - Vec3::from(v.position)).normalize_or(Vec3::Z);
+            let lit = wi.z > 0.0 && wr.z > 0.0;
+            (
+                lit,
+                [
+                    -(wi.x + wr.x) as f64,
+                    -(wi.y + wr.y) as f64,
+                    -(wi.z + wr.z) as f64,
+                ],
+            )
+        })
+        .collect();
+    let points = mesh.indices.chunks_exact(3).flat_map(|tri| {
+        let any_lit = tri.iter().any(|&i| uvw[i as usize].0);
+        tri.iter()
+            .filter(move |_| any_lit)
+            .map(|&i| uvw[i as usize].1)
+            .collect::<Vec<_>>()
+    });
+    Region::around(points, 0.02)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn map_direction_is_inside_the_disk_and_symmetric() {
+        assert!(map_direction(0, 0, 64).is_none());
+        let c = map_direction(32, 31, 64).unwrap();
+        assert!(c[2] > 0.99);
+        let a = map_direction(10, 20, 64).unwrap();
+        let b = map_direction(53, 43, 64).unwrap();
+        assert!((a[0] + b[0]).abs() < 1e-6 && (a[1] + b[1]).abs() < 1e-6);
+    }
+}

@@ -1,0 +1,225 @@
+//! Variant `flss` (thesis Algorithm 3, glsl/flss.frag): the DFT terms of the material as an
+//! image array (one layer per term, the cropped band, in the chosen storage format), the
+//! per-term decode table in the uniform block, and the constants `T`, `R`, `Δλ`, expansion
+//! and storage.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use ash::vk;
+
+use super::{DrawSetup, PreparedVariant, Variant, VariantKind, VariantStats, SPEC_COUNT};
+use crate::gpu::formats::{pack_layers, Layer};
+use crate::gpu::memory::{Image, ImageDesc, Sampler};
+use crate::gpu::pipeline::{Binding, Resource};
+use crate::gpu::{shaders, Device, StorageFormat};
+use crate::material::PreparedMaterial;
+use crate::render::{ParamsUbo, MAX_TERMS};
+use crate::spectrum::Expansion;
+use crate::{Error, Result};
+
+pub(crate) struct Flss;
+
+impl Variant for Flss {
+    fn kind(&self) -> VariantKind {
+        VariantKind::Flss
+    }
+
+    fn fragment_spirv(&self) -> &'static [u8] {
+        shaders::FLSS_FRAG
+    }
+
+    fn prepare(
+        &self,
+        dev: &Arc<Device>,
+        setup: &DrawSetup<'_>,
+    ) -> Result<Box<dyn PreparedVariant>> {
+        let start = Instant::now();
+        let prepared = setup.prepared;
+        let (terms, decode) = upload_terms(dev, prepared, setup.storage)?;
+        let m = &prepared.material;
+        let t = m.terms.min(prepared.stack.term_count().saturating_sub(1));
+        let name = format!(
+            "flss T={t} R={} dλ={} {} {}",
+            prepared.window.radius,
+            prepared.colour.step_nm,
+            prepared.stack.expansion,
+            setup.storage
+        );
+        let taps = (2 * prepared.window.radius + 1).pow(2);
+        Ok(Box::new(FlssGpu {
+            stats: VariantStats {
+                name,
+                build_ms: start.elapsed().as_secs_f64() * 1e3,
+                gpu_bytes: prepared.stack.term_count()
+                    * prepared.stack.band.width
+                    * prepared.stack.band.height
+                    * setup.storage.texel_bytes(),
+                fetches: prepared.colour.len() * (t + 1) * taps,
+            },
+            spec: [
+                t as u32,
+                prepared.window.radius as u32,
+                prepared.colour.step_nm,
+                match prepared.stack.expansion {
+                    Expansion::Taylor => 0,
+                    Expansion::Chebyshev => 1,
+                },
+                setup.storage.spec_value(),
+            ],
+            params: lookup_params(prepared, &decode),
+            sampler: Sampler::new(
+                dev,
+                "dft terms (nearest)",
+                vk::Filter::NEAREST,
+                vk::SamplerAddressMode::CLAMP_TO_EDGE,
+            )?,
+            terms,
+        }))
+    }
+}
+
+struct FlssGpu {
+    stats: VariantStats,
+    /// Constants 0, 1, 2, 3, 7: T, R, Δλ, expansion, storage.
+    spec: [u32; 5],
+    /// spectrumSize, band, lookup and decode of the uniform block.
+    params: ([i32; 4], [i32; 4], [f32; 4], Vec<[f32; 4]>),
+    sampler: Sampler,
+    terms: Image,
+}
+
+impl PreparedVariant for FlssGpu {
+    fn bindings(&self) -> Vec<Binding> {
+        vec![Binding {
+            binding: 1,
+            kind: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+            stages: vk::ShaderStageFlags::FRAGMENT,
+        }]
+    }
+
+    fn resources(&self) -> Vec<(u32, Resource<'_>)> {
+        vec![(1, Resource::Sampled(&self.terms, &self.sampler))]
+    }
+
+    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
+        spec[0] = self.spec[0];
+        spec[1] = self.spec[1];
+        spec[2] = self.spec[2];
+        spec[3] = self.spec[3];
+        spec[7] = self.spec[4];
+    }
+
+    fn fill_params(&self, params: &mut ParamsUbo) {
+        let (size, band, lookup, decode) = &self.params;
+        params.spectrum_size = *size;
+        params.band = *band;
+        params.lookup = *lookup;
+        for (d, m) in params.decode.iter_mut().zip(decode) {
+            *d = *m;
+        }
+    }
+
+    fn stats(&self) -> VariantStats {
+        self.stats.clone()
+    }
+}
+
+/// The spectrum geometry, window and Chebyshev range of the uniform block.
+fn lookup_params(
+    prepared: &PreparedMaterial,
+    decode: &[[f32; 4]],
+) -> ([i32; 4], [i32; 4], [f32; 4], Vec<[f32; 4]>) {
+    let s = &prepared.stack;
+    let sigma = prepared.window.sigma_texels;
+    let inv2 = |s: f64| (1.0 / (2.0 * s * s)) as f32;
+    (
+        [
+            s.nx as i32,
+            s.ny as i32,
+            s.centre_x() as i32,
+            s.centre_y() as i32,
+        ],
+        [
+            s.band.x0 as i32,
+            s.band.y0 as i32,
+            s.band.width as i32,
+            s.band.height as i32,
+        ],
+        [
+            s.dh_um as f32,
+            inv2(sigma[0]),
+            inv2(sigma[1]),
+            s.half_range_um as f32,
+        ],
+        decode.to_vec(),
+    )
+}
+
+/// Uploads the term stack (cropped band, one layer per term, in the storage format); also
+/// returns the per-term decode rows of thesis eq. 1.1.
+fn upload_terms(
+    dev: &Arc<Device>,
+    prepared: &PreparedMaterial,
+    storage: StorageFormat,
+) -> Result<(Image, Vec<[f32; 4]>)> {
+    let stack = &prepared.stack;
+    let layers = stack.term_count();
+    if layers == 0 || layers > MAX_TERMS {
+        return Err(Error::invalid(
+            "terms",
+            format!("{layers} term layers; the shader holds 1..={MAX_TERMS}"),
+        ));
+    }
+    let (w, h) = (stack.band.width as u32, stack.band.height as u32);
+    let info = &dev.info;
+    if w > info.max_image_dimension_2d
+        || h > info.max_image_dimension_2d
+        || layers as u32 > info.max_image_array_layers
+    {
+        return Err(Error::invalid(
+            "terms",
+            format!(
+                "{w}×{h}×{layers} texels exceed the device limits ({} a side, {} layers)",
+                info.max_image_dimension_2d, info.max_image_array_layers
+            ),
+        ));
+    }
+    let format = storage.vk_format();
+    if !dev.supports_format(format, vk::FormatFeatureFlags::SAMPLED_IMAGE) {
+        return Err(Error::invalid(
+            "storage format",
+            format!("{} cannot sample {format:?}", info.name),
+        ));
+    }
+    let texels: Vec<Vec<[f64; 2]>> = stack
+        .terms
+        .iter()
+        .map(|t| t.iter().map(|c| [c.re, c.im]).collect())
+        .collect();
+    let packed: Vec<Layer<'_>> = texels
+        .iter()
+        .zip(&stack.extrema)
+        .map(|(t, e)| Layer {
+            texels: t,
+            extrema: [e.re_min, e.re_max, e.im_min, e.im_max],
+        })
+        .collect();
+    let (bytes, decode) = pack_layers(&packed, storage);
+    let terms = Image::sampled_with_data(
+        dev,
+        "dft terms",
+        ImageDesc {
+            format,
+            width: w,
+            height: h,
+            layers: layers as u32,
+            usage: vk::ImageUsageFlags::SAMPLED,
+            aspect: vk::ImageAspectFlags::COLOR,
+            view_type: vk::ImageViewType::TYPE_2D_ARRAY,
+        },
+        storage.texel_bytes(),
+        &bytes,
+    )?;
+    Ok((terms, decode))
+}

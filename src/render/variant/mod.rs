@@ -1,0 +1,318 @@
+//! Shader variants (MODEL §7): each one owns its fragment shader, the descriptor bindings
+//! beyond the shared ones, its GPU resources and its specialisation constants, behind
+//! [`Variant`] and [`PreparedVariant`]. The renderer only knows this interface; adding a
+//! variant is one new file here plus one line in [`VariantKind`].
+//!
+//! Shared bindings (every variant's layout has them): 0 `Params` uniform block, 2 colour
+//! weights, 3 surface texture. A variant adds binding 1 (its main table) and 4 onwards.
+
+mod chebyshev_w;
+mod dhillon;
+mod flss;
+mod table;
+mod volume;
+
+use std::sync::Arc;
+
+use crate::brdf::table::{Region, TableSpec};
+use crate::gpu::pipeline::{Binding, Resource};
+use crate::gpu::{Device, StorageFormat};
+use crate::material::{Material, PreparedMaterial};
+use crate::{Error, Result};
+
+use super::{OutputMode, ParamsUbo};
+
+/// Number of specialisation constants (`constant_id` 0..=9 of glsl/interface.glsl).
+pub(crate) const SPEC_COUNT: usize = 10;
+
+/// The variants, by name.
+#[derive(
+    Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize, serde::Deserialize,
+)]
+#[serde(rename_all = "kebab-case")]
+#[value(rename_all = "kebab-case")]
+pub enum VariantKind {
+    /// Thesis Algorithm 3: the whole spectrum, every term and tap, per pixel.
+    Flss,
+    /// Dhillon et al. 2014: tables of the powers of w, Horner per pixel.
+    Dhillon,
+    /// G as a Chebyshev series in w: K bilinear fetches, Clenshaw.
+    ChebyshevW,
+    /// G(u, v, w) in a 3D texture: one trilinear fetch.
+    Volume,
+    /// The default variant (an alias; see [`VariantKind::DEFAULT`]).
+    Default,
+}
+
+impl VariantKind {
+    /// Every variant, the alias excluded, in listing order.
+    pub const ALL: [VariantKind; 4] = [
+        VariantKind::Flss,
+        VariantKind::Dhillon,
+        VariantKind::ChebyshevW,
+        VariantKind::Volume,
+    ];
+
+    /// What `default` stands for: the fastest variant whose error against the 1 nm
+    /// reference stays within ΔE2000 p99 ≤ 1 on the shipped gratings (README, profile).
+    pub const DEFAULT: VariantKind = VariantKind::ChebyshevW;
+
+    /// The variant an alias stands for.
+    pub fn resolve(self) -> VariantKind {
+        match self {
+            VariantKind::Default => Self::DEFAULT,
+            k => k,
+        }
+    }
+
+    /// Command-line name.
+    pub fn name(self) -> &'static str {
+        match self.resolve() {
+            VariantKind::Flss => "flss",
+            VariantKind::Dhillon => "dhillon",
+            VariantKind::ChebyshevW => "chebyshev-w",
+            VariantKind::Volume => "volume",
+            VariantKind::Default => unreachable!("resolved above"),
+        }
+    }
+
+    /// One line for `diffract variants`.
+    pub fn summary(self) -> &'static str {
+        match self.resolve() {
+            VariantKind::Flss => "thesis Algorithm 3: every wavelength × term × window tap per pixel (exact to its T, R, Δλ)",
+            VariantKind::Dhillon => "Dhillon et al. 2014: G = Σ_p I_p(u,v)·w^p from f64 tables, Horner (monomials: ill-conditioned in f32)",
+            VariantKind::ChebyshevW => "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw: K bilinear fetches",
+            VariantKind::Volume => "G(u,v,w) in a 3D texture from f64 tables: one trilinear fetch (the floor)",
+            VariantKind::Default => unreachable!("resolved above"),
+        }
+    }
+
+    /// Whether it evaluates the spectrum per pixel (and so can draw one wavelength).
+    pub fn is_spectral(self) -> bool {
+        self.resolve() == VariantKind::Flss
+    }
+
+    /// Texel fetches per pixel for `material` and the table options.
+    pub fn fetches(self, material: &Material, table: &TableOptions) -> usize {
+        match self.resolve() {
+            VariantKind::Flss => {
+                let lambdas = (400 / material.lambda_step_nm.max(1) + 1) as usize;
+                let taps = (2 * material.window_radius + 1).pow(2);
+                lambdas * (material.terms + 1) * taps
+            }
+            VariantKind::Volume => 1,
+            k => table.w_nodes_for(k),
+        }
+    }
+
+    pub(crate) fn implementation(self) -> &'static dyn Variant {
+        match self.resolve() {
+            VariantKind::Flss => &flss::Flss,
+            VariantKind::Dhillon => &dhillon::Dhillon,
+            VariantKind::ChebyshevW => &chebyshev_w::ChebyshevW,
+            VariantKind::Volume => &volume::Volume,
+            VariantKind::Default => unreachable!("resolved above"),
+        }
+    }
+}
+
+impl std::fmt::Display for VariantKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Storage of the pre-integrated tables.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum)]
+pub enum TableFormat {
+    /// 16 bytes a texel; linear filtering in float32.
+    Rgba32f,
+    /// 8 bytes a texel; 11-bit mantissa (relative rounding 5e-4).
+    Rgba16f,
+}
+
+/// How the table variants sample `G` (MODEL §7).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TableOptions {
+    /// `(u, v)` node spacing; `None`: half the coherence lobe ([`TableSpec::default_texel`]).
+    pub texel_uv: Option<f64>,
+    /// Nodes along `w`; `None`: the variant's default (volume 32, chebyshev-w 16, dhillon 12).
+    pub w_nodes: Option<usize>,
+    /// Wavelength step of the offline spectral integral (nm).
+    pub step_nm: u32,
+    /// GPU memory a table may take; the `(u, v)` spacing is coarsened to fit (and said so).
+    pub budget_bytes: usize,
+    pub format: TableFormat,
+}
+
+impl Default for TableOptions {
+    fn default() -> Self {
+        Self {
+            texel_uv: None,
+            w_nodes: None,
+            step_nm: 5,
+            budget_bytes: 512 << 20,
+            format: TableFormat::Rgba32f,
+        }
+    }
+}
+
+impl TableOptions {
+    /// `w` nodes of variant `kind`.
+    pub fn w_nodes_for(&self, kind: VariantKind) -> usize {
+        self.w_nodes.unwrap_or(match kind.resolve() {
+            VariantKind::Volume => 32,
+            VariantKind::Dhillon => 12,
+            _ => 16,
+        })
+    }
+
+    /// The sampling of `G` for `kind` over `region`: the requested spacing, coarsened where
+    /// the table would exceed the memory budget. The second value is the spacing asked for
+    /// when it had to be coarsened.
+    pub fn spec(
+        &self,
+        kind: VariantKind,
+        material: &Material,
+        region: Region,
+    ) -> Result<(TableSpec, Option<f64>)> {
+        let asked = self
+            .texel_uv
+            .unwrap_or_else(|| TableSpec::default_texel(material.coherence_um));
+        let w_nodes = self.w_nodes_for(kind);
+        let texel_bytes = match self.format {
+            TableFormat::Rgba32f => 16,
+            TableFormat::Rgba16f => 8,
+        };
+        let e = region.extent();
+        let bytes = |t: f64| {
+            ((e[0] / t).ceil() + 1.0) * ((e[1] / t).ceil() + 1.0) * (w_nodes * texel_bytes) as f64
+        };
+        let mut texel = asked;
+        while bytes(texel) > self.budget_bytes as f64 {
+            texel *= 1.1;
+        }
+        let spec = TableSpec {
+            region,
+            texel_uv: texel,
+            w_nodes,
+            step_nm: self.step_nm,
+        };
+        spec.validate()?;
+        Ok((spec, (texel > asked).then_some(asked)))
+    }
+}
+
+/// What a frame reports about the variant that drew it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VariantStats {
+    /// Variant name and its main settings.
+    pub name: String,
+    /// Time to build and upload its resources (ms): the table build for table variants,
+    /// the term upload for flss. Measured once; cached variants report the original time.
+    pub build_ms: f64,
+    /// GPU memory of its resources (bytes).
+    pub gpu_bytes: usize,
+    /// Texel fetches per pixel.
+    pub fetches: usize,
+}
+
+/// What a variant is prepared for.
+pub(crate) struct DrawSetup<'a> {
+    pub prepared: &'a PreparedMaterial,
+    /// The `(u, v, w)` the draw can reach.
+    pub region: Region,
+    pub output: OutputMode,
+    pub storage: StorageFormat,
+    pub table: &'a TableOptions,
+    /// Keep the f64 table on the CPU after upload ([`PreparedVariant::table_model`]).
+    pub keep_model: bool,
+    /// Where sampled tables are cached (none: always build).
+    pub cache_dir: Option<&'a std::path::Path>,
+}
+
+/// A variant: its fragment shader and how to build its resources.
+pub(crate) trait Variant: Sync {
+    fn kind(&self) -> VariantKind;
+    /// SPIR-V of its fragment shader (the vertex stages are shared).
+    fn fragment_spirv(&self) -> &'static [u8];
+    /// Builds and uploads what the shader reads for `setup`.
+    fn prepare(&self, dev: &Arc<Device>, setup: &DrawSetup<'_>)
+        -> Result<Box<dyn PreparedVariant>>;
+}
+
+/// A variant's GPU resources for one material and region.
+pub(crate) trait PreparedVariant {
+    /// Its descriptor bindings beyond the shared ones.
+    fn bindings(&self) -> Vec<Binding>;
+    /// What those bindings point at.
+    fn resources(&self) -> Vec<(u32, Resource<'_>)>;
+    /// Sets its specialisation constants.
+    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]);
+    /// Fills its part of the shared uniform block.
+    fn fill_params(&self, _params: &mut ParamsUbo) {}
+    fn stats(&self) -> VariantStats;
+    /// The f64 CPU model of a table variant, when it was kept.
+    fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
+        None
+    }
+    /// The pipeline's name (validation messages and captures show it).
+    fn pipeline_name(&self) -> String {
+        self.stats().name
+    }
+}
+
+/// Rejects a spectral (single-wavelength) draw for a variant that integrates offline.
+pub(crate) fn require_spectral(kind: VariantKind, output: OutputMode) -> Result<()> {
+    if output == OutputMode::MapSpectral && !kind.is_spectral() {
+        return Err(Error::invalid(
+            "variant",
+            format!(
+                "'{kind}' integrates the spectrum offline and cannot draw one wavelength; use --variant flss with --lambda-nm"
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// `diffract variants`: the list, with fetches and memory for the default material on a
+/// BRDF map at θi = 60°.
+pub fn list() -> String {
+    let material = Material::default();
+    let table = TableOptions::default();
+    let region = Region::brdf_map(crate::brdf::direction(60.0, 0.0));
+    let mut s = String::from(
+        "variant       fetches/pixel  memory (default material, BRDF map at θi = 60°)\n",
+    );
+    for kind in VariantKind::ALL {
+        let memory = match kind {
+            VariantKind::Flss => {
+                "term band × (T+1) layers, RG32F (≈ 120 MB for the 704² gratings)".to_string()
+            }
+            k => match table.spec(k, &material, region) {
+                Ok((spec, _)) => match spec.uv_nodes() {
+                    Ok((nu, nv)) => format!(
+                        "{:.0} MB ({nu}×{nv}×{} RGBA32F, u/v texel {:.4})",
+                        (nu * nv * spec.w_nodes * 16) as f64 / 1e6,
+                        spec.w_nodes,
+                        spec.texel_uv
+                    ),
+                    Err(e) => e.to_string(),
+                },
+                Err(e) => e.to_string(),
+            },
+        };
+        let mark = if kind == VariantKind::DEFAULT {
+            " (default)"
+        } else {
+            ""
+        };
+        s.push_str(&format!(
+            "{:<13} {:>13}  {memory}\n    {}{mark}\n",
+            kind.name(),
+            kind.fetches(&material, &table),
+            kind.summary()
+        ));
+    }
+    s
+}

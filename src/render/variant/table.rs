@@ -1,0 +1,257 @@
+//! What the pre-integrated variants share: building a [`GTable`] with a progress bar,
+//! uploading its planes (a 3D image for `volume`, an image array of coefficient planes for
+//! `chebyshev-w` and `dhillon`), the `TableInfo` uniform block (glsl/table.glsl) and a
+//! linear, clamped sampler.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use ash::vk;
+use indicatif::{ProgressBar, ProgressStyle};
+
+use super::{
+    require_spectral, DrawSetup, PreparedVariant, TableFormat, VariantKind, VariantStats,
+    SPEC_COUNT,
+};
+use crate::brdf::table::{GTable, TableSpec};
+use crate::gpu::formats::f32_to_f16;
+use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
+use crate::gpu::pipeline::{Binding, Resource};
+use crate::gpu::Device;
+use crate::{Error, Result};
+
+/// How a table's planes are stored on the GPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum Layout {
+    /// Planes are the slices of a 3D image: trilinear in (u, v, w).
+    Volume,
+    /// Planes are the layers of an image array: bilinear in (u, v) per plane.
+    Planes,
+}
+
+/// Mirror of `TableInfo` in glsl/table.glsl (std140: vec4 members only).
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct TableInfoUbo {
+    lo: [f32; 4],
+    inv_extent: [f32; 4],
+    nodes: [f32; 4],
+}
+
+// SAFETY: repr(C) of f32 arrays: no padding.
+unsafe impl Pod for TableInfoUbo {}
+
+/// Builds the table of `kind` for `setup` (with a progress bar on a terminal) and uploads it.
+pub(crate) fn prepare<T: GTable + 'static>(
+    kind: VariantKind,
+    dev: &Arc<Device>,
+    setup: &DrawSetup<'_>,
+    layout: Layout,
+    build: impl FnOnce(&TableSpec, &(dyn Fn() + Sync)) -> Result<T>,
+) -> Result<Box<dyn PreparedVariant>> {
+    require_spectral(kind, setup.output)?;
+    let start = Instant::now();
+    let material = &setup.prepared.material;
+    let (spec, coarsened) = setup.table.spec(kind, material, setup.region)?;
+    if let Some(asked) = coarsened {
+        eprintln!(
+            "note: {kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB",
+            spec.region.lo[0],
+            spec.region.hi[0],
+            spec.region.lo[1],
+            spec.region.hi[1],
+            spec.texel_uv,
+            setup.table.budget_bytes >> 20
+        );
+    }
+    let lambdas = (400 / spec.step_nm + 1) as u64;
+    let bar = ProgressBar::new(spec.w_nodes as u64 * lambdas).with_message(format!("{kind} table"));
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} (w, λ) planes, {eta} left")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    let tick = || bar.inc(1);
+    let table = build(&spec, &tick)?;
+    bar.finish_and_clear();
+    let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
+    if setup.keep_model {
+        gpu.model = Some(Box::new(table));
+    }
+    Ok(Box::new(gpu))
+}
+
+struct TableGpu {
+    stats: VariantStats,
+    model: Option<Box<dyn GTable>>,
+    terms: u32,
+    info: Buffer,
+    sampler: Sampler,
+    image: Image,
+}
+
+impl TableGpu {
+    fn upload(
+        kind: VariantKind,
+        dev: &Arc<Device>,
+        spec: &TableSpec,
+        table: &dyn GTable,
+        layout: Layout,
+        format: TableFormat,
+        start: Instant,
+    ) -> Result<Self> {
+        let (nu, nv) = table.nodes_uv();
+        let planes = table.planes();
+        let linear = vk::FormatFeatureFlags::SAMPLED_IMAGE
+            | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
+        // Float32 where the device filters it linearly, else float16.
+        let format = match format {
+            TableFormat::Rgba32f
+                if dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear) =>
+            {
+                TableFormat::Rgba32f
+            }
+            _ => TableFormat::Rgba16f,
+        };
+        let (vk_format, texel_bytes) = match format {
+            TableFormat::Rgba32f => (vk::Format::R32G32B32A32_SFLOAT, 16),
+            TableFormat::Rgba16f => (vk::Format::R16G16B16A16_SFLOAT, 8),
+        };
+        if !dev.supports_format(vk_format, linear) {
+            return Err(Error::invalid(
+                "table format",
+                format!("{} cannot filter {vk_format:?} linearly", dev.info.name),
+            ));
+        }
+        let info = &dev.info;
+        let (limit, view_type) = match layout {
+            Layout::Volume => (info.max_image_dimension_3d, vk::ImageViewType::TYPE_3D),
+            Layout::Planes => (
+                info.max_image_dimension_2d,
+                vk::ImageViewType::TYPE_2D_ARRAY,
+            ),
+        };
+        let depth_limit = match layout {
+            Layout::Volume => info.max_image_dimension_3d,
+            Layout::Planes => info.max_image_array_layers,
+        };
+        if nu as u32 > limit || nv as u32 > limit || planes.len() as u32 > depth_limit {
+            return Err(Error::invalid(
+                "table size",
+                format!(
+                    "{nu}×{nv}×{} texels exceed the device limits ({limit} a side, {depth_limit} deep): use a coarser texel",
+                    planes.len()
+                ),
+            ));
+        }
+        let mut bytes = Vec::with_capacity(nu * nv * planes.len() * texel_bytes);
+        for plane in planes {
+            for t in plane {
+                let rgba = [t[0] as f32, t[1] as f32, t[2] as f32, 0.0];
+                match format {
+                    TableFormat::Rgba32f => rgba
+                        .iter()
+                        .for_each(|c| bytes.extend_from_slice(&c.to_le_bytes())),
+                    TableFormat::Rgba16f => rgba
+                        .iter()
+                        .for_each(|c| bytes.extend_from_slice(&f32_to_f16(*c).to_le_bytes())),
+                }
+            }
+        }
+        let image = Image::sampled_with_data(
+            dev,
+            &format!("{kind} table"),
+            ImageDesc {
+                format: vk_format,
+                width: nu as u32,
+                height: nv as u32,
+                layers: planes.len() as u32,
+                usage: vk::ImageUsageFlags::SAMPLED,
+                aspect: vk::ImageAspectFlags::COLOR,
+                view_type,
+            },
+            texel_bytes,
+            &bytes,
+        )?;
+        let r = table.region();
+        let e = r.extent();
+        let ubo = TableInfoUbo {
+            lo: [r.lo[0] as f32, r.lo[1] as f32, r.lo[2] as f32, 0.0],
+            inv_extent: [
+                (1.0 / e[0]) as f32,
+                (1.0 / e[1]) as f32,
+                (1.0 / e[2]) as f32,
+                0.0,
+            ],
+            nodes: [nu as f32, nv as f32, planes.len() as f32, 0.0],
+        };
+        let info = Buffer::with_data(
+            dev,
+            &format!("{kind} table info"),
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            std::slice::from_ref(&ubo),
+        )?;
+        let fetches = match layout {
+            Layout::Volume => 1,
+            Layout::Planes => planes.len(),
+        };
+        Ok(Self {
+            model: None,
+            stats: VariantStats {
+                name: format!(
+                    "{kind} K={} {nu}×{nv} texel {:.4} dλ={} {format:?}",
+                    planes.len(),
+                    spec.texel_uv,
+                    spec.step_nm
+                ),
+                build_ms: start.elapsed().as_secs_f64() * 1e3,
+                gpu_bytes: bytes.len(),
+                fetches,
+            },
+            terms: planes.len() as u32,
+            info,
+            sampler: Sampler::new(
+                dev,
+                &format!("{kind} table (linear)"),
+                vk::Filter::LINEAR,
+                vk::SamplerAddressMode::CLAMP_TO_EDGE,
+            )?,
+            image,
+        })
+    }
+}
+
+impl PreparedVariant for TableGpu {
+    fn bindings(&self) -> Vec<Binding> {
+        vec![
+            Binding {
+                binding: 1,
+                kind: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                stages: vk::ShaderStageFlags::FRAGMENT,
+            },
+            Binding {
+                binding: 4,
+                kind: vk::DescriptorType::UNIFORM_BUFFER,
+                stages: vk::ShaderStageFlags::FRAGMENT,
+            },
+        ]
+    }
+
+    fn resources(&self) -> Vec<(u32, Resource<'_>)> {
+        vec![
+            (1, Resource::Sampled(&self.image, &self.sampler)),
+            (4, Resource::Uniform(&self.info)),
+        ]
+    }
+
+    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
+        spec[9] = self.terms;
+    }
+
+    fn stats(&self) -> VariantStats {
+        self.stats.clone()
+    }
+
+    fn table_model(&self) -> Option<&dyn GTable> {
+        self.model.as_deref()
+    }
+}
