@@ -1,14 +1,40 @@
 #version 450
 // Variant `chebyshev-w`: G = Σ_j c_j(u, v)·T_j(ŵ), ŵ the tabulated w range mapped to
-// [−1, 1]; one bilinear fetch per coefficient, summed by Clenshaw's recurrence (MODEL §7).
+// [−1, 1], summed by Clenshaw's recurrence (MODEL §7). Each coefficient plane holds cubic
+// B-spline coefficients through the (u, v) nodes (one ghost texel on each side): the
+// spline is evaluated from four bilinear fetches (the weights of each pair folded into
+// one fetch position), so lobes about two texels wide interpolate to O(h⁴).
 #include "interface.glsl"
 #include "gain.glsl"
 #include "table.glsl"
 
 layout(set = 0, binding = 1) uniform sampler2DArray gCoefficients;
 
-vec3 coefficientAt(vec2 t, int j) {
-    return texture(gCoefficients, vec3(t, float(j))).rgb;
+// Fetch positions and pair weights of the cubic B-spline at fraction f on n nodes, in
+// normalised coordinates of the n + 2 stored texels.
+void splineTaps(vec2 f, vec2 n, out vec2 p0, out vec2 p1, out vec2 g0, out vec2 g1) {
+    vec2 t = f * (n - 1.0);
+    vec2 i = clamp(floor(t), vec2(0.0), n - 2.0);
+    vec2 x = t - i;
+    vec2 x2 = x * x;
+    vec2 x3 = x2 * x;
+    vec2 w0 = (1.0 - x) * (1.0 - x) * (1.0 - x) / 6.0;
+    vec2 w1 = (3.0 * x3 - 6.0 * x2 + 4.0) / 6.0;
+    vec2 w2 = (-3.0 * x3 + 3.0 * x2 + 3.0 * x + 1.0) / 6.0;
+    vec2 w3 = x3 / 6.0;
+    g0 = w0 + w1;
+    g1 = w2 + w3;
+    // c_{i−1} is stored texel i (whose centre is i + 0.5).
+    p0 = (i + 0.5 + w1 / g0) / (n + 2.0);
+    p1 = (i + 2.5 + w3 / g1) / (n + 2.0);
+}
+
+vec3 coefficientAt(vec2 p0, vec2 p1, vec2 g0, vec2 g1, int j) {
+    float l = float(j);
+    return g0.y * (g0.x * texture(gCoefficients, vec3(p0.x, p0.y, l)).rgb
+                 + g1.x * texture(gCoefficients, vec3(p1.x, p0.y, l)).rgb)
+         + g1.y * (g0.x * texture(gCoefficients, vec3(p0.x, p1.y, l)).rgb
+                 + g1.x * texture(gCoefficients, vec3(p1.x, p1.y, l)).rgb);
 }
 
 vec3 diffractionXyz(vec3 wi, vec3 wr) {
@@ -17,16 +43,17 @@ vec3 diffractionXyz(vec3 wi, vec3 wr) {
     if (gainC == 0.0 || !tableFraction(-wi - wr, f)) {
         return vec3(0.0);
     }
-    vec2 t = nodeCentred(f.xy, tableInfo.nodes.xy);
+    vec2 p0, p1, g0, g1;
+    splineTaps(f.xy, tableInfo.nodes.xy, p0, p1, g0, g1);
     float x = 2.0 * f.z - 1.0;
     vec3 b1 = vec3(0.0);
     vec3 b2 = vec3(0.0);
     for (int j = TABLE_TERMS - 1; j >= 1; --j) {
-        vec3 b0 = coefficientAt(t, j) + 2.0 * x * b1 - b2;
+        vec3 b0 = coefficientAt(p0, p1, g0, g1, j) + 2.0 * x * b1 - b2;
         b2 = b1;
         b1 = b0;
     }
-    return gainC * (coefficientAt(t, 0) + x * b1 - b2);
+    return gainC * (coefficientAt(p0, p1, g0, g1, 0) + x * b1 - b2);
 }
 
 #include "shade.glsl"

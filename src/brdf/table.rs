@@ -426,6 +426,90 @@ fn bilinear(
     }))
 }
 
+/// Cubic B-spline coefficients that interpolate `values` (`n` nodes along one axis, any
+/// stride): `(c_{i−1} + 4c_i + c_{i+1})/6 = f_i`, with `c_0 = f_0` and `c_{n−1} = f_{n−1}`,
+/// returned with one ghost on each side (`c_{−1} = 2c_0 − c_1`, `c_n = 2c_{n−1} − c_{n−2}`,
+/// which makes the end nodes exact): `n + 2` values.
+fn spline_axis(values: &[[f64; 3]]) -> Vec<[f64; 3]> {
+    let n = values.len();
+    let mut c = values.to_vec();
+    if n > 2 {
+        // Thomas algorithm on the interior rows i = 1..n−2 of the (1, 4, 1)/6 system.
+        let m = n - 2;
+        let mut diag = vec![4.0f64; m];
+        let mut rhs: Vec<[f64; 3]> = (1..n - 1).map(|i| values[i].map(|x| 6.0 * x)).collect();
+        for ch in 0..3 {
+            rhs[0][ch] -= values[0][ch];
+            rhs[m - 1][ch] -= values[n - 1][ch];
+        }
+        for k in 1..m {
+            let f = 1.0 / diag[k - 1];
+            diag[k] -= f;
+            let prev = rhs[k - 1];
+            for (r, p) in rhs[k].iter_mut().zip(prev) {
+                *r -= f * p;
+            }
+        }
+        let mut x = vec![[0.0; 3]; m];
+        x[m - 1] = rhs[m - 1].map(|r| r / diag[m - 1]);
+        for k in (0..m - 1).rev() {
+            x[k] = [0, 1, 2].map(|ch| (rhs[k][ch] - x[k + 1][ch]) / diag[k]);
+        }
+        c[1..n - 1].copy_from_slice(&x);
+    }
+    let ghost = |a: [f64; 3], b: [f64; 3]| [0, 1, 2].map(|ch| 2.0 * a[ch] - b[ch]);
+    let mut out = Vec::with_capacity(n + 2);
+    out.push(ghost(c[0], c[1]));
+    out.extend_from_slice(&c);
+    out.push(ghost(c[n - 1], c[n - 2]));
+    out
+}
+
+/// The `(nu + 2) × (nv + 2)` cubic B-spline coefficients interpolating an `nu × nv` plane
+/// (row-major), separably: rows, then columns.
+pub fn spline_plane(plane: &[[f64; 3]], nu: usize, nv: usize) -> Vec<[f64; 3]> {
+    let rows: Vec<Vec<[f64; 3]>> = plane.chunks_exact(nu).map(spline_axis).collect();
+    let (su, sv) = (nu + 2, nv + 2);
+    let mut out = vec![[0.0; 3]; su * sv];
+    for i in 0..su {
+        let column: Vec<[f64; 3]> = rows.iter().map(|r| r[i]).collect();
+        for (j, c) in spline_axis(&column).into_iter().enumerate() {
+            out[j * su + i] = c;
+        }
+    }
+    out
+}
+
+/// The uniform cubic B-spline weights of the four coefficients around fraction `f`.
+pub fn spline_weights(f: f64) -> [f64; 4] {
+    let (f2, f3) = (f * f, f * f * f);
+    [
+        (1.0 - f) * (1.0 - f) * (1.0 - f) / 6.0,
+        (3.0 * f3 - 6.0 * f2 + 4.0) / 6.0,
+        (-3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0) / 6.0,
+        f3 / 6.0,
+    ]
+}
+
+/// Evaluates the spline of [`spline_plane`] coefficients at `(u, v)` of `region`.
+fn spline(coeffs: &[[f64; 3]], nu: usize, nv: usize, region: &Region, u: f64, v: f64) -> Option<[f64; 3]> {
+    let (i, fx) = grid_pos(u, region.lo[0], region.hi[0], nu)?;
+    let (j, fy) = grid_pos(v, region.lo[1], region.hi[1], nv)?;
+    let (wx, wy) = (spline_weights(fx), spline_weights(fy));
+    let su = nu + 2;
+    let mut out = [0.0; 3];
+    // c_{i−1} sits at stored index i (one ghost before the first node).
+    for (b, wyb) in wy.iter().enumerate() {
+        for (a, wxa) in wx.iter().enumerate() {
+            let c = coeffs[(j + b) * su + i + a];
+            for (o, x) in out.iter_mut().zip(c) {
+                *o += wxa * wyb * x;
+            }
+        }
+    }
+    Some(out)
+}
+
 /// A stored representation of `G` with its CPU model.
 pub trait GTable: Sync {
     /// The region the table covers.
@@ -437,6 +521,11 @@ pub trait GTable: Sync {
     fn planes(&self) -> &[Vec<[f64; 3]>];
     /// Nodes along `u` and `v`.
     fn nodes_uv(&self) -> (usize, usize);
+    /// Texels of each stored plane along `u` and `v` (the nodes, plus ghosts where the
+    /// representation has them).
+    fn plane_dims(&self) -> (usize, usize) {
+        self.nodes_uv()
+    }
 
     /// `XYZ = C(ωi, ωr)·G(u, v, w)`; black outside the region.
     fn xyz(&self, shading: &Shading, wi: [f64; 3], wr: [f64; 3]) -> [f64; 3] {
@@ -495,14 +584,18 @@ impl GTable for Volume {
 }
 
 /// `G = Σ_j c_j(u, v) T_j(ŵ)`, `ŵ` the region's `w` range mapped to `[−1, 1]`, coefficients
-/// from `G` at the Chebyshev nodes (the `chebyshev-w` variant).
+/// from `G` at the Chebyshev nodes (the `chebyshev-w` variant). Each coefficient plane is
+/// interpolated in `(u, v)` by a cubic B-spline through the nodes: error `O(h⁴)`, where
+/// bilinear interpolation of lobes about two texels wide errs by several per cent.
 #[derive(Debug, Clone, PartialEq)]
 pub struct ChebyshevW {
     pub region: Region,
     pub nu: usize,
     pub nv: usize,
-    /// `coeffs[j][texel]`.
+    /// `coeffs[j][texel]` at the nodes.
     pub coeffs: Vec<Vec<[f64; 3]>>,
+    /// `splines[j]`: the `(nu + 2) × (nv + 2)` B-spline coefficients of `coeffs[j]`.
+    pub splines: Vec<Vec<[f64; 3]>>,
 }
 
 impl ChebyshevW {
@@ -545,12 +638,17 @@ impl ChebyshevW {
                     })
                     .collect()
             })
+            .collect::<Vec<Vec<[f64; 3]>>>();
+        let splines = coeffs
+            .par_iter()
+            .map(|c| spline_plane(c, slices.nu, slices.nv))
             .collect();
         Self {
             region,
             nu: slices.nu,
             nv: slices.nv,
             coeffs,
+            splines,
         }
     }
 
@@ -589,17 +687,20 @@ impl GTable for ChebyshevW {
             return None;
         }
         let c: Option<Vec<[f64; 3]>> = self
-            .coeffs
+            .splines
             .iter()
-            .map(|p| bilinear(p, self.nu, self.nv, &self.region, u, v))
+            .map(|p| spline(p, self.nu, self.nv, &self.region, u, v))
             .collect();
         Some(clenshaw(&c?, self.w_hat(w)))
     }
     fn planes(&self) -> &[Vec<[f64; 3]>] {
-        &self.coeffs
+        &self.splines
     }
     fn nodes_uv(&self) -> (usize, usize) {
         (self.nu, self.nv)
+    }
+    fn plane_dims(&self) -> (usize, usize) {
+        (self.nu + 2, self.nv + 2)
     }
 }
 
@@ -775,6 +876,39 @@ mod tests {
         }
         assert!(cheb.g([0.3, 0.6, -0.3]).is_none());
         assert!(dh.powers[3][0][0] + 1.0 < 1e-9);
+    }
+
+    #[test]
+    fn splines_interpolate_nodes_exactly_and_cubics_everywhere() {
+        let region = Region {
+            lo: [-1.0, 0.0, -1.0],
+            hi: [1.0, 3.0, 0.0],
+        };
+        let (nu, nv) = (9, 7);
+        let f = |u: f64, v: f64| 1.0 + u - 0.5 * u * u * v + 0.25 * v * v * v;
+        let node = |i: usize, n: usize, lo: f64, hi: f64| lo + (hi - lo) * i as f64 / (n - 1) as f64;
+        let plane: Vec<[f64; 3]> = (0..nv)
+            .flat_map(|j| (0..nu).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let x = f(node(i, nu, -1.0, 1.0), node(j, nv, 0.0, 3.0));
+                [x, -x, 0.0]
+            })
+            .collect();
+        let c = spline_plane(&plane, nu, nv);
+        assert_eq!(c.len(), (nu + 2) * (nv + 2));
+        for j in 0..nv {
+            for i in 0..nu {
+                let (u, v) = (node(i, nu, -1.0, 1.0), node(j, nv, 0.0, 3.0));
+                let g = spline(&c, nu, nv, &region, u, v).unwrap();
+                assert!((g[0] - plane[j * nu + i][0]).abs() < 1e-12, "node {i},{j}");
+            }
+        }
+        // Between nodes: a smooth function is matched far better than linearly.
+        let (u, v) = (0.37, 1.61);
+        let g = spline(&c, nu, nv, &region, u, v).unwrap()[0];
+        let lin = bilinear(&plane, nu, nv, &region, u, v).unwrap()[0];
+        assert!((g - f(u, v)).abs() < 0.2 * (lin - f(u, v)).abs(), "{g} {lin} {}", f(u, v));
+        assert!(spline(&c, nu, nv, &region, 1.1, 1.0).is_none());
     }
 
     #[test]

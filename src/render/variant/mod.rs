@@ -81,7 +81,7 @@ impl VariantKind {
         match self.resolve() {
             VariantKind::Flss => "thesis Algorithm 3: every wavelength × term × window tap per pixel (exact to its T, R, Δλ)",
             VariantKind::Dhillon => "Dhillon et al. 2014: G = Σ_p I_p(u,v)·w^p from f64 tables, Horner (monomials: ill-conditioned in f32)",
-            VariantKind::ChebyshevW => "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw: K bilinear fetches",
+            VariantKind::ChebyshevW => "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw in w, cubic B-spline in (u,v): 4K bilinear fetches",
             VariantKind::Volume => "G(u,v,w) in a 3D texture from f64 tables: one trilinear fetch (the floor)",
             VariantKind::Default => unreachable!("resolved above"),
         }
@@ -101,6 +101,7 @@ impl VariantKind {
                 lambdas * (material.terms + 1) * taps
             }
             VariantKind::Volume => 1,
+            VariantKind::ChebyshevW => 4 * table.w_nodes_for(self),
             k => table.w_nodes_for(k),
         }
     }

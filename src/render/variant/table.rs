@@ -100,6 +100,7 @@ impl TableGpu {
         start: Instant,
     ) -> Result<Self> {
         let (nu, nv) = table.nodes_uv();
+        let (pu, pv) = table.plane_dims();
         let planes = table.planes();
         let linear = vk::FormatFeatureFlags::SAMPLED_IMAGE
             | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
@@ -134,16 +135,16 @@ impl TableGpu {
             Layout::Volume => info.max_image_dimension_3d,
             Layout::Planes => info.max_image_array_layers,
         };
-        if nu as u32 > limit || nv as u32 > limit || planes.len() as u32 > depth_limit {
+        if pu as u32 > limit || pv as u32 > limit || planes.len() as u32 > depth_limit {
             return Err(Error::invalid(
                 "table size",
                 format!(
-                    "{nu}×{nv}×{} texels exceed the device limits ({limit} a side, {depth_limit} deep): use a coarser texel",
+                    "{pu}×{pv}×{} texels exceed the device limits ({limit} a side, {depth_limit} deep): use a coarser texel",
                     planes.len()
                 ),
             ));
         }
-        let mut bytes = Vec::with_capacity(nu * nv * planes.len() * texel_bytes);
+        let mut bytes = Vec::with_capacity(pu * pv * planes.len() * texel_bytes);
         for plane in planes {
             for t in plane {
                 let rgba = [t[0] as f32, t[1] as f32, t[2] as f32, 0.0];
@@ -162,8 +163,8 @@ impl TableGpu {
             &format!("{kind} table"),
             ImageDesc {
                 format: vk_format,
-                width: nu as u32,
-                height: nv as u32,
+                width: pu as u32,
+                height: pv as u32,
                 layers: planes.len() as u32,
                 usage: vk::ImageUsageFlags::SAMPLED,
                 aspect: vk::ImageAspectFlags::COLOR,
@@ -192,7 +193,9 @@ impl TableGpu {
         )?;
         let fetches = match layout {
             Layout::Volume => 1,
-            Layout::Planes => planes.len(),
+            // Bilinear planes: one fetch each; spline planes (with ghosts): four.
+            Layout::Planes if (pu, pv) == (nu, nv) => planes.len(),
+            Layout::Planes => 4 * planes.len(),
         };
         Ok(Self {
             model: None,
