@@ -67,7 +67,7 @@ fn variants_report_error_and_time() {
         assert!(rep.build_ms > 0.0 && rep.gpu_bytes > 0 && rep.fetches > 0);
     }
     // The stable table representations reproduce their f64 tables in float32.
-    for name in ["chebyshev-w", "chebyshev-w 1nm", "volume"] {
+    for name in ["chebyshev-w", "chebyshev-w 5nm", "volume"] {
         assert!(by_name(&reports, name).vs_model.rel_l2 < 1e-4, "{name}");
     }
     assert!(

@@ -20,7 +20,7 @@ pub struct TableArgs {
     #[arg(long)]
     pub table_w_nodes: Option<usize>,
     /// Table variants: wavelength step of the offline spectral integral (nm).
-    #[arg(long, default_value_t = 5)]
+    #[arg(long, default_value_t = 1)]
     pub table_step_nm: u32,
     /// Table variants: GPU memory budget (MB); the u/v spacing is coarsened to fit.
     #[arg(long, default_value_t = 512)]
