@@ -77,6 +77,15 @@ impl Region {
         any.then(|| Region { lo, hi }.clamped())
     }
 
+    /// This box widened by `margin` on every side (and clamped to [`Region::ALL`]).
+    pub fn widened(&self, margin: f64) -> Region {
+        Region {
+            lo: self.lo.map(|x| x - margin),
+            hi: self.hi.map(|x| x + margin),
+        }
+        .clamped()
+    }
+
     fn clamped(self) -> Region {
         let mut r = self;
         for a in 0..3 {
@@ -492,7 +501,14 @@ pub fn spline_weights(f: f64) -> [f64; 4] {
 }
 
 /// Evaluates the spline of [`spline_plane`] coefficients at `(u, v)` of `region`.
-fn spline(coeffs: &[[f64; 3]], nu: usize, nv: usize, region: &Region, u: f64, v: f64) -> Option<[f64; 3]> {
+fn spline(
+    coeffs: &[[f64; 3]],
+    nu: usize,
+    nv: usize,
+    region: &Region,
+    u: f64,
+    v: f64,
+) -> Option<[f64; 3]> {
     let (i, fx) = grid_pos(u, region.lo[0], region.hi[0], nu)?;
     let (j, fy) = grid_pos(v, region.lo[1], region.hi[1], nv)?;
     let (wx, wy) = (spline_weights(fx), spline_weights(fy));
@@ -886,7 +902,8 @@ mod tests {
         };
         let (nu, nv) = (9, 7);
         let f = |u: f64, v: f64| 1.0 + u - 0.5 * u * u * v + 0.25 * v * v * v;
-        let node = |i: usize, n: usize, lo: f64, hi: f64| lo + (hi - lo) * i as f64 / (n - 1) as f64;
+        let node =
+            |i: usize, n: usize, lo: f64, hi: f64| lo + (hi - lo) * i as f64 / (n - 1) as f64;
         let plane: Vec<[f64; 3]> = (0..nv)
             .flat_map(|j| (0..nu).map(move |i| (i, j)))
             .map(|(i, j)| {
@@ -907,7 +924,11 @@ mod tests {
         let (u, v) = (0.37, 1.61);
         let g = spline(&c, nu, nv, &region, u, v).unwrap()[0];
         let lin = bilinear(&plane, nu, nv, &region, u, v).unwrap()[0];
-        assert!((g - f(u, v)).abs() < 0.2 * (lin - f(u, v)).abs(), "{g} {lin} {}", f(u, v));
+        assert!(
+            (g - f(u, v)).abs() < 0.2 * (lin - f(u, v)).abs(),
+            "{g} {lin} {}",
+            f(u, v)
+        );
         assert!(spline(&c, nu, nv, &region, 1.1, 1.0).is_none());
     }
 

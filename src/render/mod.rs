@@ -241,10 +241,9 @@ impl Renderer {
         } else {
             OutputMode::MapXyz
         };
-        // The shader sees ωi in float32: the table must cover what it computes.
+        // The shader sees ωi in float32: the table must cover what it computes from it.
         let wi32 = wi.map(|c| c as f32 as f64);
-        let region = Region::around([Region::brdf_map(wi32).lo, Region::brdf_map(wi32).hi], 1e-5)
-            .unwrap_or(Region::ALL);
+        let region = Region::brdf_map(wi32).widened(1e-5);
         self.prepare_variant(prepared, region, output)?;
         let mut params = self.params(prepared);
         params.map_wi = [

@@ -182,6 +182,12 @@ impl TableOptions {
         let asked = self
             .texel_uv
             .unwrap_or_else(|| TableSpec::default_texel(material.coherence_um));
+        if !(asked.is_finite() && asked > 0.0) {
+            return Err(Error::invalid(
+                "table texel",
+                format!("{asked}; must be a positive spacing in u and v"),
+            ));
+        }
         let w_nodes = self.w_nodes_for(kind);
         let texel_bytes = match self.format {
             TableFormat::Rgba32f => 16,
@@ -189,8 +195,19 @@ impl TableOptions {
         };
         let e = region.extent();
         let bytes = |t: f64| {
-            ((e[0] / t).ceil() + 1.0) * ((e[1] / t).ceil() + 1.0) * (w_nodes * texel_bytes) as f64
+            let nodes = |len: f64| ((len / t).ceil() + 1.0).max(2.0);
+            nodes(e[0]) * nodes(e[1]) * (w_nodes * texel_bytes) as f64
         };
+        // The smallest table (2×2 nodes) must fit, else no spacing does.
+        if bytes(f64::INFINITY) > self.budget_bytes as f64 {
+            return Err(Error::invalid(
+                "table budget",
+                format!(
+                    "{} bytes cannot hold even 2×2×{w_nodes} texels",
+                    self.budget_bytes
+                ),
+            ));
+        }
         let mut texel = asked;
         while bytes(texel) > self.budget_bytes as f64 {
             texel *= 1.1;
@@ -318,4 +335,51 @@ pub fn list() -> String {
         ));
     }
     s
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn table_options_refuse_nonsense_and_fit_the_budget() {
+        let m = Material::default();
+        let r = Region::brdf_map(crate::brdf::direction(45.0, 0.0));
+        let with = |texel_uv, budget_bytes| TableOptions {
+            texel_uv,
+            budget_bytes,
+            ..TableOptions::default()
+        };
+        for bad in [0.0, -0.01, f64::NAN, f64::INFINITY] {
+            assert!(with(Some(bad), 1 << 29)
+                .spec(VariantKind::ChebyshevW, &m, r)
+                .is_err());
+        }
+        assert!(with(None, 0).spec(VariantKind::ChebyshevW, &m, r).is_err());
+        // A small budget coarsens the spacing (and says from what); the default does not.
+        let (spec, asked) = with(None, 8 << 20)
+            .spec(VariantKind::ChebyshevW, &m, r)
+            .unwrap();
+        let default_texel = TableSpec::default_texel(m.coherence_um);
+        assert_eq!(asked, Some(default_texel));
+        assert!(spec.texel_uv > default_texel);
+        let (nu, nv) = spec.uv_nodes().unwrap();
+        assert!(nu * nv * spec.w_nodes * 16 <= 8 << 20);
+        let (spec, asked) = with(None, 512 << 20)
+            .spec(VariantKind::ChebyshevW, &m, r)
+            .unwrap();
+        assert_eq!((spec.texel_uv, asked), (default_texel, None));
+    }
+
+    #[test]
+    fn names_round_trip_and_the_alias_resolves() {
+        for k in VariantKind::ALL {
+            assert_eq!(k.resolve(), k);
+            assert!(!k.summary().is_empty());
+        }
+        assert_eq!(VariantKind::Default.resolve(), VariantKind::DEFAULT);
+        assert_eq!(VariantKind::Default.name(), VariantKind::DEFAULT.name());
+        assert!(VariantKind::Flss.is_spectral() && !VariantKind::Volume.is_spectral());
+        assert!(list().contains("(default)"));
+    }
 }
