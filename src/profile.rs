@@ -194,6 +194,8 @@ pub struct VariantReport {
     pub detail: String,
     /// Median GPU time of the mesh view (ms), when profiled.
     pub mesh_gpu_ms: Option<f64>,
+    /// Condition number of the representation's sum, where float32 rounding limits it.
+    pub conditioning: Option<f64>,
     /// GPU against the f64 reference.
     pub vs_reference: ErrorStats,
     /// GPU against the f64 model of the same variant (float32 and driver error only).
@@ -342,6 +344,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             .collect();
         let wr_of =
             |&(i, j): &(u32, u32)| map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
+        let conditioning = renderer.table_model().and_then(|t| t.conditioning());
         let modelled: Vec<[f64; 3]> = match renderer.table_model() {
             Some(t) => pixels
                 .iter()
@@ -383,6 +386,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             fetches: v.fetches,
             detail: v.name.clone(),
             mesh_gpu_ms,
+            conditioning,
             vs_reference: error_stats(&gpu_xyz, &refs),
             vs_model: error_stats(&gpu_xyz, &modelled),
         });
@@ -432,17 +436,26 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
             r.vs_model.rel_l2
         ));
     }
+    for r in reports {
+        if let Some(k) = r.conditioning {
+            s.push_str(&format!(
+                "\n{}: condition number of its sum {k:.2e}; × float32's 6e-8 ≈ {:.1e} relative error expected\n",
+                r.variant.name,
+                k * 6e-8
+            ));
+        }
+    }
     s
 }
 
 /// The CSV of the reports: the columns of the first profiler, then the new ones.
 pub fn format_csv(reports: &[VariantReport]) -> String {
-    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model\n");
+    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning\n");
     let opt = |v: Option<f64>| v.map_or(String::new(), |g| g.to_string());
     for r in reports {
         let v = &r.variant;
         csv.push_str(&format!(
-            "{},{},{},{},{},{:?},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{:?},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             v.name,
             v.expansion,
             v.terms,
@@ -464,7 +477,8 @@ pub fn format_csv(reports: &[VariantReport]) -> String {
             opt(r.mesh_gpu_ms),
             r.vs_reference.p50_de,
             r.vs_reference.p99_de,
-            r.vs_model.p99_de
+            r.vs_model.p99_de,
+            opt(r.conditioning)
         ));
     }
     csv

@@ -543,6 +543,12 @@ pub trait GTable: Sync {
         self.nodes_uv()
     }
 
+    /// How much float32 rounding the representation amplifies (the condition number of its
+    /// sum), where that is the limiting factor; `None` for stable representations.
+    fn conditioning(&self) -> Option<f64> {
+        None
+    }
+
     /// `XYZ = C(ωi, ωr)·G(u, v, w)`; black outside the region.
     fn xyz(&self, shading: &Shading, wi: [f64; 3], wr: [f64; 3]) -> [f64; 3] {
         integrated(wi, wr, shading, |d| self.g(d).unwrap_or([0.0; 3]))
@@ -824,6 +830,9 @@ impl Dhillon {
 impl GTable for Dhillon {
     fn region(&self) -> &Region {
         &self.region
+    }
+    fn conditioning(&self) -> Option<f64> {
+        Some(Dhillon::conditioning(self))
     }
     fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
         if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
