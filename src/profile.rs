@@ -79,6 +79,10 @@ pub fn flss_variants(terms: usize) -> Vec<Variant> {
         v("taylor R=2 unorm16", Taylor, terms, 2, 5, Unorm16),
         v("taylor R=2 10nm", Taylor, terms, 2, 10, Rg32f),
         v("taylor R=2 1nm", Taylor, terms, 2, 1, Rg32f),
+        Variant {
+            kind: VariantKind::Nmm,
+            ..v("nmm taylor R=2", Taylor, terms, 2, 5, Rg32f)
+        },
     ]
 }
 
@@ -307,8 +311,17 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                 None,
             )
         };
-        // The warm-up frame builds (or uploads) the variant's resources.
-        let mut frame = map(renderer)?;
+        // The warm-up frame builds (or uploads) the variant's resources. A variant that
+        // refuses this material (nmm without a dominant period) is reported and skipped.
+        let mut frame = match map(renderer) {
+            Ok(f) => f,
+            Err(e @ Error::Invalid { .. }) => {
+                progress.suspend(|| eprintln!("note: {} skipped: {e}", variant.name));
+                progress.inc(1);
+                continue;
+            }
+            Err(e) => return Err(e),
+        };
         let (mut gpu, mut wall) = (Vec::new(), Vec::new());
         for _ in 0..setup.frames {
             frame = map(renderer)?;
@@ -345,12 +358,30 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
         let wr_of =
             |&(i, j): &(u32, u32)| map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
         let conditioning = renderer.table_model().and_then(|t| t.conditioning());
-        let modelled: Vec<[f64; 3]> = match renderer.table_model() {
-            Some(t) => pixels
+        let density = crate::brdf::nmm::Density::new();
+        let modelled: Vec<[f64; 3]> = match (renderer.table_model(), renderer.nmm_grating()) {
+            (Some(t), _) => pixels
                 .iter()
                 .map(|p| t.xyz(&prepared.shading, wi32, wr_of(p)))
                 .collect(),
-            None => pixels
+            (None, Some(g)) => pixels
+                .iter()
+                .map(|p| {
+                    crate::brdf::nmm::xyz(
+                        &prepared.stack,
+                        material.terms,
+                        &prepared.window,
+                        &prepared.shading,
+                        &prepared.colour,
+                        &g,
+                        &density,
+                        wi32,
+                        wr_of(p),
+                        true,
+                    )
+                })
+                .collect(),
+            (None, None) => pixels
                 .iter()
                 .map(|p| {
                     model::xyz(

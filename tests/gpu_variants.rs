@@ -66,9 +66,27 @@ fn every_variant_matches_its_own_f64_model() {
             .render_brdf_map(&prepared, THETA, 0.0, SIZE, None)
             .unwrap_or_else(|e| panic!("{kind}: {e}"));
         assert_eq!(frame.variant.name.split(' ').next(), Some(kind.name()));
-        let model = |wr: [f64; 3]| match r.table_model() {
-            Some(t) => t.xyz(&prepared.shading, wi, wr),
-            None => diffract::brdf::model::xyz(
+        let density = diffract::brdf::nmm::Density::new();
+        if kind == VariantKind::Nmm {
+            // 5 µm ridges along x: 13 periods in the 65 µm patch.
+            let d = r.nmm_grating().unwrap().period_um[0].unwrap();
+            assert!((d - 5.0).abs() < 0.025, "estimated period {d}");
+        }
+        let model = |wr: [f64; 3]| match (r.table_model(), r.nmm_grating()) {
+            (Some(t), _) => t.xyz(&prepared.shading, wi, wr),
+            (None, Some(g)) => diffract::brdf::nmm::xyz(
+                &prepared.stack,
+                prepared.material.terms,
+                &prepared.window,
+                &prepared.shading,
+                &prepared.colour,
+                &g,
+                &density,
+                wi,
+                wr,
+                true,
+            ),
+            (None, None) => diffract::brdf::model::xyz(
                 &prepared.stack,
                 prepared.material.terms,
                 &prepared.window,

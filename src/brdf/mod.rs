@@ -8,6 +8,7 @@
 
 pub mod bessel;
 pub mod model;
+pub mod nmm;
 pub mod query;
 pub mod reference;
 pub mod table;

@@ -28,6 +28,8 @@ pub mod shaders {
     pub const BRDFMAP_VERT: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/brdfmap.vert.spv"));
     /// Variant `flss`: thesis Algorithms 3 and 4.
     pub const FLSS_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/flss.frag.spv"));
+    /// Variant `nmm`: FLSS at the wavelengths of the grating's orders.
+    pub const NMM_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/nmm.frag.spv"));
     /// Variant `volume`: G(u, v, w) in a 3D texture.
     pub const VOLUME_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/volume.frag.spv"));
     /// Variant `chebyshev-w`: Chebyshev coefficient planes in w, Clenshaw.

@@ -215,6 +215,11 @@ impl Renderer {
         self.keep_models = keep;
     }
 
+    /// The grating period `nmm` estimated for the last frame (when it drew).
+    pub fn nmm_grating(&self) -> Option<crate::brdf::nmm::Grating> {
+        self.prepared.as_ref().and_then(|(_, v)| v.grating())
+    }
+
     /// The f64 CPU model of the table the last frame used, if the variant has one and
     /// [`Renderer::set_keep_models`] was on when it was built.
     pub fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {

@@ -34,53 +34,56 @@ impl Variant for Flss {
         dev: &Arc<Device>,
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
-        let start = Instant::now();
-        let prepared = setup.prepared;
-        let (terms, decode) = upload_terms(dev, prepared, setup.storage)?;
-        let m = &prepared.material;
-        let t = m.terms.min(prepared.stack.term_count().saturating_sub(1));
-        let name = format!(
-            "flss T={t} R={} dλ={} {} {}",
-            prepared.window.radius,
-            prepared.colour.step_nm,
-            prepared.stack.expansion,
-            setup.storage
-        );
-        let taps = (2 * prepared.window.radius + 1).pow(2);
-        Ok(Box::new(FlssGpu {
-            stats: VariantStats {
-                name,
-                build_ms: start.elapsed().as_secs_f64() * 1e3,
-                gpu_bytes: prepared.stack.term_count()
-                    * prepared.stack.band.width
-                    * prepared.stack.band.height
-                    * setup.storage.texel_bytes(),
-                fetches: prepared.colour.len() * (t + 1) * taps,
-            },
-            spec: [
-                t as u32,
-                prepared.window.radius as u32,
-                prepared.colour.step_nm,
-                match prepared.stack.expansion {
-                    Expansion::Taylor => 0,
-                    Expansion::Chebyshev => 1,
-                },
-                setup.storage.spec_value(),
-            ],
-            params: lookup_params(prepared, &decode),
-            sampler: Sampler::new(
-                dev,
-                "dft terms (nearest)",
-                vk::Filter::NEAREST,
-                vk::SamplerAddressMode::CLAMP_TO_EDGE,
-            )?,
-            terms,
-        }))
+        Ok(Box::new(prepare_terms(dev, setup)?))
     }
 }
 
-struct FlssGpu {
-    stats: VariantStats,
+/// The DFT terms and lookup constants of a material on the GPU: FLSS's resources, which
+/// `nmm` reuses.
+pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<FlssGpu> {
+    let start = Instant::now();
+    let prepared = setup.prepared;
+    let (terms, decode) = upload_terms(dev, prepared, setup.storage)?;
+    let m = &prepared.material;
+    let t = m.terms.min(prepared.stack.term_count().saturating_sub(1));
+    let name = format!(
+        "flss T={t} R={} dλ={} {} {}",
+        prepared.window.radius, prepared.colour.step_nm, prepared.stack.expansion, setup.storage
+    );
+    let taps = (2 * prepared.window.radius + 1).pow(2);
+    Ok(FlssGpu {
+        stats: VariantStats {
+            name,
+            build_ms: start.elapsed().as_secs_f64() * 1e3,
+            gpu_bytes: prepared.stack.term_count()
+                * prepared.stack.band.width
+                * prepared.stack.band.height
+                * setup.storage.texel_bytes(),
+            fetches: prepared.colour.len() * (t + 1) * taps,
+        },
+        spec: [
+            t as u32,
+            prepared.window.radius as u32,
+            prepared.colour.step_nm,
+            match prepared.stack.expansion {
+                Expansion::Taylor => 0,
+                Expansion::Chebyshev => 1,
+            },
+            setup.storage.spec_value(),
+        ],
+        params: lookup_params(prepared, &decode),
+        sampler: Sampler::new(
+            dev,
+            "dft terms (nearest)",
+            vk::Filter::NEAREST,
+            vk::SamplerAddressMode::CLAMP_TO_EDGE,
+        )?,
+        terms,
+    })
+}
+
+pub(super) struct FlssGpu {
+    pub(super) stats: VariantStats,
     /// Constants 0, 1, 2, 3, 7: T, R, Δλ, expansion, storage.
     spec: [u32; 5],
     /// spectrumSize, band, lookup and decode of the uniform block.

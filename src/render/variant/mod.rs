@@ -9,6 +9,7 @@
 mod chebyshev_w;
 mod dhillon;
 mod flss;
+mod nmm;
 mod table;
 mod volume;
 
@@ -34,6 +35,8 @@ pub(crate) const SPEC_COUNT: usize = 10;
 pub enum VariantKind {
     /// Thesis Algorithm 3: the whole spectrum, every term and tap, per pixel.
     Flss,
+    /// Thesis §1.5.2 done right: FLSS at the wavelengths of the grating's orders only.
+    Nmm,
     /// Dhillon et al. 2014: tables of the powers of w, Horner per pixel.
     Dhillon,
     /// G as a Chebyshev series in w: K bilinear fetches, Clenshaw.
@@ -46,8 +49,9 @@ pub enum VariantKind {
 
 impl VariantKind {
     /// Every variant, the alias excluded, in listing order.
-    pub const ALL: [VariantKind; 4] = [
+    pub const ALL: [VariantKind; 5] = [
         VariantKind::Flss,
+        VariantKind::Nmm,
         VariantKind::Dhillon,
         VariantKind::ChebyshevW,
         VariantKind::Volume,
@@ -69,6 +73,7 @@ impl VariantKind {
     pub fn name(self) -> &'static str {
         match self.resolve() {
             VariantKind::Flss => "flss",
+            VariantKind::Nmm => "nmm",
             VariantKind::Dhillon => "dhillon",
             VariantKind::ChebyshevW => "chebyshev-w",
             VariantKind::Volume => "volume",
@@ -80,6 +85,7 @@ impl VariantKind {
     pub fn summary(self) -> &'static str {
         match self.resolve() {
             VariantKind::Flss => "thesis Algorithm 3: every wavelength × term × window tap per pixel (exact to its T, R, Δλ)",
+            VariantKind::Nmm => "thesis §1.5.2 done right: FLSS at the wavelengths of the grating's orders only, Jacobian-weighted (needs a dominant period)",
             VariantKind::Dhillon => "Dhillon et al. 2014: G = Σ_p I_p(u,v)·w^p from f64 tables, Horner (monomials: ill-conditioned in f32)",
             VariantKind::ChebyshevW => "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw in w, cubic B-spline in (u,v): 4K bilinear fetches",
             VariantKind::Volume => "G(u,v,w) in a 3D texture from f64 tables: one trilinear fetch (the floor)",
@@ -87,7 +93,7 @@ impl VariantKind {
         }
     }
 
-    /// Whether it evaluates the spectrum per pixel (and so can draw one wavelength).
+    /// Whether it can draw a single wavelength (FLSS evaluates every one per pixel).
     pub fn is_spectral(self) -> bool {
         self.resolve() == VariantKind::Flss
     }
@@ -100,6 +106,10 @@ impl VariantKind {
                 let taps = (2 * material.window_radius + 1).pow(2);
                 lambdas * (material.terms + 1) * taps
             }
+            VariantKind::Nmm => {
+                let taps = (2 * material.window_radius + 1).pow(2);
+                (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * (material.terms + 1) * taps
+            }
             VariantKind::Volume => 1,
             VariantKind::ChebyshevW => 4 * table.w_nodes_for(self),
             k => table.w_nodes_for(k),
@@ -109,6 +119,7 @@ impl VariantKind {
     pub(crate) fn implementation(self) -> &'static dyn Variant {
         match self.resolve() {
             VariantKind::Flss => &flss::Flss,
+            VariantKind::Nmm => &nmm::Nmm,
             VariantKind::Dhillon => &dhillon::Dhillon,
             VariantKind::ChebyshevW => &chebyshev_w::ChebyshevW,
             VariantKind::Volume => &volume::Volume,
@@ -272,6 +283,10 @@ pub(crate) trait PreparedVariant {
     /// Fills its part of the shared uniform block.
     fn fill_params(&self, _params: &mut ParamsUbo) {}
     fn stats(&self) -> VariantStats;
+    /// The grating NMM estimated from the height field.
+    fn grating(&self) -> Option<crate::brdf::nmm::Grating> {
+        None
+    }
     /// The f64 CPU model of a table variant, when it was kept.
     fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
         None

@@ -1,0 +1,150 @@
+//! Variant `nmm` (glsl/nmm.frag; thesis §1.5.2 done right): FLSS's terms and lookups, but
+//! only the wavelengths near the diffraction orders of the grating, weighted by the
+//! Jacobian of `λ = d·|t|/ν`. The period comes from the height field's spectrum
+//! ([`crate::brdf::nmm::estimate_grating`]); a field without a dominant period is refused.
+
+use std::sync::Arc;
+
+use ash::vk;
+
+use super::flss::{prepare_terms, FlssGpu};
+use super::{
+    require_spectral, DrawSetup, PreparedVariant, Variant, VariantKind, VariantStats, SPEC_COUNT,
+};
+use crate::brdf::nmm::{estimate_grating, Density, Grating};
+use crate::gpu::memory::{Buffer, Pod};
+use crate::gpu::pipeline::{Binding, Resource};
+use crate::gpu::{shaders, Device};
+use crate::render::ParamsUbo;
+use crate::Result;
+
+pub(crate) struct Nmm;
+
+/// Mirror of `NmmInfo` in glsl/nmm.frag (std140: vec4 members only).
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct NmmInfoUbo {
+    period: [f32; 4],
+    extent: [f32; 4],
+    sigma: [f32; 4],
+}
+
+// SAFETY: repr(C) of f32 arrays: no padding.
+unsafe impl Pod for NmmInfoUbo {}
+
+impl Variant for Nmm {
+    fn kind(&self) -> VariantKind {
+        VariantKind::Nmm
+    }
+
+    fn fragment_spirv(&self) -> &'static [u8] {
+        shaders::NMM_FRAG
+    }
+
+    fn prepare(
+        &self,
+        dev: &Arc<Device>,
+        setup: &DrawSetup<'_>,
+    ) -> Result<Box<dyn PreparedVariant>> {
+        require_spectral(self.kind(), setup.output)?;
+        let p = setup.prepared;
+        let grating = estimate_grating(&p.heightfield)?;
+        let mut flss = prepare_terms(dev, setup)?;
+        let (lx, ly) = p.heightfield.extent_um();
+        let ubo = NmmInfoUbo {
+            period: [
+                grating.period_um[0].unwrap_or(0.0) as f32,
+                grating.period_um[1].unwrap_or(0.0) as f32,
+                0.0,
+                0.0,
+            ],
+            extent: [lx as f32, ly as f32, 0.0, 0.0],
+            sigma: [
+                p.window.sigma_texels[0] as f32,
+                p.window.sigma_texels[1] as f32,
+                0.0,
+                0.0,
+            ],
+        };
+        let info = Buffer::with_data(
+            dev,
+            "nmm info",
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            std::slice::from_ref(&ubo),
+        )?;
+        let table: Vec<[f32; 4]> = Density::new()
+            .table()
+            .iter()
+            .map(|c| [c[0] as f32, c[1] as f32, c[2] as f32, 0.0])
+            .collect();
+        let density = Buffer::with_data(
+            dev,
+            "cie density (1 nm)",
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            &table,
+        )?;
+        let period = |d: Option<f64>| d.map_or("-".to_string(), |d| format!("{:.4} µm", d));
+        flss.stats.name = format!(
+            "nmm d=({}, {}) {}",
+            period(grating.period_um[0]),
+            period(grating.period_um[1]),
+            flss.stats.name.trim_start_matches("flss ")
+        );
+        // Per order: 2·HALF_SAMPLES + 1 wavelengths instead of the whole table.
+        let per_lambda = flss.stats.fetches / p.colour.len().max(1);
+        flss.stats.fetches = per_lambda * (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1);
+        Ok(Box::new(NmmGpu {
+            flss,
+            info,
+            density,
+            grating,
+        }))
+    }
+}
+
+struct NmmGpu {
+    flss: FlssGpu,
+    info: Buffer,
+    density: Buffer,
+    grating: Grating,
+}
+
+impl PreparedVariant for NmmGpu {
+    fn bindings(&self) -> Vec<Binding> {
+        let mut b = self.flss.bindings();
+        for (binding, kind) in [
+            (4, vk::DescriptorType::UNIFORM_BUFFER),
+            (5, vk::DescriptorType::STORAGE_BUFFER),
+        ] {
+            b.push(Binding {
+                binding,
+                kind,
+                stages: vk::ShaderStageFlags::FRAGMENT,
+            });
+        }
+        b
+    }
+
+    fn resources(&self) -> Vec<(u32, Resource<'_>)> {
+        let mut r = self.flss.resources();
+        r.push((4, Resource::Uniform(&self.info)));
+        r.push((5, Resource::Storage(&self.density)));
+        r
+    }
+
+    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
+        self.flss.specialise(spec);
+    }
+
+    fn fill_params(&self, params: &mut ParamsUbo) {
+        self.flss.fill_params(params);
+    }
+
+    fn stats(&self) -> VariantStats {
+        self.flss.stats()
+    }
+
+    fn grating(&self) -> Option<Grating> {
+        Some(self.grating)
+    }
+}
