@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use super::table::{prepare, Layout};
 use super::{DrawSetup, PreparedVariant, Variant, VariantKind};
-use crate::brdf::{table, table_cache};
+use crate::brdf::table;
 use crate::gpu::{shaders, Device};
 use crate::Result;
 
@@ -27,19 +27,13 @@ impl Variant for Dhillon {
         dev: &Arc<Device>,
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
-        let p = setup.prepared;
-        prepare(self.kind(), dev, setup, Layout::Planes, |spec, tick| {
-            let s = table_cache::sample_g_cached(
-                &p.heightfield,
-                p.material.coherence_um,
-                spec,
-                &table::ChebyshevW::nodes(spec),
-                setup.cache_dir,
-                tick,
-            )?;
-            Ok(table::Dhillon::from_chebyshev(
-                &table::ChebyshevW::from_nodes(spec.region, &s),
-            ))
-        })
+        prepare(
+            self.kind(),
+            dev,
+            setup,
+            Layout::Planes,
+            table::ChebyshevW::nodes,
+            |r, s| table::Dhillon::from_chebyshev(&table::ChebyshevW::from_nodes(r, &s)),
+        )
     }
 }

@@ -13,7 +13,8 @@ use super::{
     require_spectral, DrawSetup, PreparedVariant, TableFormat, VariantKind, VariantStats,
     SPEC_COUNT,
 };
-use crate::brdf::table::{GTable, TableSpec};
+use crate::brdf::table::{GTable, Region, Slices, TableSpec};
+use crate::brdf::table_cache::sample_g_cached;
 use crate::gpu::formats::f32_to_f16;
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
 use crate::gpu::pipeline::{Binding, Resource};
@@ -41,13 +42,16 @@ struct TableInfoUbo {
 // SAFETY: repr(C) of f32 arrays: no padding.
 unsafe impl Pod for TableInfoUbo {}
 
-/// Builds the table of `kind` for `setup` (with a progress bar on a terminal) and uploads it.
+/// Samples `G` at the `w` nodes `nodes(spec)` (through the table cache), assembles the
+/// representation of `kind` from the samples, and uploads it; a progress bar shows the
+/// build on a terminal.
 pub(crate) fn prepare<T: GTable + 'static>(
     kind: VariantKind,
     dev: &Arc<Device>,
     setup: &DrawSetup<'_>,
     layout: Layout,
-    build: impl FnOnce(&TableSpec, &(dyn Fn() + Sync)) -> Result<T>,
+    nodes: fn(&TableSpec) -> Vec<f64>,
+    assemble: impl FnOnce(Region, Slices) -> T,
 ) -> Result<Box<dyn PreparedVariant>> {
     require_spectral(kind, setup.output)?;
     let start = Instant::now();
@@ -70,8 +74,16 @@ pub(crate) fn prepare<T: GTable + 'static>(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} (w, λ) planes, {eta} left")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let tick = || bar.inc(1);
-    let table = build(&spec, &tick)?;
+    let p = setup.prepared;
+    let samples = sample_g_cached(
+        &p.heightfield,
+        p.material.coherence_um,
+        &spec,
+        &nodes(&spec),
+        setup.cache_dir,
+        &|| bar.inc(1),
+    )?;
+    let table = assemble(spec.region, samples);
     bar.finish_and_clear();
     let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
     if setup.keep_model {

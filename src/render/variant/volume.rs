@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use super::table::{prepare, Layout};
 use super::{DrawSetup, PreparedVariant, Variant, VariantKind};
-use crate::brdf::{table, table_cache};
+use crate::brdf::table;
 use crate::gpu::{shaders, Device};
 use crate::Result;
 
@@ -25,17 +25,13 @@ impl Variant for Volume {
         dev: &Arc<Device>,
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
-        let p = setup.prepared;
-        prepare(self.kind(), dev, setup, Layout::Volume, |spec, tick| {
-            let s = table_cache::sample_g_cached(
-                &p.heightfield,
-                p.material.coherence_um,
-                spec,
-                &table::Volume::nodes(spec),
-                setup.cache_dir,
-                tick,
-            )?;
-            Ok(table::Volume::from_slices(spec.region, s))
-        })
+        prepare(
+            self.kind(),
+            dev,
+            setup,
+            Layout::Volume,
+            table::Volume::nodes,
+            |r, s| table::Volume::from_slices(r, s),
+        )
     }
 }
