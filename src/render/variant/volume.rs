@@ -31,7 +31,7 @@ impl Variant for Volume {
             setup,
             Layout::Volume,
             table::Volume::nodes,
-            |r, s| table::Volume::from_slices(r, s),
+            table::Volume::from_slices,
         )
     }
 }
