@@ -172,7 +172,8 @@ impl Default for TableOptions {
 }
 
 impl TableOptions {
-    /// `w` nodes of variant `kind`.
+    /// `w` nodes of variant `kind` unless the height field asks for more
+    /// ([`TableOptions::w_nodes_for_field`]).
     pub fn w_nodes_for(&self, kind: VariantKind) -> usize {
         self.w_nodes.unwrap_or(match kind.resolve() {
             VariantKind::Volume => 32,
@@ -181,13 +182,37 @@ impl TableOptions {
         })
     }
 
+    /// `w` nodes of `kind` for a height range `h_range_um` over `w ∈ [w0, w1]`: the
+    /// default, raised for `chebyshev-w` until the series meets [`CHEBYSHEV_W_TOLERANCE`].
+    /// `G = Σ_λ |P̂|²` varies with `w` through phases `s·(h − h')`, `s = 2πw/λ`, so its
+    /// Chebyshev coefficients in `ŵ` decay like the Bessel functions `J_j(a)` of
+    /// `a = (2π/λ_min)·(h_max − h_min)·(w1 − w0)/2`; K is two more than the first `j` with
+    /// `|J_j(a)| ≤` the tolerance (at most [`MAX_NODES_W`](crate::brdf::table::MAX_NODES_W)).
+    /// An explicit `w_nodes` is kept as given.
+    pub fn w_nodes_for_field(&self, kind: VariantKind, h_range_um: f64, w: [f64; 2]) -> usize {
+        let base = self.w_nodes_for(kind);
+        if self.w_nodes.is_some() || kind.resolve() != VariantKind::ChebyshevW {
+            return base;
+        }
+        let k_max = 2.0 * std::f64::consts::PI / (crate::colour::LAMBDA_MIN_NM as f64 * 1e-3);
+        let a = k_max * h_range_um.max(0.0) * 0.5 * (w[1] - w[0]).abs();
+        let max = crate::brdf::table::MAX_NODES_W;
+        let j = crate::brdf::bessel::jn_all(a, max);
+        let first = (0..=max)
+            .find(|&n| n as f64 > a && j[n..].iter().all(|x| x.abs() <= CHEBYSHEV_W_TOLERANCE))
+            .unwrap_or(max);
+        base.max(first + 2).min(max)
+    }
+
     /// The sampling of `G` for `kind` over `region`: the requested spacing, coarsened where
     /// the table would exceed the memory budget. The second value is the spacing asked for
     /// when it had to be coarsened.
+    /// `h_range_um` is the height field's peak-to-valley (it sets the `w` nodes).
     pub fn spec(
         &self,
         kind: VariantKind,
         material: &Material,
+        h_range_um: f64,
         region: Region,
     ) -> Result<(TableSpec, Option<f64>)> {
         let asked = self
@@ -199,7 +224,7 @@ impl TableOptions {
                 format!("{asked}; must be a positive spacing in u and v"),
             ));
         }
-        let w_nodes = self.w_nodes_for(kind);
+        let w_nodes = self.w_nodes_for_field(kind, h_range_um, [region.lo[2], region.hi[2]]);
         let texel_bytes = match self.format {
             TableFormat::Rgba32f => 16,
             TableFormat::Rgba16f => 8,
@@ -233,6 +258,9 @@ impl TableOptions {
         Ok((spec, (texel > asked).then_some(asked)))
     }
 }
+
+/// Largest `|c_K|/|c_0|` the default `chebyshev-w` coefficient count allows.
+pub const CHEBYSHEV_W_TOLERANCE: f64 = 1e-4;
 
 /// What a frame reports about the variant that drew it.
 #[derive(Debug, Clone, PartialEq)]
@@ -324,7 +352,7 @@ pub fn list() -> String {
             VariantKind::Flss => {
                 "term band × (T+1) layers, RG32F (≈ 120 MB for the 704² gratings)".to_string()
             }
-            k => match table.spec(k, &material, region) {
+            k => match table.spec(k, &material, 0.375, region) {
                 Ok((spec, _)) => match spec.uv_nodes() {
                     Ok((nu, nv)) => format!(
                         "{:.0} MB ({nu}×{nv}×{} RGBA32F, u/v texel {:.4})",
@@ -367,13 +395,15 @@ mod tests {
         };
         for bad in [0.0, -0.01, f64::NAN, f64::INFINITY] {
             assert!(with(Some(bad), 1 << 29)
-                .spec(VariantKind::ChebyshevW, &m, r)
+                .spec(VariantKind::ChebyshevW, &m, 0.375, r)
                 .is_err());
         }
-        assert!(with(None, 0).spec(VariantKind::ChebyshevW, &m, r).is_err());
+        assert!(with(None, 0)
+            .spec(VariantKind::ChebyshevW, &m, 0.375, r)
+            .is_err());
         // A small budget coarsens the spacing (and says from what); the default does not.
         let (spec, asked) = with(None, 8 << 20)
-            .spec(VariantKind::ChebyshevW, &m, r)
+            .spec(VariantKind::ChebyshevW, &m, 0.375, r)
             .unwrap();
         let default_texel = TableSpec::default_texel(m.coherence_um);
         assert_eq!(asked, Some(default_texel));
@@ -381,9 +411,30 @@ mod tests {
         let (nu, nv) = spec.uv_nodes().unwrap();
         assert!(nu * nv * spec.w_nodes * 16 <= 8 << 20);
         let (spec, asked) = with(None, 512 << 20)
-            .spec(VariantKind::ChebyshevW, &m, r)
+            .spec(VariantKind::ChebyshevW, &m, 0.375, r)
             .unwrap();
         assert_eq!((spec.texel_uv, asked), (default_texel, None));
+    }
+
+    #[test]
+    fn chebyshev_w_nodes_grow_with_the_height_range() {
+        let t = TableOptions::default();
+        let w = [-1.5, -0.5];
+        // The shipped Elaphe-like grating (0.37 µm) keeps the default 16 …
+        assert_eq!(t.w_nodes_for_field(VariantKind::ChebyshevW, 0.37, w), 16);
+        // … a 2 µm structure needs more (a ≈ 33), capped at the table maximum.
+        let tall = t.w_nodes_for_field(VariantKind::ChebyshevW, 2.0, w);
+        assert!(
+            tall > 30 && tall <= crate::brdf::table::MAX_NODES_W,
+            "{tall}"
+        );
+        // Explicit counts and other variants are left alone.
+        let fixed = TableOptions {
+            w_nodes: Some(9),
+            ..t
+        };
+        assert_eq!(fixed.w_nodes_for_field(VariantKind::ChebyshevW, 2.0, w), 9);
+        assert_eq!(t.w_nodes_for_field(VariantKind::Volume, 2.0, w), 32);
     }
 
     #[test]

@@ -56,7 +56,8 @@ pub(crate) fn prepare<T: GTable + 'static>(
     require_spectral(kind, setup.output)?;
     let start = Instant::now();
     let material = &setup.prepared.material;
-    let (spec, coarsened) = setup.table.spec(kind, material, setup.region)?;
+    let (lo, hi) = setup.prepared.heightfield.range();
+    let (spec, coarsened) = setup.table.spec(kind, material, hi - lo, setup.region)?;
     if let Some(asked) = coarsened {
         eprintln!(
             "note: {kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB",
