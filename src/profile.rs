@@ -311,10 +311,14 @@ pub struct ProfileArgs {
     /// Directory of the DFT-term cache.
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
+    /// Do not read or write the term cache.
+    #[arg(long)]
+    pub no_cache: bool,
 }
 
 /// Runs `diffract profile`.
 pub fn run(args: &ProfileArgs) -> Result<()> {
+    crate::guard::profile_args(args)?;
     if let Some(p) = &args.csv {
         if p.file_name().is_none() {
             return Err(Error::invalid(
@@ -333,9 +337,13 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         size: args.size,
         pixels: args.pixels,
         repeats: args.repeats,
-        cache_dir: args.cache_dir.clone().or_else(default_cache_dir),
+        cache_dir: (!args.no_cache)
+            .then(|| args.cache_dir.clone().or_else(default_cache_dir))
+            .flatten(),
     };
+    let spin = crate::progress::spinner("profiling variants");
     let reports = profile(&mut renderer, &setup)?;
+    drop(spin);
     print!("{}", format_table(renderer.device_name(), &setup, &reports));
     if let Some(path) = &args.csv {
         let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model\n");

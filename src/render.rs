@@ -33,6 +33,10 @@ use crate::{Error, Result};
 const MAX_TERMS: usize = 65;
 /// Largest BRDF map side.
 pub const MAX_MAP_SIZE: u32 = 4096;
+/// `render --brdf-map` side without `--size`.
+pub const DEFAULT_MAP_SIZE: u32 = 256;
+/// `render --brdf-map` light angle without `--theta-i` (degrees).
+pub const DEFAULT_MAP_THETA_I: f64 = 30.0;
 
 /// One rendered image, linear values, row-major from the top row.
 #[derive(Debug, Clone)]
@@ -807,15 +811,15 @@ pub struct RenderArgs {
     /// Render a BRDF map (hemisphere of view directions) instead of the scene.
     #[arg(long)]
     pub brdf_map: bool,
-    /// BRDF map: polar angle of the light from the normal (degrees).
-    #[arg(long, default_value_t = 30.0)]
-    pub theta_i: f64,
-    /// BRDF map: azimuth of the light from +x, the height-field columns (degrees).
-    #[arg(long, default_value_t = 0.0)]
-    pub phi_i: f64,
-    /// BRDF map side in pixels.
-    #[arg(long, default_value_t = 256)]
-    pub size: u32,
+    /// BRDF map: polar angle of the light from the normal (degrees) [default: 30].
+    #[arg(long)]
+    pub theta_i: Option<f64>,
+    /// BRDF map: azimuth of the light from +x, the height-field columns (degrees) [default: 0].
+    #[arg(long, allow_negative_numbers = true)]
+    pub phi_i: Option<f64>,
+    /// BRDF map side in pixels [default: 256].
+    #[arg(long)]
+    pub size: Option<u32>,
     /// BRDF map: the spectral reflectance at this wavelength (nm) instead of XYZ colour.
     #[arg(long)]
     pub lambda_nm: Option<f64>,
@@ -862,6 +866,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         scene.output.exposure = e;
     }
     crate::image_io::output_format(&args.out)?;
+    crate::guard::render_args(args, &scene)?;
     // The device first: a machine without Vulkan fails before the term precompute.
     let mut renderer = Renderer::new(validation_requested())?;
     renderer.set_storage_format(args.storage);
@@ -874,13 +879,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .or_else(crate::material::default_cache_dir)
     };
     let prepared = material.prepare(cache_dir.as_deref())?;
+    let spin = crate::progress::spinner("rendering");
 
     let (frame, what) = if args.brdf_map {
         let frame = renderer.render_brdf_map(
             &prepared,
-            args.theta_i,
-            args.phi_i,
-            args.size,
+            args.theta_i.unwrap_or(DEFAULT_MAP_THETA_I),
+            args.phi_i.unwrap_or(0.0),
+            args.size.unwrap_or(DEFAULT_MAP_SIZE),
             args.lambda_nm,
         )?;
         write_map(args, &frame)?;
@@ -912,15 +918,19 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         crate::image_io::write_image(&args.out, frame.width, frame.height, &frame.rgb, 1.0)?;
         (frame, "scene".to_string())
     };
+    drop(spin);
     let gpu = frame
         .gpu_ms
         .map_or("n/a".to_string(), |ms| format!("{ms:.2}"));
+    let written = match (args.brdf_map && args.png).then(|| args.out.with_extension("png")) {
+        Some(png) => format!("{} + {}", args.out.display(), png.display()),
+        None => args.out.display().to_string(),
+    };
     println!(
-        "{}: {what} {}×{} → {}: GPU {gpu} ms, wall {:.1} ms",
+        "{}: {what} {}×{} → {written}: GPU {gpu} ms, wall {:.1} ms",
         renderer.device_name(),
         frame.width,
         frame.height,
-        args.out.display(),
         frame.wall_ms
     );
     let n = renderer.validation_messages();
