@@ -25,16 +25,20 @@ enum Command {
     EvalGrating(diffract::eval::EvalArgs),
     /// Shader variants on the GPU: error against the f64 reference together with GPU time.
     Profile(diffract::profile::ProfileArgs),
+    /// The DFT-term cache: list its files or clear it.
+    Cache(diffract::spectrum::cache::CacheArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    diffract::fsutil::remove_temps_on_interrupt();
     let result = match &cli.command {
         Command::Render(a) => diffract::render::run(a),
         Command::Brdf(a) => diffract::brdf::query::run(a),
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),
+        Command::Cache(a) => diffract::spectrum::cache::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
