@@ -433,6 +433,38 @@ fn decode(data: impl Read, len: u64, key: u64) -> std::result::Result<TermStack,
         half_range_um,
     })
 }
+/// Largest term stack held in memory (f64 complex texels × terms), bytes. With the
+/// height-field copies, FFT buffers, the float32 upload and (on lavapipe) the GPU image in
+/// host memory, a render at this size peaks near 4 GB (README: memory and disk).
+pub const MAX_STACK_BYTES: u64 = 1_000_000_000;
+
+/// Refuses, before any work, a request whose term stack would exceed [`MAX_STACK_BYTES`],
+/// naming the largest `--terms` that fits.
+pub fn check_memory(hf: &HeightField, req: &TermRequest) -> Result<()> {
+    let band = requested_band(hf, req);
+    let per_term = (band.width as u64)
+        .saturating_mul(band.height as u64)
+        .saturating_mul(16);
+    let need = per_term.saturating_mul(req.max_term as u64 + 1);
+    if need <= MAX_STACK_BYTES {
+        return Ok(());
+    }
+    let fits = (MAX_STACK_BYTES / per_term.max(1)).saturating_sub(1);
+    let gb = |b: u64| b as f64 / 1e9;
+    Err(Error::invalid(
+        "terms",
+        format!(
+            "{} terms of a {}×{} spectrum band need {:.1} GB; the limit is {:.1} GB: use \
+             --terms {fits} or less, or a smaller height field",
+            req.max_term + 1,
+            band.width,
+            band.height,
+            gb(need),
+            gb(MAX_STACK_BYTES)
+        ),
+    ))
+}
+
 /// The cap of the cache directory in bytes: `DIFFRACT_CACHE_MAX` (bytes, or with a `K`,
 /// `M` or `G` suffix, binary), else [`DEFAULT_CACHE_MAX`]. `0` disables writing.
 pub fn cache_max_bytes() -> Result<u64> {
@@ -597,10 +629,11 @@ fn round_to_f32(stack: &mut TermStack) {
 /// stderr in one line, recomputed and overwritten. Failing to write the cache only warns:
 /// the terms are still correct.
 pub fn terms_cached(hf: &HeightField, req: &TermRequest, dir: Option<&Path>) -> Result<TermStack> {
+    req.validate()?;
+    check_memory(hf, req)?;
     let Some(dir) = dir else {
         return super::compute_terms(hf, req);
     };
-    req.validate()?;
     let max = cache_max_bytes()?;
     clean_stale_temps(dir);
     let key = cache_key(hf, req);
