@@ -152,6 +152,9 @@ pub struct EvalArgs {
     /// Directory of the DFT-term cache.
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
+    /// Do not read or write the term cache.
+    #[arg(long)]
+    pub no_cache: bool,
     /// Print each wavelength's peak.
     #[arg(long)]
     pub verbose: bool,
@@ -159,6 +162,7 @@ pub struct EvalArgs {
 
 /// Runs `diffract eval-grating`.
 pub fn run(args: &EvalArgs) -> Result<()> {
+    crate::guard::eval_args(args)?;
     let [from, to, step] = [args.lambdas_nm[0], args.lambdas_nm[1], args.lambdas_nm[2]];
     if !(from >= 380.0 && to <= 780.0 && from <= to && step > 0.0) {
         return Err(Error::invalid(
@@ -169,9 +173,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let count = ((to - from) / step).floor() as usize + 1;
     let lambdas: Vec<f64> = (0..count).map(|i| from + i as f64 * step).collect();
     let material = args.material.apply(crate::material::Material::default());
-    let cache = args.cache_dir.clone().or_else(default_cache_dir);
+    let cache = (!args.no_cache)
+        .then(|| args.cache_dir.clone().or_else(default_cache_dir))
+        .flatten();
     let p = material.prepare(cache.as_deref())?;
+    let spin = crate::progress::spinner("grating equation");
     let r = grating_equation(&p, args.theta_i, args.azimuth, &lambdas, args.step_deg)?;
+    drop(spin);
     if args.verbose {
         for s in &r.samples {
             println!(

@@ -27,10 +27,13 @@ enum Command {
     Profile(diffract::profile::ProfileArgs),
     /// List the shader variants: per-pixel fetches, memory, the default.
     Variants,
+    /// The DFT-term cache: list its files or clear it.
+    Cache(diffract::spectrum::cache::CacheArgs),
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    diffract::fsutil::remove_temps_on_interrupt();
     let result = match &cli.command {
         Command::Render(a) => diffract::render::run(a),
         Command::Brdf(a) => diffract::brdf::query::run(a),
@@ -41,6 +44,7 @@ fn main() -> ExitCode {
             print!("{}", diffract::render::variant::list());
             Ok(())
         }
+        Command::Cache(a) => diffract::spectrum::cache::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -559,10 +559,14 @@ pub struct ProfileArgs {
     /// Directory of the DFT-term cache.
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
+    /// Do not read or write the term cache.
+    #[arg(long)]
+    pub no_cache: bool,
 }
 
 /// Runs `diffract profile`.
 pub fn run(args: &ProfileArgs) -> Result<()> {
+    crate::guard::profile_args(args)?;
     for p in args.csv.iter().chain(&args.plot) {
         if p.file_name().is_none() {
             return Err(Error::invalid(
@@ -606,7 +610,9 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         brightest: args.brightest,
         frames: args.frames,
         mesh,
-        cache_dir: args.cache_dir.clone().or_else(default_cache_dir),
+        cache_dir: (!args.no_cache)
+            .then(|| args.cache_dir.clone().or_else(default_cache_dir))
+            .flatten(),
     };
     let reports = profile(&mut renderer, &setup)?;
     print!("{}", format_table(renderer.device_name(), &setup, &reports));

@@ -274,6 +274,36 @@ fn line_col(text: &str, offset: usize) -> (usize, usize) {
     (line, col)
 }
 
+/// Where a semantic error (a message starting `[section] ...`) points in the scene text: the
+/// key of that section the message names (`fov_y_deg`, or `coherence` for `coherence_um`),
+/// else the section header. `None` when the section is not in the text (a default).
+fn locate_semantic(text: &str, msg: &str) -> Option<usize> {
+    let rest = msg.strip_prefix('[')?;
+    let (section, rest) = rest.split_once(']')?;
+    let doc = toml_edit::ImDocument::parse(text).ok()?;
+    let item = doc.as_table().get(section)?;
+    let table = item.as_table_like()?;
+    let words: Vec<&str> = rest
+        .split(|c: char| !(c.is_alphanumeric() || c == '_'))
+        .filter(|w| !w.is_empty())
+        .collect();
+    // The first word of the message that is a key, or the first part of one.
+    let key = words.iter().find_map(|w| {
+        table
+            .iter()
+            .map(|(k, _)| k)
+            .find(|k| k == w || k.split('_').next() == Some(w))
+    });
+    let key_span = key.and_then(|k| {
+        let (key, value) = table.get_key_value(k)?;
+        key.span().or_else(|| value.span())
+    });
+    key_span
+        .or_else(|| doc.as_table().get_key_value(section)?.0.span())
+        .or_else(|| item.span())
+        .map(|r| r.start)
+}
+
 impl Scene {
     /// Parses the embedded `assets/default_scene.toml`. It is part of the build and covered
     /// by tests, so it cannot fail at run time; should it ever, the hard-coded section
@@ -292,7 +322,7 @@ impl Scene {
 
     /// Reads and validates a scene file.
     pub fn load(path: &Path) -> Result<Scene> {
-        let text = std::fs::read_to_string(path).map_err(|e| Error::io(path, e))?;
+        let text = crate::fsutil::read_text_bounded(path, "scene", crate::fsutil::MAX_TOML_BYTES)?;
         Self::from_toml_str(&text, path)
     }
 
@@ -304,7 +334,8 @@ impl Scene {
             let msg = match e.span() {
                 Some(span) => {
                     let (line, col) = line_col(text, span.start);
-                    format!("line {line}, column {col}: {}", e.message().trim())
+                    let msg = e.message().trim().replace('\n', "; ");
+                    format!("line {line}, column {col}: {msg}")
                 }
                 // Without a span the full report is the best there is; keep it on one line.
                 None => e
@@ -326,7 +357,16 @@ impl Scene {
         if !hf.starts_with("builtin:") && !hf.is_empty() && Path::new(hf).is_relative() {
             scene.material.heightfield = base.join(hf).to_string_lossy().into_owned();
         }
-        scene.validate().map_err(|msg| Error::parse(origin, msg))?;
+        scene.validate().map_err(|msg| {
+            let msg = match locate_semantic(text, &msg) {
+                Some(offset) => {
+                    let (line, col) = line_col(text, offset);
+                    format!("line {line}, column {col}: {msg}")
+                }
+                None => msg,
+            };
+            Error::parse(origin, msg)
+        })?;
         Ok(scene)
     }
 
@@ -511,6 +551,25 @@ mod tests {
             Scene::from_toml_str(&text, Path::new("/x/s.toml")).unwrap(),
             s
         );
+    }
+
+    #[test]
+    fn semantic_errors_name_line_and_column() {
+        let text = "[camera]\neye = [0, 1, 2]\nfov_y_deg = 200\n\n[material]\nterms = 99\n";
+        let e = Scene::from_toml_str(text, Path::new("s.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3, column 1: [camera] fov_y_deg"), "{e}");
+        let text = "[material]\nexpansion = \"taylor\"\n  terms = 99\n";
+        let e = Scene::from_toml_str(text, Path::new("s.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3, column 3: [material]"), "{e}");
+        let text = "[camera]\neye = [0, 1, 2]\ntarget = [0, 1, 2]\n";
+        let e = Scene::from_toml_str(text, Path::new("s.toml"))
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2, column 1"), "{e}");
     }
 
     #[test]

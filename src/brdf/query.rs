@@ -76,8 +76,14 @@ const COLUMNS: [&str; 5] = [
     "lambda_nm",
 ];
 
-/// Parses a query CSV. Errors name the file and the 1-based line.
+/// Bad rows reported in one error before the list is cut short.
+const MAX_REPORTED_ROWS: usize = 20;
+
+/// Parses a query CSV. Errors name the file and the 1-based line of every bad row (the
+/// first [`MAX_REPORTED_ROWS`] of them, then how many more), all in one line. A leading
+/// UTF-8 byte-order mark is ignored.
 pub fn parse_queries(path: &Path, text: &str) -> Result<Vec<Query>> {
+    let text = text.strip_prefix('\u{feff}').unwrap_or(text);
     let mut lines = text
         .lines()
         .enumerate()
@@ -93,55 +99,82 @@ pub fn parse_queries(path: &Path, text: &str) -> Result<Vec<Query>> {
                 "line {}: header must be '{}', found '{}'",
                 hl + 1,
                 COLUMNS.join(","),
-                header.trim()
+                header.trim().escape_debug()
             ),
         ));
     }
     let mut out = Vec::new();
+    let mut bad: Vec<String> = Vec::new();
+    let mut bad_count = 0usize;
     for (i, line) in lines {
-        let at = |msg: String| Error::parse(path, format!("line {}: {msg}", i + 1));
-        let cells: Vec<&str> = line.split(',').map(str::trim).collect();
-        if cells.len() != 5 {
-            return Err(at(format!("expected 5 columns, found {}", cells.len())));
-        }
-        let num = |j: usize| -> Result<f64> {
-            let v: f64 = cells[j]
-                .parse()
-                .map_err(|_| at(format!("{} = '{}' is not a number", COLUMNS[j], cells[j])))?;
-            if !v.is_finite() {
-                return Err(at(format!("{} = {v} is not finite", COLUMNS[j])));
-            }
-            Ok(v)
-        };
-        let q = Query {
-            theta_i_deg: num(0)?,
-            phi_i_deg: num(1)?,
-            theta_r_deg: num(2)?,
-            phi_r_deg: num(3)?,
-            lambda_nm: if cells[4].is_empty() {
-                None
-            } else {
-                Some(num(4)?)
-            },
-        };
-        for (name, t) in [
-            ("theta_i_deg", q.theta_i_deg),
-            ("theta_r_deg", q.theta_r_deg),
-        ] {
-            if !(0.0..=180.0).contains(&t) {
-                return Err(at(format!("{name} = {t} is outside [0, 180]")));
+        match parse_row(i, line) {
+            Ok(q) => out.push(q),
+            Err(msg) => {
+                bad_count += 1;
+                if bad.len() < MAX_REPORTED_ROWS {
+                    bad.push(msg);
+                }
             }
         }
-        if let Some(l) = q.lambda_nm {
-            if !(LAMBDA_MIN_NM as f64..=LAMBDA_MAX_NM as f64).contains(&l) {
-                return Err(at(format!(
-                    "lambda_nm = {l} is outside [{LAMBDA_MIN_NM}, {LAMBDA_MAX_NM}]"
-                )));
-            }
+    }
+    if bad_count > 0 {
+        let more = bad_count - bad.len();
+        let mut msg = format!(
+            "{bad_count} bad row{}: {}",
+            if bad_count == 1 { "" } else { "s" },
+            bad.join("; ")
+        );
+        if more > 0 {
+            msg.push_str(&format!("; and {more} more"));
         }
-        out.push(q);
+        return Err(Error::parse(path, msg));
     }
     Ok(out)
+}
+
+/// One data row (0-based line index `i`); the error names the 1-based line.
+fn parse_row(i: usize, line: &str) -> std::result::Result<Query, String> {
+    let at = |msg: String| format!("line {}: {msg}", i + 1);
+    let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+    if cells.len() != 5 {
+        return Err(at(format!("expected 5 columns, found {}", cells.len())));
+    }
+    let num = |j: usize| -> std::result::Result<f64, String> {
+        let v: f64 = cells[j]
+            .parse()
+            .map_err(|_| at(format!("{} = '{}' is not a number", COLUMNS[j], cells[j])))?;
+        if !v.is_finite() {
+            return Err(at(format!("{} = {v} is not finite", COLUMNS[j])));
+        }
+        Ok(v)
+    };
+    let q = Query {
+        theta_i_deg: num(0)?,
+        phi_i_deg: num(1)?,
+        theta_r_deg: num(2)?,
+        phi_r_deg: num(3)?,
+        lambda_nm: if cells[4].is_empty() {
+            None
+        } else {
+            Some(num(4)?)
+        },
+    };
+    for (name, t) in [
+        ("theta_i_deg", q.theta_i_deg),
+        ("theta_r_deg", q.theta_r_deg),
+    ] {
+        if !(0.0..=180.0).contains(&t) {
+            return Err(at(format!("{name} = {t} is outside [0, 180]")));
+        }
+    }
+    if let Some(l) = q.lambda_nm {
+        if !(LAMBDA_MIN_NM as f64..=LAMBDA_MAX_NM as f64).contains(&l) {
+            return Err(at(format!(
+                "lambda_nm = {l} is outside [{LAMBDA_MIN_NM}, {LAMBDA_MAX_NM}]"
+            )));
+        }
+    }
+    Ok(q)
 }
 
 /// Answers queries with an evaluator `spectral(wi, wr, λ)` / `integrated(wi, wr)`.
@@ -150,9 +183,12 @@ pub fn answer_all(
     spectral: impl Fn([f64; 3], [f64; 3], f64) -> f64 + Sync,
     integrated: impl Fn([f64; 3], [f64; 3]) -> [f64; 3] + Sync,
 ) -> Vec<Answer> {
-    queries
+    // 10⁶ model queries take about a minute.
+    let bar = crate::progress::bar(queries.len() as u64, "queries");
+    let answers = queries
         .par_iter()
         .map(|q| {
+            bar.inc(1);
             let wi = direction(q.theta_i_deg, q.phi_i_deg);
             let wr = direction(q.theta_r_deg, q.phi_r_deg);
             match q.lambda_nm {
@@ -169,7 +205,9 @@ pub fn answer_all(
                 }
             }
         })
-        .collect()
+        .collect();
+    bar.finish_and_clear();
+    answers
 }
 
 /// Formats result rows (full f64 round-trip precision).
@@ -195,10 +233,15 @@ pub fn format_answers(queries: &[Query], answers: &[Answer]) -> String {
 
 /// Runs `diffract brdf`.
 pub fn run(args: &BrdfArgs) -> Result<()> {
-    let text = std::fs::read_to_string(&args.queries).map_err(|e| Error::io(&args.queries, e))?;
-    let queries = parse_queries(&args.queries, &text)?;
     let material = args.material.apply(crate::material::Material::default());
     material.validate()?;
+    crate::guard::check_output(&args.out)?;
+    let mut inputs = crate::guard::heightfield_inputs(&material.heightfield);
+    inputs.push(("query CSV", args.queries.clone()));
+    crate::guard::refuse_overwrite(&inputs, &[("--out", args.out.clone())])?;
+    let text =
+        crate::fsutil::read_text_bounded(&args.queries, "query CSV", crate::fsutil::MAX_CSV_BYTES)?;
+    let queries = parse_queries(&args.queries, &text)?;
     let answers = match args.method {
         Method::Reference => {
             let hf =

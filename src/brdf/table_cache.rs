@@ -14,7 +14,7 @@ use std::path::Path;
 use super::table::{sample_g, Slices, TableSpec};
 use crate::fsutil::write_atomic;
 use crate::heightfield::HeightField;
-use crate::spectrum::cache::Fnv1a;
+use crate::spectrum::cache::{self, Fnv1a};
 use crate::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"DIFFGTAB";
@@ -142,24 +142,45 @@ pub fn sample_g_cached(
         return sample_g(hf, coherence_um, spec, w_nodes, progress);
     };
     let (nu, nv) = spec.validate()?;
+    let max = cache::cache_max_bytes()?;
+    cache::clean_stale_temps(dir);
     let key = key(hf, coherence_um, spec, w_nodes);
     let path = dir.join(format!("gtable-{key:016x}.bin"));
-    match std::fs::read(&path) {
+    // A valid file has exactly this many bytes: read no more than that.
+    let expected = (44 + w_nodes.len() * 8 + nu * nv * w_nodes.len() * 12 + 8) as u64;
+    match crate::fsutil::read_bounded(&path, "table cache", expected) {
         Ok(data) => match decode(&data, key, w_nodes) {
-            Ok(s) if s.nu == nu && s.nv == nv => return Ok(s),
+            Ok(s) if s.nu == nu && s.nv == nv => {
+                // Last use is the mtime: the cache's LRU eviction reads it.
+                let _ = std::fs::File::options()
+                    .append(true)
+                    .open(&path)
+                    .and_then(|f| f.set_modified(std::time::SystemTime::now()));
+                return Ok(s);
+            }
             Ok(_) => eprintln!(
                 "warning: table cache {}: grid does not match; rebuilding",
                 path.display()
             ),
             Err(msg) => eprintln!("warning: table cache {}: {msg}; rebuilding", path.display()),
         },
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => eprintln!("warning: {}; rebuilding", Error::io(&path, e)),
+        Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {}
+        Err(e) => eprintln!("warning: {e}; rebuilding"),
     }
     let s = sample_g(hf, coherence_um, spec, w_nodes, progress)?;
+    let bytes = encode(&s, key);
+    if bytes.len() as u64 > max {
+        eprintln!(
+            "warning: the table takes {} MiB, more than the cache cap of {} MiB (DIFFRACT_CACHE_MAX); not cached",
+            bytes.len() >> 20,
+            max >> 20
+        );
+        return Ok(s);
+    }
     let saved = std::fs::create_dir_all(dir)
         .map_err(|e| Error::io(dir, e))
-        .and_then(|()| write_atomic(&path, &encode(&s, key)));
+        .and_then(|()| write_atomic(&path, &bytes))
+        .and_then(|()| cache::evict(dir, max, Some(&path)).map(|_| ()));
     if let Err(e) = saved {
         eprintln!("warning: could not write the table cache: {e}");
     }

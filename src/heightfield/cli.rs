@@ -53,6 +53,7 @@ impl HeightfieldArgs {
 
 /// Generates, saves and prints one summary line.
 pub fn run_heightfield(args: &HeightfieldArgs) -> Result<()> {
+    crate::guard::heightfield_args(&args.out)?;
     let spec = args.spec();
     let (first, second) = spec.waves()?;
     let hf = generate(&spec)?;

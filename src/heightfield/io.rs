@@ -59,11 +59,14 @@ pub fn sidecar_path(path: &Path) -> PathBuf {
 /// Reads the sidecar beside `path`, or an empty one when there is none.
 fn read_sidecar(path: &Path) -> Result<Sidecar> {
     let side = sidecar_path(path);
-    let text = match std::fs::read_to_string(&side) {
-        Ok(t) => t,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Sidecar::default()),
-        Err(e) => return Err(Error::io(side, e)),
-    };
+    let text =
+        match crate::fsutil::read_text_bounded(&side, "sidecar", crate::fsutil::MAX_TOML_BYTES) {
+            Ok(t) => t,
+            Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+                return Ok(Sidecar::default())
+            }
+            Err(e) => return Err(e),
+        };
     toml::from_str(&text).map_err(|e| Error::parse(&side, one_line_toml_error(&text, &e)))
 }
 
@@ -107,8 +110,13 @@ impl HeightField {
     /// both places. Never panics on a bad file.
     pub fn load(path: &Path, dh_um: Option<f64>, h_max_um: Option<f64>) -> Result<HeightField> {
         let format = format_of(path)?;
-        // A missing file is the first thing to report, before any complaint about its scale.
-        std::fs::metadata(path).map_err(|e| Error::io(path, e))?;
+        // A missing file (or a device, or a huge file) is the first thing to report, before
+        // any complaint about its scale.
+        let limit = match format {
+            Format::Png => crate::fsutil::MAX_PNG_BYTES,
+            Format::RawF32 => (super::MAX_SIDE * super::MAX_SIDE * 4) as u64,
+        };
+        crate::fsutil::check_input_file(path, "height field", limit)?;
         let side = read_sidecar(path)?;
         let side_path = sidecar_path(path);
         let dh = dh_um.or(side.dh_um).ok_or_else(|| {
@@ -324,13 +332,22 @@ fn read_f32(path: &Path, nx: usize, ny: usize) -> Result<Vec<f64>> {
                 ),
             )
         })?;
-    let data = std::fs::read(path).map_err(|e| Error::io(path, e))?;
-    if data.len() != expected {
+    // The length first, then a read bounded by it: a sidecar saying 16 KB must not let a
+    // huge (or endless) file into memory.
+    let len = std::fs::metadata(path)
+        .map_err(|e| Error::io(path, e))?
+        .len();
+    let data = if len == expected as u64 {
+        crate::fsutil::read_bounded(path, "raw .f32 height field", expected as u64)?
+    } else {
+        Vec::new()
+    };
+    if len != expected as u64 || data.len() != expected {
         return Err(Error::Image {
             path: path.to_path_buf(),
             msg: format!(
                 "{} bytes; {nx}×{ny} f32 heights need {expected} (truncated or wrong sidecar?)",
-                data.len()
+                len
             ),
         });
     }

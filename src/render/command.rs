@@ -60,15 +60,15 @@ pub struct RenderArgs {
     /// Render a BRDF map (hemisphere of view directions) instead of the scene.
     #[arg(long)]
     pub brdf_map: bool,
-    /// BRDF map: polar angle of the light from the normal (degrees).
-    #[arg(long, default_value_t = 30.0)]
-    pub theta_i: f64,
-    /// BRDF map: azimuth of the light from +x, the height-field columns (degrees).
-    #[arg(long, default_value_t = 0.0)]
-    pub phi_i: f64,
-    /// BRDF map side in pixels.
-    #[arg(long, default_value_t = 256)]
-    pub size: u32,
+    /// BRDF map: polar angle of the light from the normal (degrees) [default: 30].
+    #[arg(long)]
+    pub theta_i: Option<f64>,
+    /// BRDF map: azimuth of the light from +x, the height-field columns (degrees) [default: 0].
+    #[arg(long, allow_negative_numbers = true)]
+    pub phi_i: Option<f64>,
+    /// BRDF map side in pixels [default: 256].
+    #[arg(long)]
+    pub size: Option<u32>,
     /// BRDF map: the spectral reflectance at this wavelength (nm) instead of XYZ colour.
     #[arg(long)]
     pub lambda_nm: Option<f64>,
@@ -120,6 +120,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         scene.output.exposure = e;
     }
     crate::image_io::output_format(&args.out)?;
+    crate::guard::render_args(args, &scene)?;
     // The device first: a machine without Vulkan fails before the term precompute.
     let mut renderer = Renderer::new(validation_requested())?;
     renderer.set_storage_format(args.storage);
@@ -144,13 +145,18 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     };
     renderer.set_cache_dir(cache_dir.clone());
     let prepared = material.prepare(cache_dir.as_deref())?;
+    // Table variants show their own bar while they build; the draw after it is short.
+    let spin = args
+        .variant
+        .is_spectral()
+        .then(|| crate::progress::spinner("rendering"));
 
     let (frame, what) = if args.brdf_map {
         let frame = renderer.render_brdf_map(
             &prepared,
-            args.theta_i,
-            args.phi_i,
-            args.size,
+            args.theta_i.unwrap_or(super::DEFAULT_MAP_THETA_I),
+            args.phi_i.unwrap_or(0.0),
+            args.size.unwrap_or(super::DEFAULT_MAP_SIZE),
             args.lambda_nm,
         )?;
         write_map(args, &frame)?;
@@ -182,16 +188,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         crate::image_io::write_image(&args.out, frame.width, frame.height, &frame.rgb, 1.0)?;
         (frame, "scene".to_string())
     };
+    drop(spin);
     let gpu = frame
         .gpu_ms
         .map_or("n/a".to_string(), |ms| format!("{ms:.2}"));
+    let written = match (args.brdf_map && args.png).then(|| args.out.with_extension("png")) {
+        Some(png) => format!("{} + {}", args.out.display(), png.display()),
+        None => args.out.display().to_string(),
+    };
     let v = &frame.variant;
     println!(
-        "{}: {what} {}×{} → {}: variant {}: GPU {gpu} ms, wall {:.1} ms (build {:.1} ms, {:.1} MB, {} fetches/pixel)",
+        "{}: {what} {}×{} → {written}: variant {}: GPU {gpu} ms, wall {:.1} ms (build {:.1} ms, {:.1} MB, {} fetches/pixel)",
         renderer.device_name(),
         frame.width,
         frame.height,
-        args.out.display(),
         v.name,
         frame.wall_ms,
         v.build_ms,

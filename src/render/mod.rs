@@ -39,6 +39,10 @@ use variant::{DrawSetup, PreparedVariant, SPEC_COUNT};
 pub(crate) const MAX_TERMS: usize = 65;
 /// Largest BRDF map side.
 pub const MAX_MAP_SIZE: u32 = 4096;
+/// `render --brdf-map` side without `--size`.
+pub const DEFAULT_MAP_SIZE: u32 = 256;
+/// `render --brdf-map` light angle without `--theta-i` (degrees).
+pub const DEFAULT_MAP_THETA_I: f64 = 30.0;
 
 /// One rendered image, linear values, row-major from the top row.
 #[derive(Debug, Clone)]

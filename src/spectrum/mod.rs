@@ -207,6 +207,21 @@ pub fn lookup_coord(b: usize, u: f64, n: usize, dh_um: f64, lambda_um: f64) -> f
 /// `(2R+1)²` texels around `floor(q)`. (The `1/(N_x N_y)` is already in the stack.)
 pub fn windowed(stack: &TermStack, n: usize, window: &Window, q: [f64; 2]) -> Complex64 {
     let r = window.radius as i64;
+    if !(q[0].is_finite() && q[1].is_finite()) {
+        return Complex64::new(0.0, 0.0);
+    }
+    // The spectrum is periodic: a lookup far outside it (a huge `dH` from the command line)
+    // is moved back by whole periods, so the integer texel range below cannot overflow.
+    // Ordinary lookups are left bit-for-bit alone.
+    const FAR: f64 = (1u64 << 31) as f64;
+    let wrap = |v: f64, n: usize| {
+        if v.abs() < FAR {
+            v
+        } else {
+            v.rem_euclid(n as f64)
+        }
+    };
+    let q = [wrap(q[0], stack.nx), wrap(q[1], stack.ny)];
     let ax = q[0].floor() as i64;
     let ay = q[1].floor() as i64;
     let inv2sx = 1.0 / (2.0 * window.sigma_texels[0] * window.sigma_texels[0]);
@@ -226,12 +241,16 @@ pub fn windowed(stack: &TermStack, n: usize, window: &Window, q: [f64; 2]) -> Co
 
 /// The band of texels that lookups can reach for wavelengths ≥ `lambda_min_um` with gather
 /// radius `radius` (MODEL §3): `b ± (2·N·dH/λ_min + R + 1)`, or the whole spectrum when
-/// that is at least as large.
+/// that is at least as large. Saturating arithmetic: a huge `dH` (user input) or radius
+/// means "the whole spectrum", never an overflow.
 pub fn reachable_band(hf: &HeightField, lambda_min_um: f64, radius: usize) -> Band {
     let axis = |n: usize| -> (usize, usize) {
-        let reach = (2.0 * n as f64 * hf.dh_um() / lambda_min_um).ceil() as usize + radius + 1;
+        // `as usize` saturates (and maps NaN to 0); the sums below must saturate too.
+        let reach = ((2.0 * n as f64 * hf.dh_um() / lambda_min_um).ceil() as usize)
+            .saturating_add(radius)
+            .saturating_add(1);
         let b = n / 2;
-        if 2 * reach + 1 >= n || reach > b {
+        if reach.saturating_mul(2).saturating_add(1) >= n || reach > b {
             (0, n)
         } else {
             (b - reach, 2 * reach + 1)
@@ -244,5 +263,48 @@ pub fn reachable_band(hf: &HeightField, lambda_min_um: f64, radius: usize) -> Ba
         y0,
         width,
         height,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reachable_band_saturates_for_huge_pixels() {
+        for dh in [1e18, 1e300, f64::MAX] {
+            let hf = HeightField::new(8, 6, dh, vec![0.0; 48]).unwrap();
+            let b = reachable_band(&hf, 0.38, usize::MAX);
+            assert_eq!((b.x0, b.y0, b.width, b.height), (0, 0, 8, 6));
+        }
+        let hf = HeightField::new(512, 512, 1e-4, vec![0.0; 512 * 512]).unwrap();
+        let b = reachable_band(&hf, 0.38, 1);
+        assert!(b.width < 512 && b.x0 + b.width <= 512, "{b:?}");
+    }
+
+    #[test]
+    fn windowed_lookups_far_outside_the_spectrum_do_not_overflow() {
+        let hf = HeightField::new(8, 8, 1e18, (0..64).map(|i| i as f64 * 1e-3).collect()).unwrap();
+        let req = TermRequest {
+            expansion: Expansion::Taylor,
+            max_term: 1,
+            lambda_min_um: 0.38,
+            window_radius: 2,
+            full_band: false,
+        };
+        let stack = compute_terms(&hf, &req).unwrap();
+        let w = Window::new(8, 8, 1e18, 65.0, 2).unwrap();
+        for q in [
+            [1e30, -1e30],
+            [9.3e18, 4.0],
+            [f64::NAN, 0.0],
+            [f64::INFINITY, 1.0],
+        ] {
+            assert!(windowed(&stack, 1, &w, q).re.is_finite());
+        }
+        // Near the spectrum nothing changes: one period away is the same lookup.
+        let a = windowed(&stack, 1, &w, [3.25, 4.5]);
+        let b = windowed(&stack, 1, &w, [3.25 + 8.0 * (1u64 << 32) as f64, 4.5]);
+        assert!((a - b).norm() <= 1e-9 * a.norm().max(1e-300), "{a} {b}");
     }
 }

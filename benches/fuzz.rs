@@ -1,0 +1,214 @@
+//! Long fuzz run (issue #10) of every parser of user files: the property tests of
+//! `tests/proptest_parsers.rs` run a few thousand cases in CI; this runs mutational fuzzing
+//! for a fixed time (`FUZZ_SECS`, default 120) over seeds of each format — a valid PNG,
+//! `.f32` + sidecar, OBJ, scene TOML, query CSV and term cache file — with byte flips,
+//! insertions, deletions, splices of format tokens and truncation. Any panic is caught,
+//! its input saved under the temp directory and counted; exits non-zero if there was one.
+//! Run with `cargo bench --bench fuzz`.
+
+use std::panic::AssertUnwindSafe;
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use diffract::brdf::query::parse_queries;
+use diffract::heightfield::HeightField;
+use diffract::mesh::Mesh;
+use diffract::scene::Scene;
+use diffract::spectrum::cache;
+
+/// xorshift64*: deterministic from `FUZZ_SEED`.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_F491_4F6C_DD1D)
+    }
+    fn below(&mut self, n: usize) -> usize {
+        (self.next() % n.max(1) as u64) as usize
+    }
+}
+
+const TOKENS: &[&[u8]] = &[
+    b"\n",
+    b" = ",
+    b"[",
+    b"]",
+    b",",
+    b"1e309",
+    b"nan",
+    b"-1",
+    b"0",
+    b"9999999999999999999",
+    b"v ",
+    b"f ",
+    b"/",
+    b"//",
+    b"\"",
+    b"[camera]\n",
+    b"[mesh]\n",
+    b"[material]\n",
+    b"nx = ",
+    b"dh_um = ",
+    b"\xef\xbb\xbf",
+    b"\xff",
+    b"\0",
+    b"terms = ",
+    b"inf",
+    b"#",
+];
+
+fn mutate(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
+    let mut b = seed.to_vec();
+    for _ in 0..1 + rng.below(8) {
+        match rng.below(6) {
+            0 if !b.is_empty() => {
+                let i = rng.below(b.len());
+                b[i] ^= 1 << rng.below(8);
+            }
+            1 if !b.is_empty() => {
+                let i = rng.below(b.len());
+                b[i] = rng.next() as u8;
+            }
+            2 => {
+                let i = rng.below(b.len() + 1);
+                let t = TOKENS[rng.below(TOKENS.len())];
+                b.splice(i..i, t.iter().copied());
+            }
+            3 if !b.is_empty() => {
+                let i = rng.below(b.len());
+                let n = rng.below(16).min(b.len() - i);
+                b.drain(i..i + n);
+            }
+            4 => b.truncate(rng.below(b.len() + 1)),
+            _ => {
+                let i = rng.below(b.len() + 1);
+                let n = rng.below(8);
+                let junk: Vec<u8> = (0..n).map(|_| rng.next() as u8).collect();
+                b.splice(i..i, junk);
+            }
+        }
+    }
+    b
+}
+
+fn main() {
+    let secs: u64 = std::env::var("FUZZ_SECS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(120);
+    let mut rng = Rng(std::env::var("FUZZ_SEED")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(0x9E37_79B9_7F4A_7C15));
+    let dir = std::env::temp_dir().join(format!("diffract-fuzz-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let file = |name: &str| -> PathBuf { dir.join(name) };
+
+    // Seeds.
+    image::GrayImage::from_fn(16, 8, |x, y| image::Luma([(x * 13 + y * 7) as u8]))
+        .save(file("seed.png"))
+        .unwrap();
+    let png = std::fs::read(file("seed.png")).unwrap();
+    let f32s: Vec<u8> = (0..16)
+        .flat_map(|i| (i as f32 * 0.01).to_le_bytes())
+        .collect();
+    let sidecar = b"nx = 4\nny = 4\ndh_um = 0.1\n".to_vec();
+    let obj = b"o tri\nv 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nvt 1 0\nvt 0 1\nvn 0 0 1\nf 1/1/1 2/2/1 3/3/1\n".to_vec();
+    let scene = diffract::scene::DEFAULT_SCENE_TOML.as_bytes().to_vec();
+    let csv =
+        b"theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg,lambda_nm\n30,0,30,180,500\n10,0,20,0,\n"
+            .to_vec();
+    let hf = HeightField::new(8, 6, 0.1, (0..48).map(|i| (i % 5) as f64 * 0.02).collect()).unwrap();
+    let req = diffract::spectrum::TermRequest {
+        expansion: diffract::spectrum::Expansion::Chebyshev,
+        max_term: 2,
+        lambda_min_um: 0.38,
+        window_radius: 1,
+        full_band: false,
+    };
+    cache::terms_cached(&hf, &req, Some(&dir)).unwrap();
+    let key = cache::cache_key(&hf, &req);
+    let cache_seed = std::fs::read(dir.join(format!("terms-{key:016x}.bin"))).unwrap();
+
+    // Panics are caught and counted; keep the default hook quiet while fuzzing.
+    std::panic::set_hook(Box::new(|_| {}));
+    let names = ["png", "f32", "sidecar", "obj", "scene", "csv", "cache"];
+    let mut runs = [0u64; 7];
+    let mut panics = 0u64;
+    let start = Instant::now();
+    while start.elapsed() < Duration::from_secs(secs) {
+        let which = rng.below(names.len());
+        let input = match which {
+            0 => mutate(&mut rng, &png),
+            1 => mutate(&mut rng, &f32s),
+            2 => mutate(&mut rng, &sidecar),
+            3 => mutate(&mut rng, &obj),
+            4 => mutate(&mut rng, &scene),
+            5 => mutate(&mut rng, &csv),
+            _ => mutate(&mut rng, &cache_seed),
+        };
+        let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| match which {
+            0 => {
+                std::fs::write(file("x.png"), &input).unwrap();
+                std::fs::write(file("x.toml"), "dh_um = 0.1\nh_max_um = 1\n").unwrap();
+                let _ = HeightField::load(&file("x.png"), None, None);
+            }
+            1 | 2 => {
+                let (data, side) = if which == 1 {
+                    (&input, &sidecar)
+                } else {
+                    (&f32s, &input)
+                };
+                std::fs::write(file("y.f32"), data).unwrap();
+                std::fs::write(file("y.toml"), side).unwrap();
+                let _ = HeightField::load(&file("y.f32"), None, None);
+            }
+            3 => {
+                let text = String::from_utf8_lossy(&input);
+                let _ = Mesh::from_obj_str(&text, Path::new("fuzz.obj"));
+            }
+            4 => {
+                let text = String::from_utf8_lossy(&input);
+                let _ = Scene::from_toml_str(&text, Path::new("fuzz.toml"));
+            }
+            5 => {
+                let text = String::from_utf8_lossy(&input);
+                let _ = parse_queries(Path::new("fuzz.csv"), &text);
+            }
+            _ => {
+                std::fs::write(file("z.bin"), &input).unwrap();
+                let _ = cache::load(&file("z.bin"), key);
+            }
+        }));
+        runs[which] += 1;
+        if outcome.is_err() {
+            panics += 1;
+            let keep = dir.join(format!("panic-{panics}.{}", names[which]));
+            let _ = std::fs::write(&keep, &input);
+            eprintln!(
+                "fuzz: panic in the {} parser, input saved to {}",
+                names[which],
+                keep.display()
+            );
+        }
+    }
+    let total: u64 = runs.iter().sum();
+    let per: Vec<String> = names
+        .iter()
+        .zip(runs)
+        .map(|(n, r)| format!("{n} {r}"))
+        .collect();
+    println!(
+        "fuzz: {total} inputs in {:.0} s ({}), {panics} panic(s)",
+        start.elapsed().as_secs_f64(),
+        per.join(", ")
+    );
+    if panics == 0 {
+        let _ = std::fs::remove_dir_all(&dir);
+    } else {
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,1170 @@
+//! The bad-input corpus: a table of broken or hostile inputs (images, `.f32` files and their
+//! sidecars, OBJ meshes, scene TOML, query CSV, cache files, numeric flags, output paths),
+//! each run through the `diffract` binary. Every failing case must give a non-zero exit,
+//! exactly one `error:` line containing a given phrase, no panic, and leave every file that
+//! existed before byte-for-byte as it was (no output either). Cases that must succeed with a
+//! warning (a corrupt cache is recomputed) say so.
+//!
+//! Most cases run with no Vulkan driver (`VK_ICD_FILENAMES` pointing nowhere): their errors
+//! must be found before the device is opened, so a missing driver message instead of the
+//! expected one means the check came too late.
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+/// What a case must produce.
+#[derive(Clone, Copy)]
+enum Expect {
+    /// Non-zero exit, one `error:` line containing the phrase, no file changed or created.
+    Fail(&'static str),
+    /// Exit 0, no `error:` line, stderr contains the phrase; old files unchanged.
+    Warn(&'static str),
+    /// Exit 0 and no `error:` line; old files unchanged.
+    Ok,
+}
+
+struct Case {
+    name: &'static str,
+    /// Files to create in the case's directory before the run.
+    setup: Box<dyn Fn(&Path) + Sync>,
+    /// Arguments; `{d}` is replaced by the case's directory.
+    args: Vec<&'static str>,
+    /// Extra environment (`{d}` replaced too).
+    env: Vec<(&'static str, &'static str)>,
+    /// Whether the run may open a Vulkan device.
+    gpu: bool,
+    expect: Expect,
+}
+
+fn case(
+    name: &'static str,
+    setup: impl Fn(&Path) + Sync + 'static,
+    args: &[&'static str],
+    expect: Expect,
+) -> Case {
+    Case {
+        name,
+        setup: Box::new(setup),
+        args: args.to_vec(),
+        env: Vec::new(),
+        gpu: false,
+        expect,
+    }
+}
+
+impl Case {
+    fn env(mut self, k: &'static str, v: &'static str) -> Self {
+        self.env.push((k, v));
+        self
+    }
+    fn gpu(mut self) -> Self {
+        self.gpu = true;
+        self
+    }
+}
+
+// ---- file makers -------------------------------------------------------------------------
+
+fn put(p: &Path, bytes: impl AsRef<[u8]>) {
+    if let Some(d) = p.parent() {
+        std::fs::create_dir_all(d).unwrap();
+    }
+    std::fs::write(p, bytes).unwrap();
+}
+
+/// An 8×8 8-bit grayscale PNG with a sidecar: a valid tiny height field.
+fn grey_png(p: &Path) {
+    let img = image::GrayImage::from_fn(8, 8, |x, y| image::Luma([(x * 29 + y * 3) as u8]));
+    img.save(p).unwrap();
+    put(&p.with_extension("toml"), "dh_um = 0.1\nh_max_um = 0.2\n");
+}
+
+fn png_bytes() -> Vec<u8> {
+    let d = std::env::temp_dir().join(format!("diffract-bad-png-{}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    let p = d.join("x.png");
+    image::GrayImage::from_fn(8, 8, |x, _| image::Luma([x as u8]))
+        .save(&p)
+        .unwrap();
+    std::fs::read(&p).unwrap()
+}
+
+fn f32_field(p: &Path, n: usize, sidecar: &str) {
+    let bytes: Vec<u8> = (0..n * n)
+        .flat_map(|i| (0.01 * (i % 7) as f32).to_le_bytes())
+        .collect();
+    put(p, bytes);
+    put(&p.with_extension("toml"), sidecar);
+}
+
+fn link(target: &str, p: &Path) {
+    std::os::unix::fs::symlink(target, p).unwrap();
+}
+
+const HEADER: &str = "theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg,lambda_nm\n";
+
+fn queries(p: &Path) {
+    put(p, format!("{HEADER}30,0,30,180,500\n"));
+}
+
+/// A tiny valid setup for `brdf`: `hf.png` (+ sidecar) and `q.csv`.
+fn brdf_base(d: &Path) {
+    grey_png(&d.join("hf.png"));
+    queries(&d.join("q.csv"));
+}
+
+const BRDF: [&str; 8] = [
+    "brdf",
+    "--heightfield",
+    "{d}/hf.png",
+    "--queries",
+    "{d}/q.csv",
+    "--terms",
+    "2",
+    "--no-cache",
+];
+
+fn brdf_with(extra: &[&'static str]) -> Vec<&'static str> {
+    let mut v = BRDF.to_vec();
+    v.extend_from_slice(extra);
+    v
+}
+
+fn scene(d: &Path, text: &str) {
+    grey_png(&d.join("hf.png"));
+    put(&d.join("s.toml"), text);
+}
+
+const SCENE_OK: &str = "[material]\nheightfield = \"hf.png\"\nterms = 1\n\n[output]\nwidth = 8\nheight = 8\n\n[mesh]\npath = \"m.obj\"\n";
+
+fn obj_scene(d: &Path, obj: &[u8]) {
+    scene(d, SCENE_OK);
+    put(&d.join("m.obj"), obj);
+}
+
+// ---- the table ----------------------------------------------------------------------------
+
+fn corpus() -> Vec<Case> {
+    use Expect::*;
+    let out = ["--out", "{d}/r.csv"];
+    vec![
+        // Images (height fields read by `brdf`).
+        case(
+            "png: empty file",
+            |d| {
+                brdf_base(d);
+                put(&d.join("e.png"), b"");
+                put(&d.join("e.toml"), "dh_um = 0.1\nh_max_um = 1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/e.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("e.png"),
+        ),
+        case(
+            "png: truncated",
+            |d| {
+                brdf_base(d);
+                put(&d.join("t.png"), &png_bytes()[..40]);
+                put(&d.join("t.toml"), "dh_um = 0.1\nh_max_um = 1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/t.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("t.png"),
+        ),
+        case(
+            "png: random bytes",
+            |d| {
+                brdf_base(d);
+                let junk: Vec<u8> = (0..4096u32)
+                    .map(|i| (i.wrapping_mul(2654435761) >> 13) as u8)
+                    .collect();
+                put(&d.join("j.png"), junk);
+                put(&d.join("j.toml"), "dh_um = 0.1\nh_max_um = 1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/j.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("j.png"),
+        ),
+        case(
+            "png: colour image",
+            |d| {
+                brdf_base(d);
+                image::RgbImage::from_pixel(4, 4, image::Rgb([1, 2, 3]))
+                    .save(d.join("c.png"))
+                    .unwrap();
+                put(&d.join("c.toml"), "dh_um = 0.1\nh_max_um = 1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/c.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("c.png"),
+        ),
+        case(
+            "png: a directory",
+            |d| {
+                brdf_base(d);
+                std::fs::create_dir_all(d.join("dir.png")).unwrap();
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/dir.png",
+                "--dh-um",
+                "0.1",
+                "--hmax-um",
+                "1",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("not a regular file"),
+        ),
+        case(
+            "png: /dev/zero",
+            |d| {
+                brdf_base(d);
+                link("/dev/zero", &d.join("z.png"));
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/z.png",
+                "--dh-um",
+                "0.1",
+                "--hmax-um",
+                "1",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("not a regular file"),
+        ),
+        case(
+            "png: missing",
+            brdf_base,
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/none.png",
+                "--dh-um",
+                "0.1",
+                "--hmax-um",
+                "1",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("none.png"),
+        ),
+        case(
+            "image: unknown extension",
+            |d| {
+                brdf_base(d);
+                put(&d.join("x.jpg"), b"\xff\xd8\xff");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/x.jpg",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("unknown height-field format"),
+        ),
+        case(
+            "png: no scale anywhere",
+            |d| {
+                brdf_base(d);
+                image::GrayImage::new(4, 4).save(d.join("n.png")).unwrap();
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/n.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("pixel size unknown"),
+        ),
+        // Raw .f32 height fields.
+        case(
+            "f32: shorter than the sidecar says",
+            |d| {
+                brdf_base(d);
+                put(&d.join("s.f32"), [0u8; 10]);
+                put(&d.join("s.toml"), "nx = 4\nny = 4\ndh_um = 0.1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/s.f32",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("truncated or wrong sidecar"),
+        ),
+        case(
+            "f32: sidecar says 16 KB, file is /dev/zero",
+            |d| {
+                brdf_base(d);
+                link("/dev/zero", &d.join("z.f32"));
+                put(&d.join("z.toml"), "nx = 64\nny = 64\ndh_um = 0.1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/z.f32",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("not a regular file"),
+        ),
+        case(
+            "f32: file far longer than the sidecar says",
+            |d| {
+                brdf_base(d);
+                put(&d.join("l.f32"), vec![0u8; 1 << 20]);
+                put(&d.join("l.toml"), "nx = 4\nny = 4\ndh_um = 0.1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/l.f32",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("1048576 bytes"),
+        ),
+        case(
+            "f32: no sidecar",
+            |d| {
+                brdf_base(d);
+                put(&d.join("ns.f32"), [0u8; 64]);
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/ns.f32",
+                "--dh-um",
+                "0.1",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("need `nx` and `ny`"),
+        ),
+        case(
+            "f32: sidecar size beyond the limit",
+            |d| {
+                brdf_base(d);
+                f32_field(
+                    &d.join("b.f32"),
+                    4,
+                    "nx = 100000\nny = 100000\ndh_um = 0.1\n",
+                );
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/b.f32",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("exceeds the limit"),
+        ),
+        case(
+            "f32: a NaN sample",
+            |d| {
+                brdf_base(d);
+                let mut b = vec![0u8; 64];
+                b[20..24].copy_from_slice(&f32::NAN.to_le_bytes());
+                put(&d.join("nan.f32"), b);
+                put(&d.join("nan.toml"), "nx = 4\nny = 4\ndh_um = 0.1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/nan.f32",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("not finite"),
+        ),
+        // Sidecars.
+        case(
+            "sidecar: syntax error",
+            |d| {
+                brdf_base(d);
+                put(&d.join("hf.toml"), "dh_um = 0.1\nh_max_um = = 1\n");
+            },
+            &brdf_with(&out),
+            Fail("line 2, column"),
+        ),
+        case(
+            "sidecar: unknown key",
+            |d| {
+                brdf_base(d);
+                put(&d.join("hf.toml"), "dh_um = 0.1\nh_max_um = 1\nscale = 3\n");
+            },
+            &brdf_with(&out),
+            Fail("unknown field"),
+        ),
+        case(
+            "sidecar: negative pixel size",
+            |d| {
+                brdf_base(d);
+                put(&d.join("hf.toml"), "dh_um = -0.1\nh_max_um = 1\n");
+            },
+            &brdf_with(&out),
+            Fail("dH"),
+        ),
+        case(
+            "sidecar: NaN height scale",
+            |d| {
+                brdf_base(d);
+                put(&d.join("hf.toml"), "dh_um = 0.1\nh_max_um = nan\n");
+            },
+            &brdf_with(&out),
+            Fail("h_max_um"),
+        ),
+        case(
+            "sidecar: nx disagrees with the image",
+            |d| {
+                brdf_base(d);
+                put(&d.join("hf.toml"), "dh_um = 0.1\nh_max_um = 1\nnx = 9\n");
+            },
+            &brdf_with(&out),
+            Fail("nx = 9"),
+        ),
+        case(
+            "sidecar: a directory",
+            |d| {
+                brdf_base(d);
+                std::fs::remove_file(d.join("hf.toml")).unwrap();
+                std::fs::create_dir_all(d.join("hf.toml")).unwrap();
+            },
+            &brdf_with(&out),
+            Fail("not a regular file"),
+        ),
+        // OBJ meshes (scene renders; content errors surface after the device opened).
+        case(
+            "obj: /dev/zero",
+            |d| {
+                scene(d, SCENE_OK);
+                link("/dev/zero", &d.join("m.obj"));
+            },
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("not a regular file"),
+        ),
+        case(
+            "obj: missing",
+            |d| scene(d, SCENE_OK),
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("m.obj"),
+        ),
+        case(
+            "obj: empty",
+            |d| obj_scene(d, b""),
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("m.obj"),
+        )
+        .gpu(),
+        case(
+            "obj: face index out of range",
+            |d| obj_scene(d, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n"),
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("m.obj"),
+        )
+        .gpu(),
+        case(
+            "obj: binary junk",
+            |d| obj_scene(d, &[0xffu8, 0xfe, 0x00, 0x01, 0x80].repeat(200)),
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("m.obj"),
+        )
+        .gpu(),
+        // Scene TOML.
+        case(
+            "scene: syntax error",
+            |d| scene(d, "[camera]\neye = [0, 1\n"),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("line 3, column 1: invalid array; expected"),
+        ),
+        case(
+            "scene: unknown key",
+            |d| scene(d, "[camera]\nzoom = 2\n"),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("unknown field"),
+        ),
+        case(
+            "scene: semantic error has line and column",
+            |d| scene(d, "[output]\nwidth = 8\n\n[camera]\nfov_y_deg = 200\n"),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("line 5, column 1: [camera] fov_y_deg"),
+        ),
+        case(
+            "scene: mesh path and builtin",
+            |d| scene(d, "[mesh]\nbuiltin = \"sphere\"\npath = \"m.obj\"\n"),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("line 3, column 1: [mesh]"),
+        ),
+        case(
+            "scene: /dev/zero",
+            |d| link("/dev/zero", &d.join("z.toml")),
+            &["render", "--scene", "{d}/z.toml", "-o", "{d}/o.png"],
+            Fail("not a regular file"),
+        ),
+        case(
+            "scene: missing",
+            |_| {},
+            &["render", "--scene", "{d}/none.toml", "-o", "{d}/o.png"],
+            Fail("none.toml"),
+        ),
+        case(
+            "scene: not UTF-8",
+            |d| put(&d.join("s.toml"), b"[camera]\nfov_y_deg = 3\xff\n"),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("not UTF-8"),
+        ),
+        case(
+            "scene: larger than a scene can be",
+            |d| put(&d.join("s.toml"), format!("# {}\n", "x".repeat(1 << 21))),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("at most"),
+        ),
+        // Query CSV.
+        case(
+            "csv: wrong header",
+            |d| {
+                brdf_base(d);
+                put(&d.join("q.csv"), "theta,phi\n1,2\n");
+            },
+            &brdf_with(&out),
+            Fail("header must be"),
+        ),
+        case(
+            "csv: every bad row is reported",
+            |d| {
+                brdf_base(d);
+                put(
+                    &d.join("q.csv"),
+                    format!("{HEADER}30,0,30,180,500\n30,x,30,180,500\n10,0,10,0,500\n1,2,3\n"),
+                );
+            },
+            &brdf_with(&out),
+            Fail("2 bad rows: line 3: phi_i_deg = 'x' is not a number; line 5: expected 5 columns"),
+        ),
+        case(
+            "csv: many bad rows are cut after 20",
+            |d| {
+                brdf_base(d);
+                put(
+                    &d.join("q.csv"),
+                    format!("{HEADER}{}", "1,2,3,4,9999\n".repeat(30)),
+                );
+            },
+            &brdf_with(&out),
+            Fail("30 bad rows"),
+        ),
+        case(
+            "csv: /dev/zero",
+            |d| {
+                brdf_base(d);
+                std::fs::remove_file(d.join("q.csv")).unwrap();
+                link("/dev/zero", &d.join("q.csv"));
+            },
+            &brdf_with(&out),
+            Fail("not a regular file"),
+        ),
+        case(
+            "csv: empty",
+            |d| {
+                brdf_base(d);
+                put(&d.join("q.csv"), "");
+            },
+            &brdf_with(&out),
+            Fail("empty file"),
+        ),
+        case(
+            "csv: not UTF-8",
+            |d| {
+                brdf_base(d);
+                put(&d.join("q.csv"), b"theta_i_deg\xff\n");
+            },
+            &brdf_with(&out),
+            Fail("not UTF-8"),
+        ),
+        case(
+            "csv: wavelength out of range",
+            |d| {
+                brdf_base(d);
+                put(&d.join("q.csv"), format!("{HEADER}30,0,30,180,900\n"));
+            },
+            &brdf_with(&out),
+            Fail("lambda_nm = 900"),
+        ),
+        case(
+            "csv: a UTF-8 byte-order mark is accepted",
+            |d| {
+                brdf_base(d);
+                put(
+                    &d.join("q.csv"),
+                    format!("\u{feff}{HEADER}30,0,30,180,500\n"),
+                );
+            },
+            &brdf_with(&out),
+            Ok,
+        ),
+        // Cache files: a bad one is reported, recomputed and replaced; never fatal.
+        // The runner fills the cache first and then breaks its files (see `break_cache`).
+        case(
+            "cache: truncated term file",
+            brdf_base,
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/hf.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+                "--terms",
+                "2",
+                "--cache-dir",
+                "{d}/cache",
+            ],
+            Warn("too short"),
+        ),
+        case(
+            "cache: term file overwritten with junk",
+            brdf_base,
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/hf.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+                "--terms",
+                "2",
+                "--cache-dir",
+                "{d}/cache",
+            ],
+            Warn("bad magic"),
+        ),
+        case(
+            "cache: term file with one flipped byte",
+            brdf_base,
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/hf.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+                "--terms",
+                "2",
+                "--cache-dir",
+                "{d}/cache",
+            ],
+            Warn("checksum mismatch"),
+        ),
+        case(
+            "cache: DIFFRACT_CACHE_MAX is not a size",
+            brdf_base,
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/hf.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+                "--terms",
+                "2",
+                "--cache-dir",
+                "{d}/cache",
+            ],
+            Fail("DIFFRACT_CACHE_MAX"),
+        )
+        .env("DIFFRACT_CACHE_MAX", "lots"),
+        case(
+            "cache: a stack larger than the cap is not written",
+            brdf_base,
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/hf.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+                "--terms",
+                "2",
+                "--cache-dir",
+                "{d}/cache",
+            ],
+            Warn("not cached"),
+        )
+        .env("DIFFRACT_CACHE_MAX", "100"),
+        case(
+            "cache: clear on a file",
+            |d| put(&d.join("notadir"), b"x"),
+            &["cache", "clear", "--cache-dir", "{d}/notadir"],
+            Fail("notadir"),
+        ),
+        // Numeric flags.
+        case(
+            "flag: --dh-um 1e18 does not overflow",
+            brdf_base,
+            &brdf_with(&["--dh-um", "1e18", "--out", "{d}/r.csv"]),
+            Warn("exceeds λ_min/4"),
+        ),
+        case(
+            "flag: --terms 65",
+            brdf_base,
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/hf.png",
+                "--queries",
+                "{d}/q.csv",
+                "--terms",
+                "65",
+                "--out",
+                "{d}/r.csv",
+            ],
+            Fail("at most 64 terms"),
+        ),
+        case(
+            "flag: --coherence-um nan",
+            brdf_base,
+            &brdf_with(&["--coherence-um", "nan", "--out", "{d}/r.csv"]),
+            Fail("coherence"),
+        ),
+        case(
+            "flag: eval-grating --step-deg 1e-5",
+            |_| {},
+            &["eval-grating", "--step-deg", "1e-5", "--no-cache"],
+            Fail("step-deg"),
+        ),
+        case(
+            "flag: eval-grating --azimuth nan",
+            |_| {},
+            &["eval-grating", "--azimuth", "nan", "--no-cache"],
+            Fail("invalid azimuth"),
+        ),
+        case(
+            "flag: eval-grating with a billion wavelengths",
+            |_| {},
+            &[
+                "eval-grating",
+                "--lambdas-nm",
+                "400",
+                "700",
+                "1e-7",
+                "--no-cache",
+            ],
+            Fail("wavelengths"),
+        ),
+        case(
+            "flag: render --brdf-map --size 0",
+            |_| {},
+            &["render", "--brdf-map", "--size", "0", "-o", "{d}/m.exr"],
+            Fail("BRDF map size"),
+        ),
+        case(
+            "flag: render --brdf-map --theta-i 91",
+            |_| {},
+            &["render", "--brdf-map", "--theta-i", "91", "-o", "{d}/m.exr"],
+            Fail("theta-i"),
+        ),
+        case(
+            "flag: --size without --brdf-map",
+            |_| {},
+            &["render", "--size", "64", "-o", "{d}/o.png"],
+            Fail("--size only apply with --brdf-map"),
+        ),
+        case(
+            "flag: --theta-i and --png without --brdf-map",
+            |_| {},
+            &["render", "--theta-i", "10", "--png", "-o", "{d}/o.exr"],
+            Fail("--theta-i, --png only apply with --brdf-map"),
+        ),
+        case(
+            "flag: --png with a PNG output",
+            |_| {},
+            &["render", "--brdf-map", "--png", "-o", "{d}/m.png"],
+            Fail("--png adds a PNG beside an .exr"),
+        ),
+        case(
+            "flag: --width 0",
+            |_| {},
+            &["render", "--width", "0", "-o", "{d}/o.png"],
+            Fail("image size"),
+        ),
+        case(
+            "flag: profile scores more pixels than the map has",
+            |_| {},
+            &[
+                "profile",
+                "--size",
+                "2",
+                "--pixels",
+                "1000000",
+                "--no-cache",
+            ],
+            Fail("invalid pixels: 1000000 spread + 64 brightest; a 2² map has 4 pixels"),
+        ),
+        // Output paths.
+        case(
+            "output: directory does not exist",
+            |_| {},
+            &["render", "-o", "{d}/missing/o.png"],
+            Fail("does not exist"),
+        ),
+        case(
+            "output: the height field itself",
+            |d| grey_png(&d.join("hf.png")),
+            &[
+                "render",
+                "--brdf-map",
+                "--heightfield",
+                "{d}/hf.png",
+                "-o",
+                "{d}/hf.png",
+            ],
+            Fail("refusing to overwrite"),
+        ),
+        case(
+            "output: the --png sibling is the height field",
+            |d| grey_png(&d.join("hf.png")),
+            &[
+                "render",
+                "--brdf-map",
+                "--heightfield",
+                "{d}/hf.png",
+                "-o",
+                "{d}/hf.exr",
+                "--png",
+            ],
+            Fail("--png image"),
+        ),
+        case(
+            "output: brdf --out is the query file",
+            brdf_base,
+            &brdf_with(&["--out", "{d}/q.csv"]),
+            Fail("refusing to overwrite"),
+        ),
+        case(
+            "output: brdf --out is the height field's sidecar",
+            brdf_base,
+            &brdf_with(&["--out", "{d}/hf.toml"]),
+            Fail("sidecar"),
+        ),
+        case(
+            "output: brdf --out is a directory",
+            brdf_base,
+            &brdf_with(&["--out", "{d}"]),
+            Fail("is a directory"),
+        ),
+        case(
+            "output: heightfield -o X.f32 beside X.png",
+            |d| grey_png(&d.join("hf.png")),
+            &[
+                "heightfield",
+                "--kind",
+                "sinusoidal",
+                "--size-um",
+                "2",
+                "--dh-um",
+                "0.0625",
+                "-o",
+                "{d}/hf.f32",
+            ],
+            Fail("also the sidecar of"),
+        ),
+        case(
+            "output: heightfield into a missing directory",
+            |_| {},
+            &[
+                "heightfield",
+                "--kind",
+                "sinusoidal",
+                "--size-um",
+                "2",
+                "--dh-um",
+                "0.0625",
+                "-o",
+                "{d}/no/hf.png",
+            ],
+            Fail("does not exist"),
+        ),
+        case(
+            "output: profile --csv is the height field",
+            |d| grey_png(&d.join("hf.png")),
+            &[
+                "profile",
+                "--heightfield",
+                "{d}/hf.png",
+                "--csv",
+                "{d}/hf.png",
+                "--no-cache",
+            ],
+            Fail("refusing to overwrite"),
+        ),
+        case(
+            "output: unsupported image format",
+            |_| {},
+            &["render", "-o", "{d}/o.jpg"],
+            Fail("o.jpg"),
+        ),
+    ]
+}
+
+// ---- the runner ---------------------------------------------------------------------------
+
+/// Every file under `dir` (not following links), with its bytes or link target.
+fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
+    let mut out = BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        let Ok(rd) = std::fs::read_dir(&d) else {
+            continue;
+        };
+        for e in rd.flatten() {
+            let p = e.path();
+            let meta = std::fs::symlink_metadata(&p).unwrap();
+            if meta.is_dir() {
+                out.insert(p.clone(), b"<dir>".to_vec());
+                stack.push(p);
+            } else if meta.file_type().is_symlink() {
+                let t = std::fs::read_link(&p).unwrap();
+                out.insert(p, t.to_string_lossy().as_bytes().to_vec());
+            } else {
+                out.insert(p.clone(), std::fs::read(&p).unwrap());
+            }
+        }
+    }
+    out
+}
+
+fn run(c: &Case, root: &Path, index: usize) -> Result<(), String> {
+    let d = root.join(format!("case{index:02}"));
+    let _ = std::fs::remove_dir_all(&d);
+    std::fs::create_dir_all(&d).unwrap();
+    (c.setup)(&d);
+    let ds = d.to_str().unwrap();
+    let args: Vec<String> = c.args.iter().map(|a| a.replace("{d}", ds)).collect();
+    let mut cmd = Command::new(env!("CARGO_BIN_EXE_diffract"));
+    cmd.args(&args).env("DIFFRACT_CACHE", "");
+    if !c.gpu {
+        cmd.env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+            .env("VK_DRIVER_FILES", "/nonexistent/icd.json");
+    }
+    for (k, v) in &c.env {
+        cmd.env(k, v.replace("{d}", ds));
+    }
+    if let Some(rest) = c.name.strip_prefix("cache: ") {
+        if rest.starts_with("t") {
+            // Fill the cache, then break each term file the way the case says.
+            let o = cmd.output().unwrap();
+            if !o.status.success() {
+                return Err(format!(
+                    "first run failed: {}",
+                    String::from_utf8_lossy(&o.stderr)
+                ));
+            }
+            for e in std::fs::read_dir(d.join("cache")).unwrap().flatten() {
+                let mut b = std::fs::read(e.path()).unwrap();
+                match rest {
+                    "truncated term file" => b.truncate(30),
+                    "term file overwritten with junk" => b.fill(0x5a),
+                    _ => {
+                        let mid = b.len() / 2;
+                        b[mid] ^= 4;
+                    }
+                }
+                std::fs::write(e.path(), b).unwrap();
+            }
+        }
+    }
+    let before = snapshot(&d);
+    let o: Output = cmd.output().unwrap();
+    let after = snapshot(&d);
+    let err = String::from_utf8_lossy(&o.stderr);
+    let ctx = || format!("{args:?}\nstatus {:?}\nstderr:\n{err}", o.status.code());
+    if err.contains("panicked") || o.status.code().is_none_or(|c| c > 2) {
+        return Err(format!("panic or crash: {}", ctx()));
+    }
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error")).collect();
+    let other: Vec<&str> = err
+        .lines()
+        .filter(|l| !l.starts_with("warning:") && !l.starts_with("error"))
+        .collect();
+    match c.expect {
+        Expect::Fail(needle) => {
+            if o.status.success() {
+                return Err(format!("expected failure: {}", ctx()));
+            }
+            if errors.len() != 1 || !other.is_empty() {
+                return Err(format!("expected exactly one error line: {}", ctx()));
+            }
+            if !errors[0].starts_with("error: ") || !errors[0].contains(needle) {
+                return Err(format!("'{needle}' not in the error line: {}", ctx()));
+            }
+            if before != after {
+                let changed: Vec<_> = after
+                    .keys()
+                    .chain(before.keys())
+                    .filter(|k| before.get(*k) != after.get(*k))
+                    .collect();
+                return Err(format!("files changed {changed:?}: {}", ctx()));
+            }
+        }
+        Expect::Warn(_) | Expect::Ok => {
+            if !o.status.success() || !errors.is_empty() {
+                return Err(format!("expected success: {}", ctx()));
+            }
+            if let Expect::Warn(needle) = c.expect {
+                if !err.contains(needle) {
+                    return Err(format!("'{needle}' not in stderr: {}", ctx()));
+                }
+            }
+            for (k, v) in &before {
+                let is_cache = k.starts_with(d.join("cache"));
+                if !is_cache && after.get(k) != Some(v) {
+                    return Err(format!("{} changed: {}", k.display(), ctx()));
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+#[test]
+fn corpus_has_at_least_40_cases_across_every_kind() {
+    let cases = corpus();
+    assert!(cases.len() >= 40, "{} cases", cases.len());
+    for kind in [
+        "png", "f32", "sidecar", "obj", "scene", "csv", "cache", "flag", "output",
+    ] {
+        assert!(
+            cases.iter().filter(|c| c.name.starts_with(kind)).count() >= 3,
+            "fewer than 3 {kind} cases"
+        );
+    }
+}
+
+#[test]
+fn every_bad_input_gives_one_error_line_and_touches_nothing() {
+    let root = std::env::temp_dir().join(format!("diffract-bad-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let cases = corpus();
+    // Two workers: the machine running CI may have few cores.
+    let failures = std::sync::Mutex::new(Vec::new());
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    std::thread::scope(|s| {
+        for _ in 0..2 {
+            s.spawn(|| loop {
+                let i = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                let Some(c) = cases.get(i) else { break };
+                if let Err(msg) = run(c, &root, i) {
+                    failures.lock().unwrap().push(format!("[{}] {msg}", c.name));
+                }
+            });
+        }
+    });
+    let failures = failures.into_inner().unwrap();
+    assert!(
+        failures.is_empty(),
+        "{} of {} cases failed:\n\n{}",
+        failures.len(),
+        cases.len(),
+        failures.join("\n\n")
+    );
+    let _ = std::fs::remove_dir_all(&root);
+}
