@@ -75,7 +75,7 @@ pub fn grating_equation(
             .iter()
             .map(|&t| {
                 let wr = signed_direction(t, azimuth_deg);
-                model::rho(&p.stack, p.material.terms, &p.window, &p.shading, wi, wr, l)
+                model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, l)
             })
             .collect();
         // Diffraction peaks outside the specular lobe (|u| above a few window widths

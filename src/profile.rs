@@ -33,7 +33,7 @@ impl Variant {
     pub fn material(&self, base: &Material) -> Material {
         Material {
             expansion: self.expansion,
-            terms: self.terms,
+            terms: crate::material::Terms::Fixed(self.terms),
             window_radius: self.window_radius,
             lambda_step_nm: self.lambda_step_nm,
             ..base.clone()
@@ -237,7 +237,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                 let wr = map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
                 model::xyz(
                     &prepared.stack,
-                    material.terms,
+                    prepared.terms(),
                     &prepared.window,
                     &prepared.shading,
                     &prepared.colour,

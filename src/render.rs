@@ -111,9 +111,10 @@ struct Variant {
 
 impl Variant {
     fn of(prepared: &PreparedMaterial, storage: StorageFormat, output: OutputMode) -> Self {
-        let m = &prepared.material;
         Variant {
-            terms: m.terms.min(prepared.stack.term_count().saturating_sub(1)) as u32,
+            terms: prepared
+                .terms()
+                .min(prepared.stack.term_count().saturating_sub(1)) as u32,
             window_radius: prepared.window.radius as u32,
             lambda_step_nm: prepared.colour.step_nm,
             expansion: prepared.stack.expansion,
