@@ -18,6 +18,7 @@ pub mod heightfield;
 pub mod image_io;
 pub mod material;
 pub mod mesh;
+pub mod plot;
 pub mod profile;
 pub mod render;
 pub mod scene;
