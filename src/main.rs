@@ -25,6 +25,9 @@ enum Command {
     EvalGrating(diffract::eval::EvalArgs),
     /// Shader variants on the GPU: error against the f64 reference together with GPU time.
     Profile(diffract::profile::ProfileArgs),
+    /// Stability matrix: error of each evaluator against the f64 reference over heights,
+    /// light angles, wavelengths and expansions, with the terms used and pass/warned/refused.
+    Stability(diffract::stability::StabilityArgs),
 }
 
 fn main() -> ExitCode {
@@ -35,6 +38,7 @@ fn main() -> ExitCode {
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),
+        Command::Stability(a) => diffract::stability::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,
