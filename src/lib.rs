@@ -16,6 +16,7 @@ pub mod fsutil;
 pub mod gpu;
 pub mod heightfield;
 pub mod image_io;
+pub mod leave_out;
 pub mod material;
 pub mod mesh;
 pub mod plot;
