@@ -51,8 +51,9 @@ fn signed_direction(theta_deg: f64, azimuth_deg: f64) -> [f64; 3] {
 /// Runs the experiment for light at `theta_i_deg` in the plane of azimuth `azimuth_deg`
 /// (0: across lines that run along y). Following the thesis, the peak at each wavelength is
 /// the viewing angle of **peak reflectance away from the specular lobe**: the largest local
-/// maximum of `ρ(θr)` with `|u|` beyond the lobe, refined by a parabola through the three
-/// samples around it (grid step `step_deg`), and read as the first order.
+/// maximum of `ρ(θr)` with `|u|` beyond the lobe, read at its first order (see
+/// [`first_order`]: on tall gratings a higher order can be the brightest), refined by a
+/// parabola through the three samples around it (grid step `step_deg`).
 ///
 /// (An earlier rule took the maximum nearest to specular above 5% of the strongest. On a
 /// crop whose edges do not tile, the crop is a grating of its own size, and its weak orders
@@ -101,13 +102,14 @@ pub fn grating_equation(
         // (periods up to 20 λ). Outside it, the strongest local maximum is the peak.
         let lobe = (10.0 * l * 1e-3 / (2.0 * std::f64::consts::PI * sigma_s)).max(0.05);
         let u_of = |k: usize| (si + thetas[k].to_radians().sin()).abs();
-        let best = (1..thetas.len() - 1)
+        let peaks: Vec<usize> = (1..thetas.len() - 1)
             .filter(|&k| u_of(k) > lobe && rho[k] > rho[k - 1] && rho[k] >= rho[k + 1])
-            .max_by(|&a, &b| rho[a].total_cmp(&rho[b]));
-        let Some(k) = best else {
+            .collect();
+        let Some(&brightest) = peaks.iter().max_by(|&&a, &&b| rho[a].total_cmp(&rho[b])) else {
             rho_map.push(rho);
             continue;
         };
+        let k = first_order(&peaks, &rho, brightest, &u_of);
         let (a, b, c) = (rho[k - 1], rho[k], rho[k + 1]);
         let denom = a - 2.0 * b + c;
         let shift = if denom.abs() > 0.0 {
@@ -146,6 +148,45 @@ pub fn grating_equation(
         thetas_deg: thetas,
         rho: rho_map,
     })
+}
+
+/// Largest diffraction order the brightest peak is read as.
+const MAX_ORDER: usize = 10;
+
+/// Share of the brightest peak a lower peak needs to be taken as its first order. On the
+/// Xenopeltis-like grating (0.82 µm) the first order is 27–100% of the brightest; on the
+/// measured 100² Elaphe crop the crop's own first order (its seam) is 6–8% of the ridge
+/// peak, which sits exactly at the crop's 6th order.
+const SUBHARMONIC_SHARE: f64 = 0.2;
+
+/// The first order belonging to the brightest peak: on a tall grating (Xenopeltis-like,
+/// `k|w|h` of several radians) an order `m > 1` can outshine the first, and reading it as the
+/// first would give `d/m`. The first order is the lowest strong peak (≥ 20% of the
+/// brightest) whose `|u|` divides the brightest's by a whole `m ≤ 10` within 0.5% (peak
+/// positions on the 0.01° grid are good to ~0.1%); the brightest itself when none does. A
+/// crop's own orders (`|u| = jλ/L`) miss these ratios by the crop's mismatch with the period
+/// (1.2% for 8.1 periods), and the lobe cut removes those of crops much larger than it.
+fn first_order(
+    peaks: &[usize],
+    rho: &[f64],
+    brightest: usize,
+    u_of: &impl Fn(usize) -> f64,
+) -> usize {
+    let ub = u_of(brightest);
+    let mut candidates: Vec<usize> = peaks
+        .iter()
+        .copied()
+        .filter(|&k| rho[k] >= SUBHARMONIC_SHARE * rho[brightest] && u_of(k) < ub)
+        .collect();
+    candidates.sort_by(|&a, &b| u_of(a).total_cmp(&u_of(b)));
+    candidates
+        .into_iter()
+        .find(|&k| {
+            let ratio = ub / u_of(k);
+            let m = ratio.round();
+            m >= 2.0 && m <= MAX_ORDER as f64 && (ratio - m).abs() <= 0.005 * ratio
+        })
+        .unwrap_or(brightest)
 }
 
 /// `diffract eval-grating` options.
