@@ -5,6 +5,8 @@
 
 use std::path::PathBuf;
 
+use rayon::prelude::*;
+
 use crate::brdf::{direction, model};
 use crate::material::{default_cache_dir, MaterialArgs, PreparedMaterial};
 use crate::{Error, Result};
@@ -26,6 +28,12 @@ pub struct GratingReport {
     pub samples: Vec<PeakSample>,
     pub mean_nm: f64,
     pub variance_nm2: f64,
+    /// The wavelengths scanned (nm).
+    pub lambdas_nm: Vec<f64>,
+    /// The signed viewing angles scanned (degrees).
+    pub thetas_deg: Vec<f64>,
+    /// `ρ[λ index][θ index]`, the f64 model.
+    pub rho: Vec<Vec<f64>>,
 }
 
 /// Signed in-plane direction: negative angles lie on the mirror side (`φ = 180°`).
@@ -41,10 +49,15 @@ fn signed_direction(theta_deg: f64, azimuth_deg: f64) -> [f64; 3] {
 }
 
 /// Runs the experiment for light at `theta_i_deg` in the plane of azimuth `azimuth_deg`
-/// (0: across lines that run along y). The first order is the diffraction peak of `ρ(θr)`
-/// nearest to specular in `u` (ignoring the specular lobe and peaks under 5% of the
-/// strongest), refined by a parabola through the three samples around it (grid step
-/// `step_deg`).
+/// (0: across lines that run along y). Following the thesis, the peak at each wavelength is
+/// the viewing angle of **peak reflectance away from the specular lobe**: the largest local
+/// maximum of `ρ(θr)` with `|u|` beyond the lobe, read at its first order (see
+/// [`first_order`]: on tall gratings a higher order can be the brightest), refined by a
+/// parabola through the three samples around it (grid step `step_deg`).
+///
+/// (An earlier rule took the maximum nearest to specular above 5% of the strongest. On a
+/// crop whose edges do not tile, the crop is a grating of its own size, and its weak orders
+/// near specular won: the experiment reported the crop size instead of the ridge period.)
 pub fn grating_equation(
     p: &PreparedMaterial,
     theta_i_deg: f64,
@@ -70,32 +83,33 @@ pub fn grating_equation(
     let n = (179.8 / step_deg).floor() as usize;
     let thetas: Vec<f64> = (0..=n).map(|k| -89.9 + k as f64 * step_deg).collect();
     let mut samples = Vec::new();
+    let mut rho_map = Vec::with_capacity(lambdas_nm.len());
     for &l in lambdas_nm {
         let rho: Vec<f64> = thetas
-            .iter()
+            .par_iter()
             .map(|&t| {
                 let wr = signed_direction(t, azimuth_deg);
-                model::rho(&p.stack, p.material.terms, &p.window, &p.shading, wi, wr, l)
+                model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, l)
             })
             .collect();
-        // Diffraction peaks outside the specular lobe (|u| above a few window widths
-        // λ/(2πσs), and at least 0.05, i.e. periods up to 20 λ). Order m sits at
-        // |u| = mλ/d, so the first order is the peak nearest to specular in u; peaks below
-        // 5% of the strongest are side lobes of the window and irregularity, not orders.
+        if let Some(k) = rho.iter().position(|r| !r.is_finite()) {
+            return Err(Error::invalid(
+                "grating",
+                format!("ρ is not finite at λ = {l} nm, θr = {}°", thetas[k]),
+            ));
+        }
+        // The specular lobe: |u| within a few window widths λ/(2πσs), and at least 0.05
+        // (periods up to 20 λ). Outside it, the strongest local maximum is the peak.
         let lobe = (10.0 * l * 1e-3 / (2.0 * std::f64::consts::PI * sigma_s)).max(0.05);
         let u_of = |k: usize| (si + thetas[k].to_radians().sin()).abs();
         let peaks: Vec<usize> = (1..thetas.len() - 1)
             .filter(|&k| u_of(k) > lobe && rho[k] > rho[k - 1] && rho[k] >= rho[k + 1])
             .collect();
-        let strongest = peaks.iter().map(|&k| rho[k]).fold(0.0, f64::max);
-        let best = peaks
-            .iter()
-            .filter(|&&k| rho[k] >= 0.05 * strongest)
-            .map(|&k| (u_of(k), k))
-            .min_by(|a, b| a.0.total_cmp(&b.0));
-        let Some((_, k)) = best else {
+        let Some(&brightest) = peaks.iter().max_by(|&&a, &&b| rho[a].total_cmp(&rho[b])) else {
+            rho_map.push(rho);
             continue;
         };
+        let k = first_order(&peaks, &rho, brightest, &u_of);
         let (a, b, c) = (rho[k - 1], rho[k], rho[k + 1]);
         let denom = a - 2.0 * b + c;
         let shift = if denom.abs() > 0.0 {
@@ -110,6 +124,7 @@ pub fn grating_equation(
             theta_r_deg: theta,
             period_nm,
         });
+        rho_map.push(rho);
     }
     if samples.is_empty() {
         return Err(Error::invalid(
@@ -129,7 +144,49 @@ pub fn grating_equation(
         samples,
         mean_nm,
         variance_nm2,
+        lambdas_nm: lambdas_nm.to_vec(),
+        thetas_deg: thetas,
+        rho: rho_map,
     })
+}
+
+/// Largest diffraction order the brightest peak is read as.
+const MAX_ORDER: usize = 10;
+
+/// Share of the brightest peak a lower peak needs to be taken as its first order. On the
+/// Xenopeltis-like grating (0.82 µm) the first order is 27–100% of the brightest; on the
+/// measured 100² Elaphe crop the crop's own first order (its seam) is 6–8% of the ridge
+/// peak, which sits exactly at the crop's 6th order.
+const SUBHARMONIC_SHARE: f64 = 0.2;
+
+/// The first order belonging to the brightest peak: on a tall grating (Xenopeltis-like,
+/// `k|w|h` of several radians) an order `m > 1` can outshine the first, and reading it as the
+/// first would give `d/m`. The first order is the lowest strong peak (≥ 20% of the
+/// brightest) whose `|u|` divides the brightest's by a whole `m ≤ 10` within 0.5% (peak
+/// positions on the 0.01° grid are good to ~0.1%); the brightest itself when none does. A
+/// crop's own orders (`|u| = jλ/L`) miss these ratios by the crop's mismatch with the period
+/// (1.2% for 8.1 periods), and the lobe cut removes those of crops much larger than it.
+fn first_order(
+    peaks: &[usize],
+    rho: &[f64],
+    brightest: usize,
+    u_of: &impl Fn(usize) -> f64,
+) -> usize {
+    let ub = u_of(brightest);
+    let mut candidates: Vec<usize> = peaks
+        .iter()
+        .copied()
+        .filter(|&k| rho[k] >= SUBHARMONIC_SHARE * rho[brightest] && u_of(k) < ub)
+        .collect();
+    candidates.sort_by(|&a, &b| u_of(a).total_cmp(&u_of(b)));
+    candidates
+        .into_iter()
+        .find(|&k| {
+            let ratio = ub / u_of(k);
+            let m = ratio.round();
+            m >= 2.0 && m <= MAX_ORDER as f64 && (ratio - m).abs() <= 0.005 * ratio
+        })
+        .unwrap_or(brightest)
 }
 
 /// `diffract eval-grating` options.
@@ -158,6 +215,82 @@ pub struct EvalArgs {
     /// Print each wavelength's peak.
     #[arg(long)]
     pub verbose: bool,
+    /// Write a PNG: log ρ over λ (x, left to right) and signed θr (y, −90° at the bottom),
+    /// the peaks found (white) and the grating equation at the mean period (green).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+/// Rows of the plot (θr is pooled by maximum into this many bands).
+const PLOT_ROWS: usize = 360;
+
+/// Writes the thesis-style evaluation figure of `r` (see [`EvalArgs::plot`]).
+pub fn write_plot(r: &GratingReport, path: &std::path::Path) -> Result<()> {
+    let n_theta = r.thetas_deg.len();
+    let (t0, t1) = (r.thetas_deg[0], r.thetas_deg[n_theta - 1]);
+    let rows = PLOT_ROWS.min(n_theta);
+    let mut values = vec![vec![0.0f64; r.lambdas_nm.len()]; rows];
+    for (c, rho) in r.rho.iter().enumerate() {
+        for (k, v) in rho.iter().enumerate() {
+            let row = (k * rows / n_theta).min(rows - 1);
+            values[row][c] = values[row][c].max(*v);
+        }
+    }
+    let dl = if r.lambdas_nm.len() > 1 {
+        r.lambdas_nm[1] - r.lambdas_nm[0]
+    } else {
+        1.0
+    };
+    let (l0, l1) = (
+        r.lambdas_nm[0] - 0.5 * dl,
+        r.lambdas_nm[r.lambdas_nm.len() - 1] + 0.5 * dl,
+    );
+    let si = r.theta_i_deg.to_radians().sin();
+    let peaks = crate::plot::Curve {
+        points: r
+            .samples
+            .iter()
+            .map(|s| (s.lambda_nm, s.theta_r_deg))
+            .collect(),
+        colour: (255, 255, 255),
+    };
+    // The side of specular the peaks lie on: si + sin θr = ±λ/d.
+    let side = r
+        .samples
+        .iter()
+        .map(|s| (si + s.theta_r_deg.to_radians().sin()).signum())
+        .sum::<f64>()
+        .signum();
+    let grating = crate::plot::Curve {
+        points: r
+            .lambdas_nm
+            .iter()
+            .map(|&l| {
+                let s = side * l / r.mean_nm - si;
+                (
+                    l,
+                    if s.abs() <= 1.0 {
+                        s.asin().to_degrees()
+                    } else {
+                        f64::NAN
+                    },
+                )
+            })
+            .collect(),
+        colour: (0, 220, 0),
+    };
+    crate::plot::write_heat_map(
+        path,
+        &crate::plot::Heat {
+            values: &values,
+            x: (l0, l1),
+            y: (t0, t1),
+            log: true,
+        },
+        &[grating, peaks],
+        640,
+        480,
+    )
 }
 
 /// Runs `diffract eval-grating`.
@@ -176,10 +309,19 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let cache = (!args.no_cache)
         .then(|| args.cache_dir.clone().or_else(default_cache_dir))
         .flatten();
-    let p = material.prepare(cache.as_deref())?;
+    // The f64 model evaluates in-plane directions only: |w| ≤ cos θi + 1.
+    let p = material.prepare_for(
+        cache.as_deref(),
+        &crate::brdf::truncation::Reach::brdf_map(args.theta_i),
+        crate::brdf::truncation::Precision::F64,
+    )?;
     let spin = crate::progress::spinner("grating equation");
     let r = grating_equation(&p, args.theta_i, args.azimuth, &lambdas, args.step_deg)?;
     drop(spin);
+    if let Some(path) = &args.plot {
+        write_plot(&r, path)?;
+        eprintln!("plot → {}", path.display());
+    }
     if args.verbose {
         for s in &r.samples {
             println!(

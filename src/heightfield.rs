@@ -19,6 +19,20 @@ pub use io::{sidecar_path, BUILTIN_PREFIX};
 /// term of that size another 256 MiB: beyond this the precompute is not interactive.
 pub const MAX_SIDE: usize = 4096;
 
+/// Smallest accepted pixel size (µm, 0.1 nm). At `dH = 1e-20 µm` the lookup offset
+/// `u·N·dH/λ` vanishes next to the centre index `N/2` in f64, so every direction read the
+/// specular texel and off-specular `ρ` was nonzero; at 0.1 nm the patch is already far below
+/// a wavelength and the offset is still exact to ~1e-12 texels.
+pub const MIN_DH_UM: f64 = 1e-4;
+/// Largest accepted pixel size (µm, 1 mm): lookups then sit millions of texels off centre,
+/// beyond what float32 positions resolve.
+pub const MAX_DH_UM: f64 = 1e3;
+/// Largest accepted |height| (µm). Taylor terms reach `h^64`, which must stay finite in f64
+/// (`1e3^64 = 1e192`); anything this tall is far beyond what any expansion can sum (the
+/// term planner refuses well before), and a stray `1e30` sample or `h_max = 1e6` turned every
+/// output into inf/NaN.
+pub const MAX_HEIGHT_UM: f64 = 1e3;
+
 /// A periodic height field. Sample (column `c`, row `r`) sits at `x = c·dH`, `y = r·dH`;
 /// `x` runs along the surface tangent. Heights are stored row-major in µm.
 #[derive(Debug, Clone, PartialEq)]
@@ -57,10 +71,32 @@ impl HeightField {
                 format!("{dh_um} µm; the pixel size must be a finite positive length"),
             ));
         }
+        if !(MIN_DH_UM..=MAX_DH_UM).contains(&dh_um) {
+            return Err(Error::invalid(
+                "dH",
+                format!(
+                    "{dh_um} µm; the pixel size must lie in [{MIN_DH_UM}, {MAX_DH_UM}] µm \
+                     (0.1 nm to 1 mm): below it the lookup offset u·N·dH/λ is lost to rounding \
+                     and off-specular directions read the specular lobe"
+                ),
+            ));
+        }
         if let Some(i) = heights_um.iter().position(|h| !h.is_finite()) {
             return Err(Error::invalid(
                 "height field",
                 format!("sample (column {}, row {}) is not finite", i % nx, i / nx),
+            ));
+        }
+        if let Some(i) = heights_um.iter().position(|h| h.abs() > MAX_HEIGHT_UM) {
+            return Err(Error::invalid(
+                "height field",
+                format!(
+                    "sample (column {}, row {}) is {} µm; heights must lie within ±{MAX_HEIGHT_UM} µm \
+                     (check h_max and the units: heights are in µm)",
+                    i % nx,
+                    i / nx,
+                    heights_um[i]
+                ),
             ));
         }
         Ok(Self {

@@ -17,6 +17,7 @@ pub mod gpu;
 pub mod guard;
 pub mod heightfield;
 pub mod image_io;
+pub mod leave_out;
 pub mod material;
 pub mod mesh;
 pub mod plot;
@@ -25,5 +26,6 @@ pub mod progress;
 pub mod render;
 pub mod scene;
 pub mod spectrum;
+pub mod stability;
 
 pub use error::{Error, Result};

@@ -29,6 +29,9 @@ enum Command {
     Variants,
     /// The DFT-term cache: list its files or clear it.
     Cache(diffract::spectrum::cache::CacheArgs),
+    /// Stability matrix: error of each evaluator against the f64 reference over heights,
+    /// light angles, wavelengths and expansions, with the terms used and pass/warned/refused.
+    Stability(diffract::stability::StabilityArgs),
 }
 
 fn main() -> ExitCode {
@@ -45,6 +48,7 @@ fn main() -> ExitCode {
             Ok(())
         }
         Command::Cache(a) => diffract::spectrum::cache::run(a),
+        Command::Stability(a) => diffract::stability::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

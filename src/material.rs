@@ -5,11 +5,19 @@
 
 use std::path::PathBuf;
 
+use crate::brdf::truncation::{self, Geometry, Precision, Reach, TermPlan};
 use crate::brdf::Shading;
 use crate::colour::ColourTable;
 use crate::heightfield::HeightField;
 use crate::spectrum::{self, Expansion, TermRequest, TermStack, Window};
 use crate::{Error, Result};
+
+pub use crate::brdf::truncation::Terms;
+
+/// Largest accepted coherence length (µm, 10 mm). Beyond it the window is narrower than
+/// float32 lookups resolve and the direct-sum reference (`3·coherence/dH` samples a side)
+/// cannot be afforded; at `1e308` the window's variance underflows and every value is NaN.
+pub const MAX_COHERENCE_UM: f64 = 1e4;
 
 /// Default coherence length of sunlight (µm), MODEL §3.
 pub const DEFAULT_COHERENCE_UM: f64 = 65.0;
@@ -24,10 +32,15 @@ pub struct Material {
     pub dh_um: Option<f64>,
     /// Height of grey level 1 (µm); overrides the sidecar.
     pub h_max_um: Option<f64>,
-    /// Taylor (thesis) or Chebyshev (stable) expansion.
+    /// Chebyshev (stable, the default) or Taylor (thesis) expansion. With `terms = auto`
+    /// this is a preference: where it cannot meet the tolerance the other one is used, with
+    /// a warning.
     pub expansion: Expansion,
-    /// Highest term index `T` (terms `0..=T`).
-    pub terms: usize,
+    /// Highest term index `T` (terms `0..=T`), or `auto` (the default): the smallest `T`
+    /// and the expansion meeting `tolerance` (MODEL §4; see [`truncation`]).
+    pub terms: Terms,
+    /// Tolerance on `ρ/C = |P̂|²` relative to a flat mirror's specular value, for `auto`.
+    pub tolerance: f64,
     /// Gather radius `R` of the Gaussian window, in texels (thesis: 1).
     pub window_radius: usize,
     /// Spatial coherence length (µm); the window std is a quarter of it.
@@ -48,8 +61,9 @@ impl Default for Material {
             heightfield: "builtin:elaphe".into(),
             dh_um: None,
             h_max_um: None,
-            expansion: Expansion::Taylor,
-            terms: 30,
+            expansion: Expansion::Chebyshev,
+            terms: Terms::Auto,
+            tolerance: truncation::DEFAULT_TOLERANCE,
             window_radius: 2,
             coherence_um: DEFAULT_COHERENCE_UM,
             lambda_step_nm: 5,
@@ -72,13 +86,18 @@ pub struct MaterialArgs {
     /// Height of grey level 1 in µm (overrides the sidecar).
     #[arg(long, allow_negative_numbers = true)]
     pub hmax_um: Option<f64>,
-    /// Highest expansion term T (terms 0..=T).
+    /// Highest expansion term T (terms 0..=T), or auto: the smallest T (and the expansion)
+    /// meeting --tolerance [default: auto].
     #[arg(long)]
-    pub terms: Option<usize>,
+    pub terms: Option<Terms>,
+    /// Tolerance of auto terms on ρ/C = |P̂|², relative to a mirror's specular value
+    /// [default: 1e-3].
+    #[arg(long)]
+    pub tolerance: Option<f64>,
     /// Gaussian-window gather radius R in texels (thesis: 1).
     #[arg(long)]
     pub window_radius: Option<usize>,
-    /// taylor (thesis) or chebyshev (stable for tall structures).
+    /// chebyshev (stable; default) or taylor (thesis; cancels in float32 on tall structures).
     #[arg(long)]
     pub expansion: Option<Expansion>,
     /// Spatial coherence length in µm.
@@ -109,6 +128,9 @@ impl MaterialArgs {
         }
         if let Some(t) = self.terms {
             base.terms = t;
+        }
+        if let Some(t) = self.tolerance {
+            base.tolerance = t;
         }
         if let Some(r) = self.window_radius {
             base.window_radius = r;
@@ -141,15 +163,24 @@ pub struct PreparedMaterial {
     pub window: Window,
     pub shading: Shading,
     pub colour: ColourTable,
+    /// The resolved expansion and `T`, with their error budget.
+    pub plan: TermPlan,
+}
+
+impl PreparedMaterial {
+    /// The resolved highest term index `T` every evaluator uses (the stack holds `0..=T`).
+    pub fn terms(&self) -> usize {
+        self.plan.terms
+    }
 }
 
 impl Material {
-    /// What to precompute for this material: its expansion, `T` and `R`, for wavelengths
-    /// from 380 nm, cropped to the reachable band.
-    pub fn term_request(&self) -> TermRequest {
+    /// What to precompute for a resolved expansion and `T`, for wavelengths from 380 nm,
+    /// cropped to the reachable band.
+    pub fn term_request(&self, expansion: Expansion, max_term: usize) -> TermRequest {
         TermRequest {
-            expansion: self.expansion,
-            max_term: self.terms,
+            expansion,
+            max_term,
             lambda_min_um: crate::colour::LAMBDA_MIN_NM as f64 * 1e-3,
             window_radius: self.window_radius,
             full_band: false,
@@ -158,11 +189,31 @@ impl Material {
 
     /// Checks every numeric field for sense.
     pub fn validate(&self) -> Result<()> {
-        self.term_request().validate()?;
+        let max_term = match self.terms {
+            Terms::Auto => 0,
+            Terms::Fixed(t) => t,
+        };
+        self.term_request(self.expansion, max_term).validate()?;
+        if !(self.tolerance.is_finite() && self.tolerance > 0.0 && self.tolerance < 1.0) {
+            return Err(Error::invalid(
+                "tolerance",
+                format!("{}; must be in (0, 1)", self.tolerance),
+            ));
+        }
         if !(self.coherence_um.is_finite() && self.coherence_um > 0.0) {
             return Err(Error::invalid(
                 "coherence length",
                 format!("{} µm; must be positive", self.coherence_um),
+            ));
+        }
+        if self.coherence_um > MAX_COHERENCE_UM {
+            return Err(Error::invalid(
+                "coherence length",
+                format!(
+                    "{:e} µm; at most {MAX_COHERENCE_UM} µm (10 mm): a longer window is narrower \
+                     than float32 lookups resolve and its direct sum cannot be afforded",
+                    self.coherence_um
+                ),
             ));
         }
         if !(self.ior.is_finite() && self.ior >= 1.0 && self.ior <= 4.0) {
@@ -184,15 +235,56 @@ impl Material {
         }
     }
 
+    /// Resolves `terms` (and, for `auto`, the expansion) for `hf` at `reach` and
+    /// `precision` without printing anything (MODEL §4, [`truncation::plan_terms`]).
+    pub fn plan(&self, hf: &HeightField, reach: &Reach, precision: Precision) -> Result<TermPlan> {
+        let geometry = Geometry::of(hf, self.coherence_um, self.window_radius);
+        truncation::plan_terms(
+            self.expansion,
+            self.terms,
+            self.tolerance,
+            &geometry,
+            reach,
+            precision,
+        )
+    }
+
     /// Loads the height field, computes (or loads from `cache_dir`) the cropped terms, and
-    /// builds the window and colour table. Prints the Nyquist warning to stderr if it applies.
+    /// builds the window and colour table, planned for every direction (`|w| ≤ 2`) in
+    /// float32, the GPU's precision. Prints the Nyquist warning and the plan's warnings
+    /// (an expansion switch, an explicit `T` above the tolerance) to stderr.
     pub fn prepare(&self, cache_dir: Option<&std::path::Path>) -> Result<PreparedMaterial> {
+        self.prepare_for(cache_dir, &Reach::ALL, Precision::F32)
+    }
+
+    /// [`prepare`](Self::prepare) for a known reach (e.g. [`Reach::brdf_map`]) and precision.
+    pub fn prepare_for(
+        &self,
+        cache_dir: Option<&std::path::Path>,
+        reach: &Reach,
+        precision: Precision,
+    ) -> Result<PreparedMaterial> {
         self.validate()?;
         let heightfield = HeightField::load_source(&self.heightfield, self.dh_um, self.h_max_um)?;
-        let req = self.term_request();
+        let plan = self.plan(&heightfield, reach, precision)?;
+        for w in &plan.warnings {
+            eprintln!("warning: {w}");
+        }
+        let req = self.term_request(plan.expansion, plan.terms);
         if let Some(w) = heightfield.nyquist_warning(req.lambda_min_um) {
             eprintln!("warning: {w}");
         }
+        self.prepare_planned(heightfield, plan, cache_dir)
+    }
+
+    /// Builds the prepared material from a loaded height field and a resolved plan.
+    pub fn prepare_planned(
+        &self,
+        heightfield: HeightField,
+        plan: TermPlan,
+        cache_dir: Option<&std::path::Path>,
+    ) -> Result<PreparedMaterial> {
+        let req = self.term_request(plan.expansion, plan.terms);
         let stack = spectrum::cache::terms_cached(&heightfield, &req, cache_dir)?;
         let window = Window::new(
             heightfield.nx(),
@@ -208,6 +300,7 @@ impl Material {
             heightfield,
             stack,
             window,
+            plan,
         })
     }
 }

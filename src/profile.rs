@@ -41,9 +41,9 @@ impl Variant {
     /// read only the height field and coherence length).
     pub fn material(&self, base: &Material) -> Material {
         match self.kind {
-            VariantKind::Flss => Material {
+            VariantKind::Flss | VariantKind::Nmm => Material {
                 expansion: self.expansion,
-                terms: self.terms,
+                terms: crate::material::Terms::Fixed(self.terms),
                 window_radius: self.window_radius,
                 lambda_step_nm: self.lambda_step_nm,
                 ..base.clone()
@@ -369,7 +369,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                 .map(|p| {
                     crate::brdf::nmm::xyz(
                         &prepared.stack,
-                        material.terms,
+                        prepared.terms(),
                         &prepared.window,
                         &prepared.shading,
                         &prepared.colour,
@@ -386,7 +386,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                 .map(|p| {
                     model::xyz(
                         &prepared.stack,
-                        material.terms,
+                        prepared.terms(),
                         &prepared.window,
                         &prepared.shading,
                         &prepared.colour,

@@ -798,10 +798,10 @@ fn corpus() -> Vec<Case> {
         ),
         // Numeric flags.
         case(
-            "flag: --dh-um 1e18 does not overflow",
+            "flag: --dh-um 1e18 does not overflow (refused: dH above 1 mm)",
             brdf_base,
             &brdf_with(&["--dh-um", "1e18", "--out", "{d}/r.csv"]),
-            Warn("exceeds λ_min/4"),
+            Fail("the pixel size must lie in [0.0001, 1000] µm"),
         ),
         case(
             "flag: --terms 65",

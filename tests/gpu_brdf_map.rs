@@ -38,7 +38,7 @@ fn check_xyz_map(heightfield: &str, expansion: Expansion, specular_pixel: u32) {
     );
     let tol = 1e-3 * max + 1e-6;
     let wi = uploaded_direction(theta, phi);
-    let terms = p.material.terms;
+    let terms = p.terms();
     let mut worst = 0.0f64;
     let pixels = sample_pixels(SIZE, wi, 8);
     assert!(pixels.len() >= 20);
@@ -100,7 +100,7 @@ fn spectral_map_matches_cpu_rho() {
     let wi = uploaded_direction(theta, phi);
     for (i, j) in sample_pixels(SIZE, wi, 8) {
         let wr = map_direction(i, j, SIZE).unwrap();
-        let cpu = brdf::model::rho(&p.stack, m.terms, &p.window, &p.shading, wi, wr, lambda);
+        let cpu = brdf::model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, lambda);
         let gpu = frame.at(i, j);
         assert_eq!(gpu[0], gpu[1]);
         assert_eq!(gpu[0], gpu[2]);

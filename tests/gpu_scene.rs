@@ -188,7 +188,7 @@ fn plane_pixels_match_cpu_model() {
         let wr = (eye - hit).normalize();
         let xyz = brdf::model::xyz(
             &p.stack,
-            scene.material.terms,
+            p.terms(),
             &p.window,
             &p.shading,
             &p.colour,

@@ -26,7 +26,7 @@ fn spectral_map_error(path: &str, expansion: Expansion, terms: usize) -> (f64, b
     let m = Material {
         heightfield: path.into(),
         expansion,
-        terms,
+        terms: diffract::material::Terms::Fixed(terms),
         window_radius: 1,
         ..Material::default()
     };

@@ -29,7 +29,7 @@ fn material(dir: &std::path::Path) -> Material {
     HeightField::new(n, n, dh, h).unwrap().save(&path).unwrap();
     Material {
         heightfield: path.to_string_lossy().into_owned(),
-        terms: 12,
+        terms: diffract::material::Terms::Fixed(12),
         lambda_step_nm: 10,
         ..Material::default()
     }
@@ -76,7 +76,7 @@ fn every_variant_matches_its_own_f64_model() {
             (Some(t), _) => t.xyz(&prepared.shading, wi, wr),
             (None, Some(g)) => diffract::brdf::nmm::xyz(
                 &prepared.stack,
-                prepared.material.terms,
+                prepared.terms(),
                 &prepared.window,
                 &prepared.shading,
                 &prepared.colour,
@@ -88,7 +88,7 @@ fn every_variant_matches_its_own_f64_model() {
             ),
             (None, None) => diffract::brdf::model::xyz(
                 &prepared.stack,
-                prepared.material.terms,
+                prepared.terms(),
                 &prepared.window,
                 &prepared.shading,
                 &prepared.colour,

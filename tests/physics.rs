@@ -347,7 +347,7 @@ fn grating_equation_experiment_recovers_the_blazed_period() {
     // MODEL §8 on the shipped blazed grating (2.5 µm); the thesis reports 2499.997 nm.
     let material = diffract::material::Material {
         heightfield: "builtin:blazed".into(),
-        terms: 12,
+        terms: diffract::material::Terms::Fixed(12),
         window_radius: 3,
         ..Default::default()
     };

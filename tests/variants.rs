@@ -218,13 +218,13 @@ fn nmm_matches_flss_at_1nm_on_a_grating_and_needs_its_jacobian() {
         ..Material::default()
     };
     let p = material.prepare(None).unwrap();
+    let t = p.terms();
     let g = nmm::estimate_grating(&p.heightfield).unwrap();
     let d = g.period_um[0].unwrap();
     assert!((d - 1.625).abs() / 1.625 < 5e-3, "period {d}");
     let density = nmm::Density::new();
     let shading = Shading::default();
     let wi = direction(40.0, 0.0);
-    let t = material.terms;
     let (mut e2, mut r2, mut thesis_e2) = (0.0, 0.0, 0.0);
     for k in 0..40 {
         let wr = direction(5.0 + 2.0 * k as f64, 180.0);

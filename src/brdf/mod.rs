@@ -13,6 +13,7 @@ pub mod query;
 pub mod reference;
 pub mod table;
 pub mod table_cache;
+pub mod truncation;
 
 /// Switches and constants of the gain factor `C(ωi, ωr)`.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -43,6 +44,10 @@ impl Shading {
         ior: 1.5,
     };
 }
+
+/// Tangential components of `ωi + ωr` at or below this are rounding residue of unit
+/// vectors (8 ulps of 1), not a direction.
+const TANGENTIAL_RESIDUE: f64 = 8.0 * f64::EPSILON;
 
 /// Unit vector of polar angle `theta_deg` from the normal and azimuth `phi_deg` from `+x`.
 pub fn direction(theta_deg: f64, phi_deg: f64) -> [f64; 3] {
@@ -75,8 +80,17 @@ pub fn schlick_r0(ior: f64) -> f64 {
 /// `G = (1 + ωi·ωr)²/(cosθi cosθr)` restores `ρ = 1` (Fresnel off) at every angle, so that is
 /// what every evaluator uses; renderers multiply by `cosθi` for irradiance.
 ///
-/// Near `w = 0` (both directions grazing) the numerator vanishes faster than `w²`; the
-/// result stays finite for every pair of unit vectors.
+/// **Grazing limit.** Write `ωi + ωr = (t, w)` with `t` the tangential part. Then
+/// `(1 + ωi·ωr)² = (|t|² + w²)²/4` and the geometric term is `(|t|² + w²)²/(4w² cosθi cosθr)`.
+/// Along the specular direction `t = 0` and `cosθi = cosθr = w/2`, so it is exactly 1 at
+/// every angle; `H = N`, `ωr·H = cosθr → 0`, so Schlick's `R → 1` and `S = min(1, 2, 2) = 1`:
+/// `C → 1/R0` (25 for `n = 1.5`) with Fresnel, 1 without, as `θ → 90°`. At exactly 90°
+/// the directions built from angles carry `cos 90° ≈ 6e-17` and a tangential residue of the
+/// same size (`sin 180° ≈ 1.2e-16`), which made `C` read 4 (66.7 with Fresnel). A
+/// tangential sum below a few ulps of the unit components cannot be told from zero, so it
+/// is taken as zero: the value at 90° is then the limit, and nothing changes where `|t|`
+/// is resolvable. Away from specular the factor keeps its `1/(cosθi cosθr)` growth at
+/// grazing (Kirchhoff's; shadowing tames it); the result stays finite for unit vectors.
 pub fn gain(wi: [f64; 3], wr: [f64; 3], shading: &Shading) -> f64 {
     let (ci, cr) = (wi[2], wr[2]);
     if ci <= 0.0 || cr <= 0.0 {
@@ -84,7 +98,11 @@ pub fn gain(wi: [f64; 3], wr: [f64; 3], shading: &Shading) -> f64 {
     }
     let w = ci + cr;
     // 1 + ωi·ωr = |ωi + ωr|²/2, which does not cancel near grazing specular.
-    let h = [wi[0] + wr[0], wi[1] + wr[1], wi[2] + wr[2]];
+    let mut h = [wi[0] + wr[0], wi[1] + wr[1], wi[2] + wr[2]];
+    if h[0].abs() <= TANGENTIAL_RESIDUE && h[1].abs() <= TANGENTIAL_RESIDUE {
+        h[0] = 0.0;
+        h[1] = 0.0;
+    }
     let h2 = dot(h, h);
     let geometric = 0.25 * h2 * h2 / (w * w * ci * cr);
     let mut c = geometric;

@@ -263,7 +263,7 @@ pub fn run(args: &BrdfArgs) -> Result<()> {
                 args.cache_dir.clone().or_else(default_cache_dir)
             };
             let p = material.prepare(cache.as_deref())?;
-            let t = material.terms;
+            let t = p.terms();
             answer_all(
                 &queries,
                 |wi, wr, l| model::rho(&p.stack, t, &p.window, &p.shading, wi, wr, l),

@@ -2,7 +2,7 @@
 //! has no Vulkan at all), the validation canary check, and materials for small fast cases.
 #![allow(dead_code)]
 
-use diffract::material::{Material, PreparedMaterial};
+use diffract::material::{Material, PreparedMaterial, Terms};
 use diffract::render::Renderer;
 use diffract::spectrum::Expansion;
 use diffract::Error;
@@ -47,7 +47,7 @@ pub fn small_material(
     Material {
         heightfield: heightfield.into(),
         expansion,
-        terms,
+        terms: Terms::Fixed(terms),
         window_radius: radius,
         lambda_step_nm: 10,
         ..Material::default()

@@ -44,8 +44,9 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
     let start = Instant::now();
     let prepared = setup.prepared;
     let (terms, decode) = upload_terms(dev, prepared, setup.storage)?;
-    let m = &prepared.material;
-    let t = m.terms.min(prepared.stack.term_count().saturating_sub(1));
+    let t = prepared
+        .terms()
+        .min(prepared.stack.term_count().saturating_sub(1));
     let name = format!(
         "flss T={t} R={} dλ={} {} {}",
         prepared.window.radius, prepared.colour.step_nm, prepared.stack.expansion, setup.storage

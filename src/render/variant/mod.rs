@@ -98,17 +98,18 @@ impl VariantKind {
         self.resolve() == VariantKind::Flss
     }
 
-    /// Texel fetches per pixel for `material` and the table options.
-    pub fn fetches(self, material: &Material, table: &TableOptions) -> usize {
+    /// Texel fetches per pixel for `material` with highest term `terms` (FLSS and NMM) and
+    /// the table options.
+    pub fn fetches(self, terms: usize, material: &Material, table: &TableOptions) -> usize {
         match self.resolve() {
             VariantKind::Flss => {
                 let lambdas = (400 / material.lambda_step_nm.max(1) + 1) as usize;
                 let taps = (2 * material.window_radius + 1).pow(2);
-                lambdas * (material.terms + 1) * taps
+                lambdas * (terms + 1) * taps
             }
             VariantKind::Nmm => {
                 let taps = (2 * material.window_radius + 1).pow(2);
-                (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * (material.terms + 1) * taps
+                (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * (terms + 1) * taps
             }
             VariantKind::Volume => 1,
             VariantKind::ChebyshevW => 4 * table.w_nodes_for(self),
@@ -339,9 +340,22 @@ pub(crate) fn require_spectral(kind: VariantKind, output: OutputMode) -> Result<
 }
 
 /// `diffract variants`: the list, with fetches and memory for the default material on a
-/// BRDF map at θi = 60°.
+/// BRDF map at θi = 60° (its automatic `T` planned, not computed).
 pub fn list() -> String {
     let material = Material::default();
+    let terms = crate::heightfield::HeightField::load_source(
+        &material.heightfield,
+        material.dh_um,
+        material.h_max_um,
+    )
+    .and_then(|hf| {
+        material.plan(
+            &hf,
+            &crate::brdf::truncation::Reach::brdf_map(60.0),
+            crate::brdf::truncation::Precision::F32,
+        )
+    })
+    .map_or(30, |p| p.terms);
     let table = TableOptions::default();
     let region = Region::brdf_map(crate::brdf::direction(60.0, 0.0));
     let mut s = String::from(
@@ -373,7 +387,7 @@ pub fn list() -> String {
         s.push_str(&format!(
             "{:<13} {:>13}  {memory}\n    {}{mark}\n",
             kind.name(),
-            kind.fetches(&material, &table),
+            kind.fetches(terms, &material, &table),
             kind.summary()
         ));
     }

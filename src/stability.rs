@@ -1,0 +1,794 @@
+//! `diffract stability`: the stability matrix of issue #8. Every cell is one height
+//! (peak-to-valley `h_max`), light angle `θi`, wavelength, preferred expansion, term mode
+//! (`auto` or a fixed `T`) and evaluator (the f64 model, the float32 GPU shader); it holds
+//! the error against the f64 direct-sum reference, the expansion and `T` actually used, and
+//! whether the cell passed, was warned about, or was refused.
+//!
+//! Errors are stated on `ρ/C = |P̂|²` (see [`crate::brdf::truncation`]): the reflectance
+//! error divided by the gain factor, i.e. relative to a flat mirror's specular value, so
+//! grazing Fresnel gains do not hide or inflate it. The f64 model is probed at the exact
+//! specular direction (`u = v = 0`), backscatter (`ωr = ωi`), normal view, the first orders
+//! of the field's strongest period, and an in-plane sweep; the GPU at every pixel of a tiny
+//! spectral BRDF map, against the reference and against its own f64 model (the float32
+//! error, checked against the planner's stated float32 bound).
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use rayon::prelude::*;
+
+use crate::brdf::truncation::{Precision, Reach, TermPlan, Terms};
+use crate::brdf::{direction, gain, model, reference};
+use crate::heightfield::{generate, GratingKind, GratingSpec, HeightField};
+use crate::material::Material;
+use crate::spectrum::Expansion;
+use crate::{Error, Result};
+
+/// Which evaluator a cell measures.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Evaluator {
+    /// The CPU model of the FLSS shader in f64.
+    Model,
+    /// The GPU shader (float32), on a tiny spectral BRDF map.
+    Gpu,
+}
+
+impl std::fmt::Display for Evaluator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Evaluator::Model => "f64 model",
+            Evaluator::Gpu => "GPU float32",
+        })
+    }
+}
+
+/// Outcome of a cell.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Status {
+    /// Within the tolerance, no warning.
+    Pass,
+    /// A warning was printed (expansion switched, or a fixed `T` above the tolerance);
+    /// the error is what a user gets.
+    Warned,
+    /// The planner refused the configuration (nothing was evaluated).
+    Refused,
+    /// Silently wrong: above the tolerance without a warning, or the GPU off its f64 model
+    /// by more than the stated float32 bound. Never expected.
+    Fail,
+}
+
+impl std::fmt::Display for Status {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Status::Pass => "pass",
+            Status::Warned => "warned",
+            Status::Refused => "refused",
+            Status::Fail => "FAIL",
+        })
+    }
+}
+
+/// One cell of the matrix.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Cell {
+    pub h_max_um: f64,
+    pub theta_i_deg: f64,
+    pub lambda_nm: f64,
+    /// The material's expansion (auto may switch it).
+    pub expansion: Expansion,
+    pub terms_mode: Terms,
+    pub evaluator: Evaluator,
+    /// Expansion and `T` used; `None` when refused.
+    pub used: Option<(Expansion, usize)>,
+    pub status: Status,
+    /// Max `|ρ − ρ_ref|/C` over the probes; `None` when refused.
+    pub error: Option<f64>,
+    /// The planner's bound on `|ΔP̂|²` (truncation + rounding).
+    pub bound: Option<f64>,
+    /// GPU only: max `|ρ_gpu − ρ_model|/C`, and the stated float32 bound.
+    pub f32_error: Option<f64>,
+    pub f32_bound: Option<f64>,
+    /// Probe of the largest error.
+    pub worst_probe: String,
+    /// The refusal or the warnings, one line.
+    pub message: String,
+}
+
+/// The axes and settings of a run.
+#[derive(Debug, Clone)]
+pub struct MatrixSpec {
+    /// The base field; every `h_max` rescales it to that peak-to-valley height.
+    pub field: HeightField,
+    /// Name of the field in reports.
+    pub field_name: String,
+    /// Strongest period of the field along x (µm), for the first-order probes.
+    pub period_um: Option<f64>,
+    pub h_max_um: Vec<f64>,
+    pub theta_i_deg: Vec<f64>,
+    pub lambdas_nm: Vec<f64>,
+    pub expansions: Vec<Expansion>,
+    pub terms_modes: Vec<Terms>,
+    pub evaluators: Vec<Evaluator>,
+    pub tolerance: f64,
+    pub window_radius: usize,
+    pub coherence_um: f64,
+    /// GPU map side (pixels).
+    pub map_size: u32,
+    /// Renderer validation layer on.
+    pub validation: bool,
+}
+
+/// The issue's axes.
+pub const H_MAX_UM: [f64; 6] = [0.05, 0.25, 0.5, 1.0, 2.0, 5.0];
+pub const THETA_I_DEG: [f64; 5] = [0.0, 45.0, 80.0, 89.0, 89.99];
+pub const LAMBDAS_NM: [f64; 3] = [380.0, 580.0, 780.0];
+
+/// The default field: a 128² sinusoid of period 1.6 µm (4 periods over 6.4 µm, dH = 50
+/// nm), where the direct-sum reference is cheap.
+pub fn default_field() -> Result<(HeightField, f64)> {
+    let spec = GratingSpec {
+        kind: GratingKind::Sinusoidal,
+        size_um: 6.4,
+        dh_um: 0.05,
+        period_um: 1.6,
+        height_um: 1.0,
+        angle_deg: 0.0,
+        seed: 1,
+    };
+    let (wave, _) = spec.waves()?;
+    Ok((generate(&spec)?, wave.period_um))
+}
+
+impl MatrixSpec {
+    /// The full matrix of issue #8 on `field`.
+    pub fn full(field: HeightField, field_name: &str, period_um: Option<f64>) -> Self {
+        MatrixSpec {
+            field,
+            field_name: field_name.into(),
+            period_um,
+            h_max_um: H_MAX_UM.to_vec(),
+            theta_i_deg: THETA_I_DEG.to_vec(),
+            lambdas_nm: LAMBDAS_NM.to_vec(),
+            expansions: vec![Expansion::Taylor, Expansion::Chebyshev],
+            terms_modes: vec![Terms::Auto, Terms::Fixed(30)],
+            evaluators: vec![Evaluator::Model, Evaluator::Gpu],
+            tolerance: crate::brdf::truncation::DEFAULT_TOLERANCE,
+            window_radius: 2,
+            coherence_um: crate::material::DEFAULT_COHERENCE_UM,
+            map_size: 15,
+            validation: crate::render::validation_requested(),
+        }
+    }
+}
+
+/// `field` rescaled to peak-to-valley `h_max` (a flat field stays flat).
+fn scaled(field: &HeightField, h_max: f64) -> Result<HeightField> {
+    let (lo, hi) = field.range();
+    let s = if hi > lo { h_max / (hi - lo) } else { 0.0 };
+    HeightField::new(
+        field.nx(),
+        field.ny(),
+        field.dh_um(),
+        field.heights_um().iter().map(|h| (h - lo) * s).collect(),
+    )
+}
+
+/// In-plane direction at signed polar angle: negative on the light's side (`φ = 0`),
+/// positive on the mirror side (`φ = 180°`).
+fn in_plane(theta_deg: f64) -> [f64; 3] {
+    if theta_deg < 0.0 {
+        direction(-theta_deg, 0.0)
+    } else {
+        direction(theta_deg, 180.0)
+    }
+}
+
+/// The f64 model's probes for light at `theta_i` (φ = 0): name and `ωr`.
+fn probes(theta_i: f64, lambda_nm: f64, period_um: Option<f64>) -> Vec<(String, [f64; 3])> {
+    let wi = direction(theta_i, 0.0);
+    let mut p = vec![
+        ("specular (u=v=0)".to_string(), direction(theta_i, 180.0)),
+        ("backscatter".to_string(), wi),
+        ("normal view".to_string(), [0.0, 0.0, 1.0]),
+    ];
+    if let Some(d) = period_um {
+        // In plane, u = sin θr − sin θi on the mirror side: orders at u = ±mλ/d.
+        let si = theta_i.to_radians().sin();
+        for m in [-2.0, -1.0, 1.0, 2.0] {
+            let s = si + m * lambda_nm * 1e-3 / d;
+            if s.abs() < 1.0 {
+                p.push((format!("order {m:+}"), in_plane(s.asin().to_degrees())));
+            }
+        }
+    }
+    for k in -8..=8 {
+        let t = k as f64 * 10.0 + 0.5;
+        p.push((format!("θr = {t}°"), in_plane(t)));
+    }
+    p
+}
+
+/// Max `|ρ − ρ_ref|/C` over `dirs`, and the name of the worst one.
+fn max_error(
+    dirs: &[(String, [f64; 3])],
+    wi: [f64; 3],
+    shading: &crate::brdf::Shading,
+    eval: impl Fn([f64; 3]) -> f64 + Sync,
+    refer: impl Fn([f64; 3]) -> f64 + Sync,
+) -> Result<(f64, String)> {
+    let errs: Vec<(f64, String)> = dirs
+        .par_iter()
+        .map(|(name, wr)| {
+            let c = gain(wi, *wr, shading);
+            if c == 0.0 {
+                return (0.0, name.clone());
+            }
+            let (a, b) = (eval(*wr), refer(*wr));
+            let e = if a.is_finite() && b.is_finite() {
+                (a - b).abs() / c
+            } else {
+                f64::INFINITY
+            };
+            (e, name.clone())
+        })
+        .collect();
+    let worst = errs
+        .into_iter()
+        .max_by(|a, b| a.0.total_cmp(&b.0))
+        .unwrap_or((0.0, String::new()));
+    Ok(worst)
+}
+
+/// The material of a cell (the base field replaced by the scaled one at prepare time).
+fn material(spec: &MatrixSpec, expansion: Expansion, terms: Terms) -> Material {
+    Material {
+        heightfield: "stability field".into(),
+        expansion,
+        terms,
+        tolerance: spec.tolerance,
+        window_radius: spec.window_radius,
+        coherence_um: spec.coherence_um,
+        ..Material::default()
+    }
+}
+
+/// The GPU part, isolated because the renderer's API is being reworked: a spectral BRDF
+/// map of `prepared` under light at `(theta_i, 0)`. Returns per-pixel `(ωr, ρ)`.
+fn gpu_spectral_map(
+    renderer: &mut crate::render::Renderer,
+    prepared: &crate::material::PreparedMaterial,
+    theta_i: f64,
+    size: u32,
+    lambda_nm: f64,
+) -> Result<Vec<([f64; 3], f64)>> {
+    let frame = renderer.render_brdf_map(prepared, theta_i, 0.0, size, Some(lambda_nm))?;
+    let mut out = Vec::new();
+    for j in 0..size {
+        for i in 0..size {
+            if let Some(wr) = crate::render::map_direction(i, j, size) {
+                out.push((wr, frame.at(i, j)[0] as f64));
+            }
+        }
+    }
+    Ok(out)
+}
+
+/// Runs the matrix. `renderer` is needed when `spec.evaluators` holds [`Evaluator::Gpu`];
+/// `progress` is called after each cell.
+pub fn run_matrix(
+    spec: &MatrixSpec,
+    mut renderer: Option<&mut crate::render::Renderer>,
+    mut progress: impl FnMut(&Cell),
+) -> Result<Vec<Cell>> {
+    let mut cells = Vec::new();
+    let shading = Material::default().shading();
+    for &h in &spec.h_max_um {
+        let hf = scaled(&spec.field, h)?;
+        for &theta_i in &spec.theta_i_deg {
+            let wi = direction(theta_i, 0.0);
+            for &lambda in &spec.lambdas_nm {
+                let reach = Reach::at(1.0 + theta_i.to_radians().cos(), lambda);
+                for &expansion in &spec.expansions {
+                    for &terms in &spec.terms_modes {
+                        for &evaluator in &spec.evaluators {
+                            let m = material(spec, expansion, terms);
+                            let precision = match evaluator {
+                                Evaluator::Model => Precision::F64,
+                                Evaluator::Gpu => Precision::F32,
+                            };
+                            let mut cell = Cell {
+                                h_max_um: h,
+                                theta_i_deg: theta_i,
+                                lambda_nm: lambda,
+                                expansion,
+                                terms_mode: terms,
+                                evaluator,
+                                used: None,
+                                status: Status::Refused,
+                                error: None,
+                                bound: None,
+                                f32_error: None,
+                                f32_bound: None,
+                                worst_probe: String::new(),
+                                message: String::new(),
+                            };
+                            let plan = match m.plan(&hf, &reach, precision) {
+                                Ok(p) => p,
+                                Err(e) => {
+                                    cell.message = e.to_string();
+                                    progress(&cell);
+                                    cells.push(cell);
+                                    continue;
+                                }
+                            };
+                            let r = match evaluator {
+                                Evaluator::Model => {
+                                    model_cell(spec, &m, &hf, &plan, wi, theta_i, lambda, &shading)
+                                }
+                                Evaluator::Gpu => {
+                                    let Some(r) = renderer.as_deref_mut() else {
+                                        return Err(Error::invalid(
+                                            "stability",
+                                            "the GPU evaluator needs a renderer",
+                                        ));
+                                    };
+                                    gpu_cell(spec, &m, &hf, &plan, r, theta_i, lambda, &shading)
+                                }
+                            }?;
+                            cell.used = Some((plan.expansion, plan.terms));
+                            cell.bound = Some(plan.error_bound());
+                            cell.error = Some(r.0);
+                            cell.worst_probe = r.1;
+                            cell.f32_error = r.2;
+                            // |P̂_model| ≤ 1 + truncation, so rounding δ moves |P̂|² by
+                            // at most 2(1 + truncation)δ + δ² (unbounded where the series
+                            // has not converged: those cells carry a warning).
+                            let ro = plan.rounding;
+                            cell.f32_bound =
+                                r.2.map(|_| 2.0 * (1.0 + plan.truncation) * ro + ro * ro);
+                            cell.message = plan.warnings.join("; ");
+                            let within = r.0 <= spec.tolerance;
+                            let f32_ok = match (cell.f32_error, cell.f32_bound) {
+                                (Some(e), Some(b)) => e <= b,
+                                _ => true,
+                            };
+                            cell.status = if !f32_ok {
+                                Status::Fail
+                            } else if !plan.warnings.is_empty() {
+                                Status::Warned
+                            } else if within {
+                                Status::Pass
+                            } else {
+                                Status::Fail
+                            };
+                            progress(&cell);
+                            cells.push(cell);
+                        }
+                    }
+                }
+            }
+        }
+    }
+    Ok(cells)
+}
+
+type CellResult = (f64, String, Option<f64>);
+
+#[allow(clippy::too_many_arguments)]
+fn model_cell(
+    spec: &MatrixSpec,
+    m: &Material,
+    hf: &HeightField,
+    plan: &TermPlan,
+    wi: [f64; 3],
+    theta_i: f64,
+    lambda: f64,
+    shading: &crate::brdf::Shading,
+) -> Result<CellResult> {
+    let p = m.prepare_planned(hf.clone(), plan.clone(), None)?;
+    let dirs = probes(theta_i, lambda, spec.period_um);
+    let t = p.terms();
+    let (e, worst) = max_error(
+        &dirs,
+        wi,
+        shading,
+        |wr| model::rho(&p.stack, t, &p.window, shading, wi, wr, lambda),
+        |wr| reference::rho(hf, spec.coherence_um, shading, wi, wr, lambda),
+    )?;
+    Ok((e, worst, None))
+}
+
+#[allow(clippy::too_many_arguments)]
+fn gpu_cell(
+    spec: &MatrixSpec,
+    m: &Material,
+    hf: &HeightField,
+    plan: &TermPlan,
+    renderer: &mut crate::render::Renderer,
+    theta_i: f64,
+    lambda: f64,
+    shading: &crate::brdf::Shading,
+) -> Result<CellResult> {
+    let p = m.prepare_planned(hf.clone(), plan.clone(), None)?;
+    let pixels = gpu_spectral_map(renderer, &p, theta_i, spec.map_size, lambda)?;
+    // What the shader saw: ωi and λ rounded to float32.
+    let wi32 = direction(theta_i, 0.0).map(|c| c as f32 as f64);
+    let l32 = (lambda * 1e-3) as f32 as f64 * 1e3;
+    let t = p.terms();
+    let dirs: Vec<(String, [f64; 3])> = pixels
+        .iter()
+        .map(|(wr, _)| (format!("pixel ({:.3}, {:.3})", wr[0], wr[1]), *wr))
+        .collect();
+    let lookup = |wr: [f64; 3]| -> f64 {
+        pixels
+            .iter()
+            .find(|(d, _)| *d == wr)
+            .map_or(f64::NAN, |(_, v)| *v)
+    };
+    let (e_ref, worst) = max_error(&dirs, wi32, shading, lookup, |wr| {
+        reference::rho(hf, spec.coherence_um, shading, wi32, wr, l32)
+    })?;
+    let (e_model, _) = max_error(&dirs, wi32, shading, lookup, |wr| {
+        model::rho(&p.stack, t, &p.window, shading, wi32, wr, l32)
+    })?;
+    Ok((e_ref, worst, Some(e_model)))
+}
+
+/// `diffract stability` options.
+#[derive(Debug, Clone, clap::Args)]
+pub struct StabilityArgs {
+    /// Height field (any source; rescaled to each h_max) [default: a 128² sinusoid of
+    /// period 1.6 µm, dH = 50 nm].
+    #[arg(long)]
+    pub heightfield: Option<String>,
+    /// Pixel size override for --heightfield (µm).
+    #[arg(long)]
+    pub dh_um: Option<f64>,
+    /// Peak-to-valley heights (µm).
+    #[arg(long, num_args = 1.., default_values_t = H_MAX_UM)]
+    pub hmax_um: Vec<f64>,
+    /// Light polar angles (degrees).
+    #[arg(long, num_args = 1.., default_values_t = THETA_I_DEG)]
+    pub theta_i: Vec<f64>,
+    /// Wavelengths (nm).
+    #[arg(long, num_args = 1.., default_values_t = LAMBDAS_NM)]
+    pub lambda_nm: Vec<f64>,
+    /// Fixed term counts to show beside auto (the old default was 30).
+    #[arg(long, num_args = 0.., default_values_t = [30usize])]
+    pub fixed_terms: Vec<usize>,
+    /// Tolerance on ρ/C = |P̂|².
+    #[arg(long, default_value_t = crate::brdf::truncation::DEFAULT_TOLERANCE)]
+    pub tolerance: f64,
+    /// Skip the GPU evaluator.
+    #[arg(long)]
+    pub no_gpu: bool,
+    /// GPU map side in pixels.
+    #[arg(long, default_value_t = 15)]
+    pub map_size: u32,
+    /// Output directory: stability.md, stability.csv, stability.png.
+    #[arg(short, long, default_value = "stability")]
+    pub out: PathBuf,
+}
+
+/// Runs `diffract stability`.
+pub fn run(args: &StabilityArgs) -> Result<()> {
+    let (field, name, period) = match &args.heightfield {
+        Some(src) => (
+            HeightField::load_source(src, args.dh_um, None)?,
+            src.clone(),
+            None,
+        ),
+        None => {
+            let (f, p) = default_field()?;
+            (
+                f,
+                "128² sinusoid, period 1.6 µm, dH 50 nm".to_string(),
+                Some(p),
+            )
+        }
+    };
+    let mut spec = MatrixSpec::full(field, &name, period);
+    spec.h_max_um = args.hmax_um.clone();
+    spec.theta_i_deg = args.theta_i.clone();
+    spec.lambdas_nm = args.lambda_nm.clone();
+    spec.tolerance = args.tolerance;
+    spec.map_size = args.map_size;
+    spec.terms_modes = std::iter::once(Terms::Auto)
+        .chain(args.fixed_terms.iter().map(|&t| Terms::Fixed(t)))
+        .collect();
+    for &t in &spec.theta_i_deg {
+        if !(0.0..90.0).contains(&t) {
+            return Err(Error::invalid("theta-i", format!("{t}°; expected [0, 90)")));
+        }
+    }
+    for &l in &spec.lambdas_nm {
+        if !(380.0..=780.0).contains(&l) {
+            return Err(Error::invalid(
+                "wavelength",
+                format!("{l} nm; expected 380..=780"),
+            ));
+        }
+    }
+    for &h in &spec.h_max_um {
+        if !(h.is_finite() && h >= 0.0) {
+            return Err(Error::invalid("h_max", format!("{h} µm")));
+        }
+    }
+    let mut renderer = if args.no_gpu {
+        spec.evaluators = vec![Evaluator::Model];
+        None
+    } else {
+        Some(crate::render::Renderer::new(spec.validation)?)
+    };
+    let device = renderer
+        .as_ref()
+        .map_or("none".to_string(), |r| r.device_name().to_string());
+    let start = Instant::now();
+    let total = spec.h_max_um.len()
+        * spec.theta_i_deg.len()
+        * spec.lambdas_nm.len()
+        * spec.expansions.len()
+        * spec.terms_modes.len()
+        * spec.evaluators.len();
+    let mut done = 0;
+    let cells = run_matrix(&spec, renderer.as_mut(), |c| {
+        done += 1;
+        if c.status == Status::Fail {
+            eprintln!(
+                "FAIL: h_max {} µm, θi {}°, λ {} nm, {} {} {}: error {:?}, f32 {:?} (bound {:?})",
+                c.h_max_um,
+                c.theta_i_deg,
+                c.lambda_nm,
+                c.expansion,
+                c.terms_mode,
+                c.evaluator,
+                c.error,
+                c.f32_error,
+                c.f32_bound
+            );
+        }
+        if done % 20 == 0 || done == total {
+            eprintln!("{done}/{total} cells");
+        }
+    })?;
+    if let Some(r) = &renderer {
+        if r.validation_messages() > 0 {
+            return Err(Error::Validation(r.validation_messages()));
+        }
+    }
+    let secs = start.elapsed().as_secs_f64();
+    std::fs::create_dir_all(&args.out).map_err(|e| Error::io(&args.out, e))?;
+    let header = format!(
+        "Field: {name}; tolerance {:.0e} on ρ/C; window R = {}, coherence {} µm; GPU: {device}, \
+         {}² spectral maps; {total} cells in {secs:.0} s.",
+        spec.tolerance, spec.window_radius, spec.coherence_um, spec.map_size
+    );
+    crate::fsutil::write_atomic(&args.out.join("stability.csv"), to_csv(&cells).as_bytes())?;
+    crate::fsutil::write_atomic(
+        &args.out.join("stability.md"),
+        to_markdown(&spec, &cells, &header).as_bytes(),
+    )?;
+    write_png(&spec, &cells, &args.out.join("stability.png"))?;
+    let fails = cells.iter().filter(|c| c.status == Status::Fail).count();
+    println!("{header}");
+    println!("{}", summary(&spec, &cells).join("\n"));
+    println!("→ {}/stability.{{md,csv,png}}", args.out.display());
+    if fails > 0 {
+        return Err(Error::invalid(
+            "stability",
+            format!("{fails} cell(s) silently wrong (FAIL); see the report"),
+        ));
+    }
+    Ok(())
+}
+
+fn opt(x: Option<f64>) -> String {
+    x.map_or(String::new(), |v| format!("{v:.3e}"))
+}
+
+/// One CSV row per cell.
+pub fn to_csv(cells: &[Cell]) -> String {
+    let mut s = String::from(
+        "h_max_um,theta_i_deg,lambda_nm,expansion,terms_mode,evaluator,expansion_used,terms_used,status,error,bound,f32_error,f32_bound,worst_probe,message\n",
+    );
+    for c in cells {
+        let (eu, tu) = c.used.map_or((String::new(), String::new()), |(e, t)| {
+            (e.to_string(), t.to_string())
+        });
+        s += &format!(
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",\"{}\"\n",
+            c.h_max_um,
+            c.theta_i_deg,
+            c.lambda_nm,
+            c.expansion,
+            c.terms_mode,
+            c.evaluator,
+            eu,
+            tu,
+            c.status,
+            opt(c.error),
+            opt(c.bound),
+            opt(c.f32_error),
+            opt(c.f32_bound),
+            c.worst_probe.replace('"', "'"),
+            c.message.replace('"', "'")
+        );
+    }
+    s
+}
+
+/// The configurations (columns of the PNG, tables of the markdown) in run order.
+fn configs(spec: &MatrixSpec) -> Vec<(Expansion, Terms, Evaluator)> {
+    let mut v = Vec::new();
+    for &e in &spec.expansions {
+        for &t in &spec.terms_modes {
+            for &ev in &spec.evaluators {
+                v.push((e, t, ev));
+            }
+        }
+    }
+    v
+}
+
+/// Per configuration: which `h_max` is the last where every cell passes, and the
+/// refusals/warnings; the lines the README quotes.
+pub fn summary(spec: &MatrixSpec, cells: &[Cell]) -> Vec<String> {
+    let mut out = Vec::new();
+    for (e, t, ev) in configs(spec) {
+        let mine: Vec<&Cell> = cells
+            .iter()
+            .filter(|c| c.expansion == e && c.terms_mode == t && c.evaluator == ev)
+            .collect();
+        let count = |s: Status| mine.iter().filter(|c| c.status == s).count();
+        let worst_pass = mine
+            .iter()
+            .filter(|c| c.status == Status::Pass)
+            .filter_map(|c| c.error)
+            .fold(0.0, f64::max);
+        let trusted_up_to = spec
+            .h_max_um
+            .iter()
+            .take_while(|&&h| {
+                mine.iter()
+                    .filter(|c| c.h_max_um == h)
+                    .all(|c| c.status == Status::Pass)
+            })
+            .last();
+        let worst_warned = mine
+            .iter()
+            .filter(|c| c.status == Status::Warned)
+            .filter_map(|c| c.error)
+            .fold(0.0, f64::max);
+        out.push(format!(
+            "{e} T={t} {ev}: pass {}, warned {} (worst error {:.1e}), refused {}, FAIL {}; \
+             every cell passes up to h_max = {} µm; worst passing error {:.1e}",
+            count(Status::Pass),
+            count(Status::Warned),
+            worst_warned,
+            count(Status::Refused),
+            count(Status::Fail),
+            trusted_up_to.map_or("none".to_string(), |h| h.to_string()),
+            worst_pass
+        ));
+    }
+    out
+}
+
+/// Markdown: one table per configuration, rows `h_max`, columns `θi`, each entry the
+/// worst cell over wavelength: error (`T`, expansion letter) or the status.
+pub fn to_markdown(spec: &MatrixSpec, cells: &[Cell], header: &str) -> String {
+    let mut s = format!(
+        "# Stability matrix\n\n{header}\n\nEach entry: the worst over λ ∈ {:?} nm of \
+         max |ρ − ρ_ref|/C (error relative to a mirror's specular value), then T and the \
+         expansion used (T = Taylor, C = Chebyshev), `!` = warned, `refused` = refused, \
+         `FAIL` = silently wrong.\n\n",
+        spec.lambdas_nm
+    );
+    for line in summary(spec, cells) {
+        s += &format!("- {line}\n");
+    }
+    for (e, t, ev) in configs(spec) {
+        s += &format!("\n### {ev}, preferred {e}, T = {t}\n\n| h_max (µm) |");
+        for th in &spec.theta_i_deg {
+            s += &format!(" θi = {th}° |");
+        }
+        s += "\n|---|";
+        s += &"---|".repeat(spec.theta_i_deg.len());
+        s += "\n";
+        for &h in &spec.h_max_um {
+            s += &format!("| {h} |");
+            for &th in &spec.theta_i_deg {
+                let group: Vec<&Cell> = cells
+                    .iter()
+                    .filter(|c| {
+                        c.h_max_um == h
+                            && c.theta_i_deg == th
+                            && c.expansion == e
+                            && c.terms_mode == t
+                            && c.evaluator == ev
+                    })
+                    .collect();
+                s += &format!(" {} |", entry(&group));
+            }
+            s += "\n";
+        }
+    }
+    s
+}
+
+fn entry(group: &[&Cell]) -> String {
+    if group.is_empty() {
+        return String::new();
+    }
+    if group.iter().any(|c| c.status == Status::Fail) {
+        let e = group
+            .iter()
+            .filter(|c| c.status == Status::Fail)
+            .filter_map(|c| c.error)
+            .fold(0.0, f64::max);
+        return format!("FAIL {e:.1e}");
+    }
+    if group.iter().all(|c| c.status == Status::Refused) {
+        return "refused".into();
+    }
+    let worst = group
+        .iter()
+        .filter(|c| c.error.is_some())
+        .max_by(|a, b| a.error.unwrap_or(0.0).total_cmp(&b.error.unwrap_or(0.0)));
+    let Some(w) = worst else {
+        return String::new();
+    };
+    let (exp, t) = w.used.unwrap_or((w.expansion, 0));
+    let letter = match exp {
+        Expansion::Taylor => "T",
+        Expansion::Chebyshev => "C",
+    };
+    let refused = group.iter().filter(|c| c.status == Status::Refused).count();
+    let warned = group.iter().any(|c| c.status == Status::Warned);
+    format!(
+        "{:.1e} ({t}{letter}){}{}",
+        w.error.unwrap_or(0.0),
+        if warned { "!" } else { "" },
+        if refused > 0 {
+            format!(" +{refused} refused")
+        } else {
+            String::new()
+        }
+    )
+}
+
+/// The heat map: one row per (h_max, θi) — h_max rising upwards, θi rising within each —
+/// one column per (configuration, λ) in the markdown's order; colour = log10 error,
+/// grey = refused.
+pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
+    let cfg = configs(spec);
+    let cols = cfg.len() * spec.lambdas_nm.len();
+    let rows = spec.h_max_um.len() * spec.theta_i_deg.len();
+    let mut values = vec![vec![f64::NAN; cols]; rows];
+    for c in cells {
+        let (Some(hi), Some(ti), Some(li), Some(ci)) = (
+            spec.h_max_um.iter().position(|&h| h == c.h_max_um),
+            spec.theta_i_deg.iter().position(|&t| t == c.theta_i_deg),
+            spec.lambdas_nm.iter().position(|&l| l == c.lambda_nm),
+            cfg.iter()
+                .position(|&(e, t, ev)| e == c.expansion && t == c.terms_mode && ev == c.evaluator),
+        ) else {
+            continue;
+        };
+        let row = hi * spec.theta_i_deg.len() + ti;
+        let col = ci * spec.lambdas_nm.len() + li;
+        values[row][col] = c.error.map_or(f64::NAN, |e| e.max(1e-16));
+    }
+    crate::plot::write_heat_map(
+        path,
+        &crate::plot::Heat {
+            values: &values,
+            x: (0.0, cols as f64),
+            y: (0.0, rows as f64),
+            log: true,
+        },
+        &[],
+        (cols as u32 * 24).max(200),
+        (rows as u32 * 16).max(200),
+    )
+}
