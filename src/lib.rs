@@ -16,11 +16,13 @@ pub mod fsutil;
 pub mod gpu;
 pub mod heightfield;
 pub mod image_io;
+pub mod light;
 pub mod material;
 pub mod mesh;
 pub mod profile;
 pub mod render;
 pub mod scene;
+pub mod skin;
 pub mod spectrum;
 
 pub use error::{Error, Result};
