@@ -1,11 +1,13 @@
 //! Height fields of nanostructures (MODEL §1): a periodic grid of heights in µm with pixel
-//! size `dH`. Owns validation, loading (PNG 8/16-bit, raw f32 with a TOML sidecar) and the
-//! seeded generators of the MODEL §9 test gratings. It knows nothing about spectra or GPUs.
+//! size `dH`. Owns validation, loading (PNG 8/16-bit, raw f32 with a TOML sidecar), the
+//! seeded generators of the MODEL §9 test gratings and the growing of a measured crop into a
+//! coherence-sized field. It knows nothing about spectra or GPUs.
 
 use crate::{Error, Result};
 
 mod cli;
 mod generate;
+mod grow;
 mod io;
 
 pub use cli::{run_heightfield, HeightfieldArgs};
@@ -13,7 +15,10 @@ pub use generate::{
     generate, GratingKind, GratingSpec, LatticeWave, DEFAULT_DH_UM, DEFAULT_SIZE_UM,
     MAX_GENERATED_DH_UM,
 };
-pub use io::{sidecar_path, BUILTIN_PREFIX};
+pub use grow::{grow, GROW_ITERATIONS};
+pub use io::{
+    sidecar_path, BUILTIN_PREFIX, GROWN_SAMPLES, MEASURED_ELAPHE_DH_UM, MEASURED_ELAPHE_H_MAX_UM,
+};
 
 /// Largest accepted side length (samples). 4096² f64 heights are 128 MiB, and each DFT
 /// term of that size another 256 MiB: beyond this the precompute is not interactive.

@@ -272,6 +272,133 @@ pub fn difference_image(actual: &[[f32; 3]], expected: &[[f32; 3]]) -> Vec<[f32;
         .collect()
 }
 
+/// The tone curve applied to linear colour (after the exposure) before the sRGB transfer
+/// curve of an 8-bit PNG. EXR output stays linear and skips it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Tone {
+    /// Identity: values above 1 clip (the sRGB curve clamps).
+    #[default]
+    Linear,
+    /// Extended Reinhard, per channel: `f(x) = x·(1 + x/W²)/(1 + x)` with white point `W`.
+    /// Slope 1 at black (dark colours are as in `linear`), `f(W) = 1`, a smooth shoulder
+    /// in between, so a BRDF map or a render whose specular peak is 100× its diffraction
+    /// colours keeps both visible. Per channel, so very bright saturated colours go towards
+    /// white as on film.
+    Filmic,
+}
+
+/// Default white point of [`Tone::Filmic`]: the linear value (after exposure) shown as 1.
+pub const DEFAULT_TONE_WHITE: f32 = 8.0;
+
+/// One channel through the tone curve; negative and non-finite values give 0.
+pub fn tone_map(x: f32, tone: Tone, white: f32) -> f32 {
+    if !(x.is_finite() && x > 0.0) {
+        return 0.0;
+    }
+    match tone {
+        Tone::Linear => x,
+        Tone::Filmic => {
+            let x = f64::from(x);
+            let w = f64::from(white);
+            (x * (1.0 + x / (w * w)) / (1.0 + x)) as f32
+        }
+    }
+}
+
+/// Multiplies by `exposure` and applies the tone curve in place: what a PNG writer then
+/// encodes with exposure 1 (`write_png_srgb(…, 1.0)`).
+pub fn apply_tone(rgb: &mut [[f32; 3]], exposure: f32, tone: Tone, white: f32) -> Result<()> {
+    check_exposure(exposure)?;
+    if !(white.is_finite() && white > 0.0) {
+        return Err(Error::invalid(
+            "tone white point",
+            format!("{white}; must be positive and finite"),
+        ));
+    }
+    for p in rgb {
+        *p = p.map(|c| tone_map(c * exposure, tone, white));
+    }
+    Ok(())
+}
+
+/// Box-filters a supersampled frame: every `factor × factor` block of linear colour becomes
+/// its mean (the pixel integrates radiance, as a sensor does; the tone curve comes after).
+/// Non-finite samples count as 0. `width` and `height` must be multiples of `factor ≥ 1`.
+pub fn box_downsample(
+    width: u32,
+    height: u32,
+    rgb: &[[f32; 3]],
+    factor: u32,
+) -> Result<(u32, u32, Vec<[f32; 3]>)> {
+    let bad = |msg: String| Error::invalid("supersampled frame", msg);
+    if factor == 0 {
+        return Err(bad("supersampling factor 0".into()));
+    }
+    if width as u64 * height as u64 != rgb.len() as u64 || rgb.is_empty() {
+        return Err(bad(format!(
+            "{width}×{height} frame with {} pixels",
+            rgb.len()
+        )));
+    }
+    if !width.is_multiple_of(factor) || !height.is_multiple_of(factor) {
+        return Err(bad(format!(
+            "{width}×{height} is not a multiple of the factor {factor}"
+        )));
+    }
+    let (w, h, f) = (width / factor, height / factor, factor as usize);
+    let scale = 1.0 / (f * f) as f64;
+    let mut out = Vec::with_capacity((w * h) as usize);
+    for y in 0..h as usize {
+        for x in 0..w as usize {
+            let mut sum = [0.0f64; 3];
+            for sy in 0..f {
+                let row = (y * f + sy) * width as usize;
+                for sx in 0..f {
+                    let p = rgb[row + x * f + sx];
+                    for c in 0..3 {
+                        sum[c] += f64::from(finite_or_zero(p[c]));
+                    }
+                }
+            }
+            out.push(sum.map(|s| (s * scale) as f32));
+        }
+    }
+    Ok((w, h, out))
+}
+
+/// Mean and 99th percentile (nearest rank) of the per-pixel CIEDE2000 difference over the
+/// pixels where `mask` is true (all pixels without a mask): the anti-aliasing criterion
+/// compares a render with a supersampled one over the pixels the object covers. `None` when
+/// the sizes differ or no pixel is selected; a non-finite pixel counts as ΔE = ∞.
+pub fn delta_e_over(
+    actual: &[[f32; 3]],
+    expected: &[[f32; 3]],
+    mask: Option<&[bool]>,
+) -> Option<(f64, f64)> {
+    if actual.len() != expected.len() || mask.is_some_and(|m| m.len() != actual.len()) {
+        return None;
+    }
+    let mut de: Vec<f64> = actual
+        .iter()
+        .zip(expected)
+        .enumerate()
+        .filter(|(i, _)| mask.is_none_or(|m| m[*i]))
+        .map(|(_, (a, e))| {
+            if a.iter().chain(e).all(|c| c.is_finite()) {
+                colour::delta_e2000(linear_srgb_to_lab(*a), linear_srgb_to_lab(*e))
+            } else {
+                f64::INFINITY
+            }
+        })
+        .collect();
+    if de.is_empty() {
+        return None;
+    }
+    let mean = de.iter().sum::<f64>() / de.len() as f64;
+    Some((mean, percentile(&mut de, 0.99)))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -379,5 +506,79 @@ mod tests {
         assert_eq!(diff.len(), 100);
         assert_eq!(diff[5], [1.0, 0.0, 1.0]);
         assert!((diff[0][0] - 0.5).abs() < 1e-6);
+    }
+
+    #[test]
+    fn box_downsample_averages_blocks_and_keeps_the_mean() {
+        let px = vec![
+            [1.0, 0.0, 2.0],
+            [3.0, 0.0, 2.0],
+            [0.0, 8.0, f32::NAN],
+            [0.0, 0.0, 4.0],
+            [5.0, 4.0, 2.0],
+            [7.0, 4.0, 2.0],
+            [0.0, 0.0, 0.0],
+            [4.0, 4.0, 4.0],
+        ];
+        // 4×2 → 2×1: NaN counts as 0.
+        let (w, h, out) = box_downsample(4, 2, &px, 2).unwrap();
+        assert_eq!((w, h), (2, 1));
+        assert_eq!(out, vec![[4.0, 2.0, 2.0], [1.0, 3.0, 2.0]]);
+        // Factor 1 is the identity (up to the NaN), and the mean is kept for any factor.
+        let g = gradient(12, 6);
+        assert_eq!(box_downsample(12, 6, &g, 1).unwrap().2, g);
+        let mean =
+            |v: &[[f32; 3]]| v.iter().map(|p| p[0] + p[1] + p[2]).sum::<f32>() / v.len() as f32;
+        for f in [2, 3, 6] {
+            let (w, h, d) = box_downsample(12, 6, &g, f).unwrap();
+            assert_eq!((w, h), (12 / f, 6 / f));
+            assert!((mean(&d) - mean(&g)).abs() < 1e-5, "{f}");
+        }
+        assert!(box_downsample(12, 6, &g, 4).is_err());
+        assert!(box_downsample(12, 6, &g, 0).is_err());
+        assert!(box_downsample(12, 5, &g, 1).is_err());
+    }
+
+    #[test]
+    fn filmic_tone_curve_is_monotone_with_unit_slope_and_white_at_w() {
+        for x in [0.0, 0.25, 1.0, 3.0, 100.0] {
+            assert_eq!(tone_map(x, Tone::Linear, 8.0), x);
+        }
+        assert_eq!(tone_map(f32::NAN, Tone::Filmic, 8.0), 0.0);
+        assert_eq!(tone_map(-1.0, Tone::Filmic, 8.0), 0.0);
+        assert_eq!(tone_map(f32::INFINITY, Tone::Linear, 8.0), 0.0);
+        // Slope 1 at black: f(ε) ≈ ε.
+        let e = 1e-4;
+        assert!((tone_map(e, Tone::Filmic, 8.0) / e - 1.0).abs() < 2e-4);
+        // f(W) = 1 and the curve rises monotonically below and above it.
+        for w in [1.0, 4.0, 8.0, 50.0] {
+            assert!((tone_map(w, Tone::Filmic, w) - 1.0).abs() < 1e-6, "{w}");
+        }
+        let mut prev = 0.0;
+        for i in 1..2000 {
+            let y = tone_map(i as f32 * 0.01, Tone::Filmic, 8.0);
+            assert!(y > prev && y <= i as f32 * 0.01, "{i}");
+            prev = y;
+        }
+        // Exposure first, then the curve; a bad white point is an error.
+        let mut px = vec![[0.5, 2.0, 16.0]];
+        apply_tone(&mut px, 2.0, Tone::Filmic, 8.0).unwrap();
+        let want = [1.0f32, 4.0, 32.0].map(|x| tone_map(x, Tone::Filmic, 8.0));
+        assert_eq!(px[0], want);
+        assert!(apply_tone(&mut px, 1.0, Tone::Filmic, 0.0).is_err());
+        assert!(apply_tone(&mut px, 0.0, Tone::Linear, 8.0).is_err());
+    }
+
+    #[test]
+    fn delta_e_over_a_mask() {
+        let a = vec![[0.5f32; 3], [0.5; 3], [0.2, 0.3, 0.4]];
+        let mut b = a.clone();
+        b[2] = [0.4, 0.3, 0.2];
+        let (mean, p99) = delta_e_over(&a, &b, Some(&[true, true, false])).unwrap();
+        assert_eq!((mean, p99), (0.0, 0.0));
+        let (mean, p99) = delta_e_over(&a, &b, None).unwrap();
+        assert!(mean > 0.0 && p99 > mean, "{mean} {p99}");
+        assert!(delta_e_over(&a, &b, Some(&[false; 3])).is_none());
+        assert!(delta_e_over(&a, &b[..2], None).is_none());
     }
 }

@@ -18,6 +18,7 @@ pub mod guard;
 pub mod heightfield;
 pub mod image_io;
 pub mod leave_out;
+pub mod light;
 pub mod material;
 pub mod mesh;
 pub mod plot;
@@ -25,6 +26,7 @@ pub mod profile;
 pub mod progress;
 pub mod render;
 pub mod scene;
+pub mod skin;
 pub mod spectrum;
 pub mod stability;
 

@@ -260,11 +260,12 @@ impl Mesh {
         })
     }
 
-    /// A built-in shape by name: `snake`, `sphere` or `plane` (the shapes shipped as
-    /// `assets/<name>.obj`).
+    /// A built-in shape by name: `snake`, `scaly-snake`, `sphere` or `plane` (all but
+    /// `scaly-snake` are shipped as `assets/<name>.obj`).
     pub fn builtin(name: &str) -> Option<Mesh> {
         match name {
             "snake" => Some(Mesh::snake(2.0, 0.08, 160, 48)),
+            "scaly-snake" => Some(Mesh::scaly_snake(2.0, 0.08, 64, 18)),
             "sphere" => Some(Mesh::sphere(1.0, 64, 32)),
             "plane" => Some(Mesh::plane(2.0, 16)),
             _ => None,
@@ -272,7 +273,7 @@ impl Mesh {
     }
 
     /// Names accepted by [`Mesh::builtin`].
-    pub const BUILTIN_NAMES: [&'static str; 3] = ["snake", "sphere", "plane"];
+    pub const BUILTIN_NAMES: [&'static str; 4] = ["snake", "scaly-snake", "sphere", "plane"];
 
     /// A UV sphere centred at the origin, `y` up. `u = φ/2π` runs around the `y` axis (so the
     /// tangent is the east direction), `v = θ/π` from the north pole (`+y`) to the south pole.
@@ -361,6 +362,98 @@ impl Mesh {
             (p, None)
         });
         build_generated("snake", raw)
+    }
+
+    /// The snake of [`Mesh::snake`] covered in curved, overlapping scales, as on a real
+    /// snake's skin: `scales_along × scales_around` scales in staggered rows (alternate rings
+    /// shifted by half a scale), each a smooth dome over the body (rising 5 % of the body
+    /// radius, so its normal tilts by up to about ±20° across it), lifted at its tail end by
+    /// 3 % of the radius so it lies over the next scale like a shingle, and tapered towards
+    /// that free edge. Scales are 35 % longer and 25 % wider than their cells, so they
+    /// overlap and no body shows between them; a plain body tube slightly inside them
+    /// covers the tail tip and the head, where there are no scales.
+    ///
+    /// **Frame:** here `u` runs **along** the body (tail → head, by arc length) and `v`
+    /// **around** it (`v = 0.25` the belly, `0.75` the spine), the reverse of
+    /// [`Mesh::snake`]: the tangent `T = ∂P/∂u` follows each scale's dome along the body, so
+    /// the height field's rows (the measured Elaphe ridges, which run along `x`) run along
+    /// the body as on the animal, and the grating diffracts around it. Normals are analytic
+    /// per scale (smooth within a scale, a crease where one scale overlaps the next), so the
+    /// diffraction colour sweeps smoothly across each scale.
+    ///
+    /// Counts are clamped to `scales_along ∈ [4, 1024]`, `scales_around ∈ [3, 256]`; sizes
+    /// that are not positive and finite are replaced by 2 and 0.08.
+    pub fn scaly_snake(length: f32, radius: f32, scales_along: u32, scales_around: u32) -> Mesh {
+        let len = if length.is_finite() && length > 0.0 {
+            length
+        } else {
+            2.0
+        } as f64;
+        let rad = if radius.is_finite() && radius > 0.0 {
+            radius
+        } else {
+            0.08
+        } as f64;
+        let (na, nr) = (
+            scales_along.clamp(4, 1024) as usize,
+            scales_around.clamp(3, 256) as usize,
+        );
+        let body = ScalyBody::new(len, rad);
+        // The body under the scales, a little inside them.
+        let mut raw = grid(4 * na as u32, 3 * nr as u32, |u, v| {
+            (body.point(u, v, 0.985), None)
+        });
+        const Q: usize = 6; // quads per scale side
+        let (ds, da) = (1.0 / na as f64, 1.0 / nr as f64);
+        let (over_s, over_a) = (1.35, 1.25);
+        let (dome, lift) = (0.05, 0.03);
+        for i in 0..na {
+            let sc = (i as f64 + 0.5) * ds;
+            // No scales where the body narrows to its tips (the tail point, the snout).
+            let reach = 0.5 * ds * over_s;
+            if snake_profile(sc - reach) < 0.3 || snake_profile(sc + reach) < 0.3 || sc > 0.93 {
+                continue;
+            }
+            for j in 0..nr {
+                let ac = (j as f64 + 0.5 + 0.5 * (i % 2) as f64) * da;
+                // (p, q) ∈ [−1, 1]²: p around, q along (q = −1 the tail end, the free edge).
+                let at = |p: f64, q: f64| {
+                    let taper = 1.0 - 0.4 * (-q).max(0.0).powi(2);
+                    let s = sc + q * 0.5 * ds * over_s;
+                    let a = ac + p * taper * 0.5 * da * over_a;
+                    let h = dome * (1.0 - p * p) * (1.0 - q * q) + lift * 0.5 * (1.0 - q);
+                    (body.point(s, a, 1.0 + h), [s as f32, a as f32])
+                };
+                let base = raw.positions.len() as u32;
+                for qi in 0..=Q {
+                    for pi in 0..=Q {
+                        let (p, q) = (
+                            2.0 * pi as f64 / Q as f64 - 1.0,
+                            2.0 * qi as f64 / Q as f64 - 1.0,
+                        );
+                        let (pos, uv) = at(p, q);
+                        // Analytic (central-difference) normal of the dome: smooth in a scale.
+                        let e = 1e-4;
+                        let dq = at(p, q + e).0 - at(p, q - e).0;
+                        let dp = at(p + e, q).0 - at(p - e, q).0;
+                        let n = dq.cross(dp).normalize_or(DVec3::Y);
+                        raw.positions.push(f3(pos));
+                        raw.normals.push(Some(f3(n)));
+                        raw.uvs.push(Some(uv));
+                    }
+                }
+                let k = |pi: usize, qi: usize| base + (qi * (Q + 1) + pi) as u32;
+                for qi in 0..Q {
+                    for pi in 0..Q {
+                        // Counter-clockwise seen from outside: ∂P/∂q × ∂P/∂p points out.
+                        let (a, b, c, d) =
+                            (k(pi, qi), k(pi, qi + 1), k(pi + 1, qi + 1), k(pi + 1, qi));
+                        raw.indices.extend_from_slice(&[a, b, c, a, c, d]);
+                    }
+                }
+            }
+        }
+        build_generated("scaly-snake", raw)
     }
 
     /// Facets the mesh into flat "scales", as on a snake's skin: every pair of consecutive
@@ -848,6 +941,36 @@ fn snake_profile(s: f64) -> f64 {
     tail * neck * snout
 }
 
+/// The body of [`Mesh::scaly_snake`]: `point(s, a, k)` is the tube point at arc fraction `s`
+/// (tail → head) and around-fraction `a`, `k` times the local radius from the centre line
+/// (`k > 1` lies above the skin). `θ = −2πa`, so `∂P/∂s × ∂P/∂a` points outwards.
+struct ScalyBody {
+    curve: SnakeCurve,
+    radius: f64,
+}
+
+impl ScalyBody {
+    fn new(length: f64, radius: f64) -> Self {
+        Self {
+            curve: SnakeCurve::new(length),
+            radius,
+        }
+    }
+
+    fn point(&self, s: f64, a: f64, k: f64) -> DVec3 {
+        let s = s.clamp(0.0, 1.0);
+        let (c, tp) = self.curve.at_arc_fraction(s);
+        let r = self.radius * snake_profile(s);
+        let side = DVec3::Y.cross(tp);
+        let (sn, co) = (-a * std::f64::consts::TAU).sin_cos();
+        let height = 0.8 * r;
+        // The belly rests on the ground at k = 1; scales above it grow outwards from the
+        // centre of the cross-section.
+        let centre = DVec3::new(c.x, height, c.z);
+        centre + (side * (r * co) + DVec3::Y * (height * sn)) * k
+    }
+}
+
 /// The snake's centre line in the `xz` plane, re-parametrised by arc length.
 struct SnakeCurve {
     length: f64,
@@ -1006,6 +1129,57 @@ mod tests {
             }
         }
         assert!(checked > 1000);
+    }
+
+    #[test]
+    fn scaly_snake_has_domed_scales_with_tangents_along_the_body() {
+        let m = Mesh::builtin("scaly-snake").unwrap();
+        check_frames(&m);
+        let curve = SnakeCurve::new(2.0);
+        let mid = |v: &Vertex| (0.08..=0.9).contains(&v.uv[0]);
+        let (mut along, mut tilt, mut n_mid) = (0.0f64, Vec::new(), 0usize);
+        for v in m.vertices.iter().filter(|v| mid(v)) {
+            let s = f64::from(v.uv[0]);
+            let (c, axis) = curve.at_arc_fraction(s);
+            let centre = DVec3::new(c.x, 0.8 * 0.08 * snake_profile(s), c.z);
+            let n = v3(v.normal);
+            let radial = (v3(v.position) - centre).normalize();
+            assert!(n.dot(radial) > 0.5, "normal points into the body: {v:?}");
+            let t = v3([v.tangent[0], v.tangent[1], v.tangent[2]]);
+            assert!(t.dot(axis) > 0.6, "tangent not along the body: {v:?}");
+            along += t.dot(axis);
+            tilt.push(n.dot(radial).clamp(-1.0, 1.0).acos().to_degrees());
+            n_mid += 1;
+        }
+        assert!(n_mid > 10_000, "{n_mid}");
+        // Mean |cos| between T and the body axis: the domes tilt T by up to ~20°.
+        assert!(along / n_mid as f64 > 0.95, "{}", along / n_mid as f64);
+        // Domed, not flat: a tube's normal leaves the radial direction by at most ~7° (its
+        // 1 : 0.8 ellipse); the scales' domes tilt a good share of normals beyond 12°.
+        tilt.sort_by(f64::total_cmp);
+        let p90 = tilt[tilt.len() * 9 / 10];
+        assert!(p90 > 12.0 && tilt[tilt.len() - 1] < 45.0, "p90 {p90}");
+        // Smooth within a scale: on the trunk, corners of one triangle typically differ by a
+        // few degrees (6×6 quads a scale tilting ±25°: ~8° a quad); the
+        // largest changes are at a scale's free tail edge, where dome, lift and taper meet.
+        let mut worst = 0.0f64;
+        let mut changes = Vec::new();
+        for tri in m.indices.chunks_exact(3) {
+            let vs = [0, 1, 2].map(|k| m.vertices[tri[k] as usize]);
+            if vs.iter().all(|v| (0.3..=0.85).contains(&v.uv[0])) {
+                for (a, b) in [(0, 1), (1, 2), (0, 2)] {
+                    let d = v3(vs[a].normal).dot(v3(vs[b].normal)).clamp(-1.0, 1.0);
+                    worst = worst.max(d.acos().to_degrees());
+                    changes.push(d.acos().to_degrees());
+                }
+            }
+        }
+        changes.sort_by(f64::total_cmp);
+        let median = changes[changes.len() / 2];
+        println!(
+            "normal change across a triangle: median {median:.1}°, max {worst:.1}°; p90 tilt {p90:.1}°"
+        );
+        assert!(median < 10.0 && worst < 35.0, "{median} {worst}");
     }
 
     #[test]

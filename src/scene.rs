@@ -12,8 +12,11 @@ use std::path::{Path, PathBuf};
 use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
+use crate::image_io::{apply_tone, box_downsample, Tone, DEFAULT_TONE_WHITE};
+use crate::light::{MAX_ANGULAR_DIAMETER_DEG, MAX_DISK_SAMPLES};
 use crate::material::Material;
 use crate::mesh::Mesh;
+use crate::skin::{elaphe_skin, ELAPHE_SKIN_BUILTIN, ELAPHE_SKIN_SIZE};
 use crate::{Error, Result};
 
 /// The embedded default scene (also the reference for every key's default).
@@ -77,13 +80,25 @@ pub struct Light {
     pub direction: [f32; 3],
     /// Radiance scale (≥ 0).
     pub intensity: f32,
+    /// Angular diameter of the light's disc in degrees, 0..=20 (the sun: 0.53; 0: a point).
+    pub angular_diameter_deg: f32,
+    /// Directions the disc is integrated over ([`crate::light::sun_disk_samples`]), 1..=256.
+    pub disk_samples: u32,
 }
+
+/// The sun's angular diameter seen from the Earth (degrees).
+pub const SUN_ANGULAR_DIAMETER_DEG: f32 = 0.53;
+
+/// Default number of directions over the sun's disc.
+pub const DEFAULT_DISK_SAMPLES: u32 = 8;
 
 impl Default for Light {
     fn default() -> Self {
         Self {
             direction: [0.25, -0.45, 1.0],
             intensity: 1.0,
+            angular_diameter_deg: SUN_ANGULAR_DIAMETER_DEG,
+            disk_samples: DEFAULT_DISK_SAMPLES,
         }
     }
 }
@@ -93,6 +108,17 @@ impl Light {
     /// `−normalize(direction)`.
     pub fn towards_light(&self) -> Vec3 {
         -Vec3::from(self.direction).normalize_or_zero()
+    }
+
+    /// The directions `ωi` (world space) over the light's disc with their weights (summing
+    /// to 1): what a renderer sums the diffraction term over instead of [`Self::towards_light`]
+    /// alone. One direction when the diameter is 0 or `disk_samples` is 1.
+    pub fn disk_samples(&self) -> Vec<crate::light::DiskSample> {
+        crate::light::sun_disk_samples(
+            self.towards_light().to_array(),
+            self.angular_diameter_deg,
+            self.disk_samples,
+        )
     }
 }
 
@@ -197,6 +223,13 @@ pub struct Output {
     pub exposure: f32,
     /// Linear sRGB colour where no surface is hit.
     pub background: [f32; 3],
+    /// Anti-aliasing: render `supersample²` samples per pixel (a frame `supersample` times
+    /// the size) and box-filter it down ([`crate::image_io::box_downsample`]), 1..=4.
+    pub supersample: u32,
+    /// Tone curve after the exposure, before the sRGB curve of a PNG (EXR stays linear).
+    pub tone: Tone,
+    /// White point of the `filmic` tone curve: the linear value (after exposure) shown as 1.
+    pub white: f32,
 }
 
 impl Default for Output {
@@ -206,14 +239,39 @@ impl Default for Output {
             height: 512,
             exposure: 1.0,
             background: [0.02, 0.02, 0.02],
+            supersample: 1,
+            tone: Tone::Linear,
+            white: DEFAULT_TONE_WHITE,
         }
     }
 }
+
+/// Largest `[output] supersample`: 16 samples a pixel; an 8192² frame at 4× is already a
+/// 32768² render target.
+pub const MAX_SUPERSAMPLE: u32 = 4;
 
 impl Output {
     /// `width / height`.
     pub fn aspect(&self) -> f32 {
         self.width as f32 / self.height as f32
+    }
+
+    /// Size of the frame to render before [`Self::resolve`]: `supersample` times the output.
+    pub fn render_size(&self) -> (u32, u32) {
+        (
+            self.width * self.supersample.max(1),
+            self.height * self.supersample.max(1),
+        )
+    }
+
+    /// A rendered linear frame of [`Self::render_size`] → the output-sized frame: box
+    /// downsampling, then the exposure and the tone curve. What is left is what
+    /// `write_png_srgb(…, exposure = 1)` encodes. (For EXR, stop after the downsampling.)
+    pub fn resolve(&self, rendered: &[[f32; 3]]) -> Result<Vec<[f32; 3]>> {
+        let (w, h) = self.render_size();
+        let (_, _, mut px) = box_downsample(w, h, rendered, self.supersample.max(1))?;
+        apply_tone(&mut px, self.exposure, self.tone, self.white)?;
+        Ok(px)
     }
 }
 
@@ -222,11 +280,24 @@ impl Output {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TextureSpec {
-    /// sRGB PNG looked up by the mesh UVs (made absolute against the scene file's directory).
+    /// sRGB PNG looked up by the mesh UVs (made absolute against the scene file's directory),
+    /// or `builtin:elaphe-skin` ([`crate::skin`]).
     pub path: PathBuf,
     /// Weight of the diffuse texture part, in [0, 1].
     #[serde(default = "default_w_diffuse")]
     pub w_diffuse: f32,
+    /// Optional diffuse term for the sky: the texture colour times this irradiance (relative
+    /// to the light's), added without the light's `cos θi`, so the skin turned away from the
+    /// sun is dim rather than black. 0..=1; 0 is the thesis (Algorithm 4 alone).
+    #[serde(default)]
+    pub ambient: f32,
+    /// Linear multiplier of the texture colour, > 0 (1: the thesis). The diffraction colour
+    /// is relative to a mirror's specular peak, the texture an albedo: in sunlight a first
+    /// order at 1/300 of the mirror is still ~1000× brighter than diffuse skin, which is why
+    /// the iridescence is striking. With the exposure set for the diffraction colours, a
+    /// gain ≪ 1 puts the skin back at a visible level.
+    #[serde(default = "one")]
+    pub gain: f32,
 }
 
 fn default_w_diffuse() -> f32 {
@@ -234,8 +305,37 @@ fn default_w_diffuse() -> f32 {
 }
 
 impl TextureSpec {
+    /// The shaded colour of one pixel (linear sRGB, before exposure), the CPU statement of
+    /// what the fragment shader computes with a texture:
+    /// `intensity · max(cos θi, 0) · Algorithm4(c_diffraction, t, F) + ambient · t` with
+    /// `t = gain · c_texture` and Algorithm 4 `= (1 − w_d)·c_diffraction + (1 − α)·t + w_d·t`,
+    /// `α = min(1, |F|)`, `F` the Schlick reflectance at the half vector. With a finite
+    /// light, `c_diffraction` is the weighted sum over [`Light::disk_samples`].
+    pub fn shade(
+        &self,
+        c_diffraction: [f32; 3],
+        c_texture: [f32; 3],
+        fresnel_f: f32,
+        cos_theta_i: f32,
+        intensity: f32,
+    ) -> [f32; 3] {
+        let alpha = fresnel_f.abs().min(1.0);
+        let lit = intensity * cos_theta_i.max(0.0);
+        let w = self.w_diffuse;
+        [0, 1, 2].map(|c| {
+            let tex = self.gain * c_texture[c];
+            let blend = (1.0 - w) * c_diffraction[c] + (1.0 - alpha) * tex + w * tex;
+            lit * blend + self.ambient * tex
+        })
+    }
+
     /// Reads the texture: `(width, height, sRGB-encoded RGB bytes)`, top row first.
+    /// `builtin:elaphe-skin` is the procedural corn-snake skin ([`crate::skin`]).
     pub fn load(&self) -> Result<(u32, u32, Vec<[u8; 3]>)> {
+        if self.path.as_os_str() == ELAPHE_SKIN_BUILTIN {
+            let (w, h) = ELAPHE_SKIN_SIZE;
+            return Ok((w, h, elaphe_skin(w, h)));
+        }
         crate::image_io::read_png_rgb8(&self.path)
     }
 }
@@ -351,7 +451,9 @@ impl Scene {
             scene.mesh.path = Some(base.join(p));
         }
         if let Some(t) = &mut scene.texture {
-            t.path = base.join(&t.path);
+            if t.path.as_os_str() != ELAPHE_SKIN_BUILTIN {
+                t.path = base.join(&t.path);
+            }
         }
         let hf = &scene.material.heightfield;
         if !hf.starts_with("builtin:") && !hf.is_empty() && Path::new(hf).is_relative() {
@@ -435,6 +537,19 @@ impl Scene {
                 l.intensity
             ));
         }
+        if !(0.0..=MAX_ANGULAR_DIAMETER_DEG).contains(&l.angular_diameter_deg) {
+            return Err(format!(
+                "[light] angular_diameter_deg = {}: expected 0 to {MAX_ANGULAR_DIAMETER_DEG} \
+                 degrees (the sun: 0.53)",
+                l.angular_diameter_deg
+            ));
+        }
+        if !(1..=MAX_DISK_SAMPLES).contains(&l.disk_samples) {
+            return Err(format!(
+                "[light] disk_samples = {}: expected 1 to {MAX_DISK_SAMPLES}",
+                l.disk_samples
+            ));
+        }
 
         let m = &self.mesh;
         match (&m.path, &m.builtin) {
@@ -476,6 +591,14 @@ impl Scene {
                 o.background
             ));
         }
+        if !(1..=MAX_SUPERSAMPLE).contains(&o.supersample) {
+            return Err(format!(
+                "[output] supersample = {}: expected 1 to {MAX_SUPERSAMPLE} (samples per pixel \
+                 = its square)",
+                o.supersample
+            ));
+        }
+        positive("[output] white", o.white)?;
 
         if let Some(t) = &self.texture {
             if t.path.as_os_str().is_empty() {
@@ -485,6 +608,13 @@ impl Scene {
                 return Err(format!(
                     "[texture] w_diffuse = {}: must be in [0, 1]",
                     t.w_diffuse
+                ));
+            }
+            positive("[texture] gain", t.gain)?;
+            if !(0.0..=1.0).contains(&t.ambient) {
+                return Err(format!(
+                    "[texture] ambient = {}: must be in [0, 1]",
+                    t.ambient
                 ));
             }
         }
@@ -507,35 +637,134 @@ mod tests {
         let parsed = Scene::from_toml_str(DEFAULT_SCENE_TOML, Path::new("x/default.toml"))
             .expect("embedded default scene");
         assert_eq!(Scene::default(), parsed);
-        assert_eq!(parsed.material, Material::default());
-        assert_eq!(parsed.texture, None);
-        // The default scene sets up its own diffraction geometry (see the file); a scene
-        // that leaves a section out gets general-purpose defaults instead.
+        // The default scene sets up its own close-up (see the file); a scene that leaves a
+        // section out gets general-purpose defaults instead.
         let empty = Scene::from_toml_str("", Path::new("e.toml")).unwrap();
         assert_eq!(empty.camera, Camera::default());
         assert_eq!(empty.light, Light::default());
         assert_eq!(empty.mesh, MeshSpec::default());
         assert_eq!(empty.output, Output::default());
+        assert_eq!(empty.texture, None);
+        assert_eq!(parsed.mesh.builtin.as_deref(), Some("scaly-snake"));
+        assert_eq!(parsed.material.heightfield, "builtin:elaphe-grown");
         assert_eq!(
-            parsed.mesh,
-            MeshSpec {
-                scale_roll_deg: 10.0,
-                ..MeshSpec::default()
+            parsed.material,
+            Material {
+                heightfield: "builtin:elaphe-grown".into(),
+                ..Material::default()
             }
+        );
+        let t = parsed.texture.as_ref().expect("[texture]");
+        assert_eq!(
+            t.path,
+            Path::new(ELAPHE_SKIN_BUILTIN),
+            "builtins are not paths"
         );
         assert_eq!(
             parsed.output,
             Output {
-                exposure: 60.0,
+                exposure: 400.0,
+                supersample: 2,
+                tone: Tone::Filmic,
                 ..Output::default()
             }
         );
-        // Light and camera in one vertical plane at 45° on either side: ωi + ωr is vertical,
-        // so v = 0 wherever the skin's bitangent is horizontal.
+        assert_eq!(
+            (parsed.light.angular_diameter_deg, parsed.light.disk_samples),
+            (SUN_ANGULAR_DIAMETER_DEG, DEFAULT_DISK_SAMPLES)
+        );
+        // Light and camera in one plane across the body (x = const): ωi + ωr has no
+        // component along the trunk, so u ≈ 0 on it and the colours come from v.
         let wi = parsed.light.towards_light();
         let wr = (parsed.camera.eye() - Vec3::from(parsed.camera.target)).normalize();
-        let s = wi + wr;
-        assert!(s.x.abs() < 1e-3 && s.z.abs() < 1e-3, "{s}");
+        assert!((wi + wr).x.abs() < 1e-6);
+    }
+
+    #[test]
+    fn new_keys_are_validated() {
+        for (text, key) in [
+            ("[output]\nsupersample = 0", "supersample"),
+            ("[output]\nsupersample = 5", "supersample"),
+            ("[output]\nwhite = 0.0", "white"),
+            ("[output]\ntone = \"aces\"", "aces"),
+            (
+                "[light]\nangular_diameter_deg = -1.0",
+                "angular_diameter_deg",
+            ),
+            (
+                "[light]\nangular_diameter_deg = 30.0",
+                "angular_diameter_deg",
+            ),
+            ("[light]\ndisk_samples = 0", "disk_samples"),
+            ("[texture]\npath = \"a.png\"\ngain = 0.0", "gain"),
+            ("[texture]\npath = \"a.png\"\nambient = 2.0", "ambient"),
+        ] {
+            let e = Scene::from_toml_str(text, Path::new("s.toml"))
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(key) && e.contains("s.toml"), "{text}: {e}");
+        }
+        let s = Scene::from_toml_str(
+            "[output]\nsupersample = 3\ntone = \"filmic\"\nwhite = 4.0\n[light]\nangular_diameter_deg = 0\ndisk_samples = 16",
+            Path::new("s.toml"),
+        )
+        .unwrap();
+        assert_eq!(s.output.render_size(), (1536, 1536));
+        assert_eq!(
+            s.light.disk_samples().len(),
+            1,
+            "diameter 0 is a point light"
+        );
+    }
+
+    #[test]
+    fn resolve_downsamples_then_exposes_then_tones() {
+        let out = Output {
+            width: 2,
+            height: 1,
+            exposure: 2.0,
+            supersample: 2,
+            tone: Tone::Filmic,
+            white: 4.0,
+            ..Output::default()
+        };
+        assert_eq!(out.render_size(), (4, 2));
+        let frame = vec![
+            [1.0, 0.0, 0.0],
+            [3.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0],
+            [0.0, 0.0, 1.0],
+        ];
+        let px = out.resolve(&frame).unwrap();
+        let f = |x: f32| crate::image_io::tone_map(x, Tone::Filmic, 4.0);
+        assert_eq!(px, vec![[f(2.0), 0.0, 0.0], [0.0, 0.0, f(2.0)]]);
+        assert!(out.resolve(&frame[..4]).is_err());
+    }
+
+    #[test]
+    fn texture_shading_is_algorithm_4_lit_by_the_sun_plus_ambient() {
+        let t = TextureSpec {
+            path: "x.png".into(),
+            w_diffuse: 0.25,
+            ambient: 0.1,
+            gain: 0.5,
+        };
+        let c = t.shade([0.8, 0.4, 0.0], [0.2, 0.4, 1.0], 0.04, 0.5, 2.0);
+        // lit = 2·0.5 = 1; tex = 0.5·c_texture; (1 − α) = 0.96.
+        let want = [0, 1, 2].map(|i| {
+            let tex = 0.5 * [0.2f32, 0.4, 1.0][i];
+            0.75 * [0.8f32, 0.4, 0.0][i] + 0.96 * tex + 0.25 * tex + 0.1 * tex
+        });
+        for i in 0..3 {
+            assert!((c[i] - want[i]).abs() < 1e-6, "{c:?} vs {want:?}");
+        }
+        // Facing away from the sun: only the ambient part is left.
+        let dark = t.shade([5.0; 3], [0.2, 0.4, 1.0], 0.04, -0.3, 2.0);
+        assert_eq!(dark, [0.1f32 * 0.1, 0.1 * 0.2, 0.1 * 0.5]);
     }
 
     #[test]
@@ -544,7 +773,12 @@ mod tests {
         s.texture = Some(TextureSpec {
             path: "/t/skin.png".into(),
             w_diffuse: 0.25,
+            ambient: 0.125,
+            gain: 0.5,
         });
+        s.output.tone = Tone::Filmic;
+        s.output.supersample = 3;
+        s.light.angular_diameter_deg = 2.0;
         s.material.dh_um = Some(0.05);
         let text = toml::to_string(&s).expect("serialise");
         assert_eq!(

@@ -13,9 +13,12 @@ use diffract::render::{Frame, Renderer};
 use diffract::scene::Scene;
 use gpu_util::*;
 
-/// The default scene at 64×64.
+/// The flat-scales example (the first default scene, whose colours these tests check) at 64×64.
 fn default_scene_64() -> Scene {
-    let mut scene = Scene::default_scene();
+    let mut scene = Scene::load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/examples/flat_scales.toml"),
+    )
+    .expect("flat_scales example");
     scene.output.width = 64;
     scene.output.height = 64;
     scene

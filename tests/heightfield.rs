@@ -173,14 +173,17 @@ fn bad_inputs_are_clear_errors() {
         "{e}"
     );
 
-    // Colour image.
+    // Colour image: names the first pixel and channel that differ from R.
     let rgb = dir.join("rgb.png");
     image::RgbImage::from_pixel(4, 4, image::Rgb([1, 2, 3]))
         .save(&rgb)
         .unwrap();
     let e = HeightField::load(&rgb, Some(0.05), Some(1.0)).unwrap_err();
     assert!(
-        matches!(e, Error::Image { .. }) && e.to_string().contains("grayscale"),
+        matches!(e, Error::Image { .. })
+            && e.to_string().contains("not grey")
+            && e.to_string()
+                .contains("(column 0, row 0) has R = 1 but G = 2"),
         "{e}"
     );
 
@@ -390,7 +393,10 @@ fn builtin_sources() {
 
 fn args(kind: GratingKind, out: PathBuf) -> HeightfieldArgs {
     HeightfieldArgs {
-        kind,
+        kind: Some(kind),
+        from_sample: None,
+        samples: None,
+        hmax_um: None,
         out,
         size_um: Some(10.0),
         dh_um: None,

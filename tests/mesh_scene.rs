@@ -45,10 +45,14 @@ fn close(a: &Vertex, b: &Vertex, tol: f32) -> bool {
     pairs.into_iter().all(|(x, y)| (x - y).abs() <= tol)
 }
 
+/// Built-in meshes shipped as `assets/<name>.obj`; `scaly-snake` (83k triangles, ~6 MB of
+/// OBJ) is only generated.
+const SHIPPED: [&str; 3] = ["snake", "sphere", "plane"];
+
 #[test]
 #[ignore = "writes assets/; run explicitly to regenerate the shipped meshes"]
 fn regenerate_builtin_assets() {
-    for name in Mesh::BUILTIN_NAMES {
+    for name in SHIPPED {
         let m = Mesh::builtin(name).unwrap();
         m.write_obj(&asset(&format!("{name}.obj"))).unwrap();
     }
@@ -56,7 +60,7 @@ fn regenerate_builtin_assets() {
 
 #[test]
 fn shipped_meshes_match_the_generators() {
-    for name in Mesh::BUILTIN_NAMES {
+    for name in SHIPPED {
         let generated = Mesh::builtin(name).unwrap();
         let loaded = Mesh::load_obj(&asset(&format!("{name}.obj")))
             .unwrap_or_else(|e| panic!("{name}: {e} (regenerate: see the file docs)"));
@@ -333,11 +337,17 @@ fn scene(text: &str) -> diffract::Result<Scene> {
     Scene::from_toml_str(text, Path::new("/scenes/s.toml"))
 }
 
+/// The first default scene, kept as a named example (and the goldens' scene).
+fn flat_scales() -> Scene {
+    Scene::load(&Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/examples/flat_scales.toml"))
+        .expect("assets/examples/flat_scales.toml")
+}
+
 #[test]
 fn default_scene_file_is_valid_and_complete() {
     let s = Scene::default_scene();
-    assert_eq!(s.mesh.builtin.as_deref(), Some("snake"));
-    assert_eq!(s.material, diffract::material::Material::default());
+    assert_eq!(s.mesh.builtin.as_deref(), Some("scaly-snake"));
+    assert_eq!(s.material.heightfield, "builtin:elaphe-grown");
     assert_eq!((s.output.width, s.output.height), (512, 512));
     assert_eq!(Scene::default(), s);
     // Every section is spelt out in the file (it documents the format).
@@ -354,8 +364,8 @@ fn default_scene_file_is_valid_and_complete() {
 }
 
 #[test]
-fn default_camera_frames_the_trunk() {
-    let s = Scene::default_scene();
+fn flat_scales_camera_frames_the_trunk() {
+    let s = flat_scales();
     let mesh = s.mesh.load().unwrap();
     let vp = s.camera.view_proj(s.output.aspect());
     let ndc = |p: [f32; 3]| {
@@ -379,13 +389,13 @@ fn default_camera_frames_the_trunk() {
     assert!(ndc([lo[0], 0.0, 0.0]).x < -0.9 && ndc([hi[0], 0.0, 0.0]).x > 0.9);
 }
 
-/// The default light, camera and scales must put a good share of the visible, lit skin
+/// The flat-scales example's light, camera and scales must put a good share of the visible, lit skin
 /// scales into first-order diffraction of the Elaphe grating (period ≈ 1.14 µm): |v| inside
 /// the coherence lobe and |u| between λ/d for 380 and 780 nm (u, v = −(ωi + ωr)·(T, B) in
 /// the tangent frame, MODEL §1).
 #[test]
-fn default_scene_shows_first_order_colours() {
-    let s = Scene::default_scene();
+fn flat_scales_scene_shows_first_order_colours() {
+    let s = flat_scales();
     let mesh = s.mesh.load().unwrap();
     let wi = s.light.towards_light();
     let (period, mut visible, mut coloured) = (1.144f32, 0, 0);
@@ -647,4 +657,44 @@ fn golden_comparison_tolerates_small_noise_and_catches_shifts() {
     let tinted: Vec<[f32; 3]> = img.iter().map(|p| [p[0] * 0.7, p[1], p[2]]).collect();
     let d = image_io::compare_images(&tinted, &img);
     assert!(d.p95_delta_e > 3.0, "{d}");
+}
+
+/// The default close-up: the camera sees many scales of the trunk, and a good share of the
+/// visible, lit scale corners is in first-order diffraction of the measured Elaphe skin. Its
+/// ridges run along the tangent (along the body), so the orders are at `|v| = λ/d` with
+/// `d = 1.144 µm` (0.33 ≤ |v| ≤ 0.68 over 380–780 nm) and `u` near 0: within ±0.1, the
+/// half-width of the grown field's fan-shaped lobe in its BRDF map (README figure).
+#[test]
+fn default_close_up_shows_scales_in_first_order() {
+    let s = Scene::default_scene();
+    let mesh = s.mesh.load().unwrap();
+    let vp = s.camera.view_proj(s.output.aspect());
+    let (period, mut visible, mut coloured) = (1.144f32, 0, 0);
+    let wi = s.light.towards_light();
+    for v in &mesh.vertices {
+        let c = vp * Vec3::from(v.position).extend(1.0);
+        let p = c.xyz() / c.w;
+        if c.w <= 0.0 || p.x.abs() > 1.0 || p.y.abs() > 1.0 {
+            continue;
+        }
+        let n = Vec3::from(v.normal);
+        let wr = (s.camera.eye() - Vec3::from(v.position)).normalize();
+        if n.dot(wi) <= 0.05 || n.dot(wr) <= 0.05 {
+            continue;
+        }
+        visible += 1;
+        let t = Vec3::new(v.tangent[0], v.tangent[1], v.tangent[2]);
+        let b = n.cross(t) * v.tangent[3];
+        let (u, vv) = (-(wi + wr).dot(t), -(wi + wr).dot(b));
+        if u.abs() < 0.1 && vv.abs() > 0.38 / period && vv.abs() < 0.78 / period {
+            coloured += 1;
+        }
+    }
+    println!("{coloured} of {visible} visible lit corners in first order");
+    assert!(visible > 1000, "{visible}");
+    assert!(coloured * 10 > visible, "{coloured} of {visible}");
+    // The texture is the built-in skin, and its UVs cover the body.
+    let t = s.texture.as_ref().unwrap();
+    let (w, h, px) = t.load().unwrap();
+    assert_eq!(px.len(), (w * h) as usize);
 }

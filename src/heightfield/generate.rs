@@ -277,10 +277,10 @@ fn positive(what: &'static str, v: f64) -> Result<()> {
 /// SplitMix64 (Steele, Lea & Flood 2014): tiny, fast, and good enough for jitter. Owned
 /// here so the gratings never change with a dependency's version.
 #[derive(Debug, Clone)]
-struct Rng(u64);
+pub(super) struct Rng(u64);
 
 impl Rng {
-    fn new(seed: u64) -> Self {
+    pub(super) fn new(seed: u64) -> Self {
         Self(seed ^ 0x6a09_e667_f3bc_c909)
     }
     fn next_u64(&mut self) -> u64 {
@@ -291,7 +291,7 @@ impl Rng {
         z ^ (z >> 31)
     }
     /// Uniform in `[0, 1)` with 53 random bits.
-    fn unit(&mut self) -> f64 {
+    pub(super) fn unit(&mut self) -> f64 {
         (self.next_u64() >> 11) as f64 * (1.0 / (1u64 << 53) as f64)
     }
     /// Uniform in `[lo, hi)`.

@@ -1,5 +1,6 @@
-//! Height-field files: 8/16-bit grayscale PNG (`h = g·h_max`) and raw little-endian `.f32`
-//! heights in µm, each with an optional TOML sidecar (`elaphe.png` → `elaphe.toml`) giving
+//! Height-field files: 8/16-bit grey PNG (`h = g·h_max`; grey stored as RGB/RGBA or as a
+//! palette with R = G = B is accepted, as measurement tools and the thesis write it) and raw
+//! little-endian `.f32` heights in µm, each with an optional TOML sidecar (`elaphe.png` → `elaphe.toml`) giving
 //! `dh_um`, `h_max_um` (images) or `nx`, `ny` (raw). Caller-supplied values override the
 //! sidecar. Writes go through a temporary sibling file and a rename, so a failed save never
 //! leaves a half-written file behind.
@@ -105,7 +106,7 @@ fn with_path(path: &Path) -> impl FnOnce(Error) -> Error + '_ {
 }
 
 impl HeightField {
-    /// Loads a PNG (8/16-bit grayscale, alpha ignored) or raw `.f32` height field. `dh_um`
+    /// Loads a PNG (8/16-bit grey; RGB/RGBA/palette with R = G = B; alpha ignored) or raw `.f32` height field. `dh_um`
     /// and `h_max_um` override the sidecar; a value missing from both is an error naming
     /// both places. Never panics on a bad file.
     pub fn load(path: &Path, dh_um: Option<f64>, h_max_um: Option<f64>) -> Result<HeightField> {
@@ -182,7 +183,11 @@ impl HeightField {
     /// `builtin:<kind>` (blazed, sinusoidal, elaphe, xenopeltis) is the default generated
     /// grating of that kind, the same field as the shipped `assets/<kind>.png` before
     /// quantisation; `dh_um` then resamples it at that pixel size and `h_max_um` rescales
-    /// its peak-to-valley height. Anything else is a path for [`HeightField::load`].
+    /// its peak-to-valley height. `builtin:elaphe-measured` is the shipped AFM crop
+    /// (`assets/measured/`, embedded in the binary) and `builtin:elaphe-grown` that crop
+    /// grown to [`GROWN_SAMPLES`]² samples with seed 1 ([`super::grow()`]); for both,
+    /// `dh_um` and `h_max_um` override the crop's calibration (pixel size, height of grey
+    /// level 1) as a sidecar would. Anything else is a path for [`HeightField::load`].
     pub fn load_source(
         spec: &str,
         dh_um: Option<f64>,
@@ -191,6 +196,13 @@ impl HeightField {
         let Some(name) = spec.strip_prefix(BUILTIN_PREFIX) else {
             return HeightField::load(Path::new(spec), dh_um, h_max_um);
         };
+        match name.to_ascii_lowercase().as_str() {
+            "elaphe-measured" => return measured_elaphe(dh_um, h_max_um),
+            "elaphe-grown" => {
+                return super::grow::grow(&measured_elaphe(dh_um, h_max_um)?, GROWN_SAMPLES, 1)
+            }
+            _ => {}
+        }
         let kind: GratingKind = name.parse()?;
         let mut grating = GratingSpec::default_for(kind);
         if let Some(dh) = dh_um {
@@ -280,7 +292,82 @@ impl HeightField {
     }
 }
 
-/// Decodes a grayscale PNG into values `g ∈ [0, 1]`, row-major.
+/// The shipped AFM crop of an *Elaphe guttata* shed (`assets/measured/README.md`).
+const MEASURED_ELAPHE_PNG: &[u8] = include_bytes!("../../assets/measured/elaphe_afm_100x100.png");
+
+/// Sample spacing of the measured crop (µm): the thesis's Elaphe ridge period, 1144.262 nm
+/// (grating-equation experiment), over the crop's 100/6 samples per ridge (1.144262·6/100,
+/// as in the shipped sidecar).
+pub const MEASURED_ELAPHE_DH_UM: f64 = 0.06865572;
+
+/// Height of grey level 1 of the measured crop (µm): the thesis's one-finger Elaphe patch
+/// (the same AFM scan) used 0.4347 µm.
+pub const MEASURED_ELAPHE_H_MAX_UM: f64 = 0.4347;
+
+/// Side of `builtin:elaphe-grown`: 960 samples of 68.7 nm = 65.9 µm, just over the 65 µm
+/// coherence length (960 = 2⁶·3·5 keeps the FFTs fast).
+pub const GROWN_SAMPLES: usize = 960;
+
+/// `builtin:elaphe-measured`: the embedded crop with its calibration or the overrides.
+fn measured_elaphe(dh_um: Option<f64>, h_max_um: Option<f64>) -> Result<HeightField> {
+    let origin = Path::new("builtin:elaphe-measured");
+    let h_max = check_h_max(h_max_um.unwrap_or(MEASURED_ELAPHE_H_MAX_UM), origin)?;
+    let img = image::load_from_memory(MEASURED_ELAPHE_PNG).map_err(|e| Error::Image {
+        path: origin.to_path_buf(),
+        msg: format!("cannot decode: {e}"),
+    })?;
+    let (nx, ny, grey) = grey_of_image(&img, "image", origin)?;
+    let heights = grey.into_iter().map(|g| g * h_max).collect();
+    HeightField::new(nx, ny, dh_um.unwrap_or(MEASURED_ELAPHE_DH_UM), heights)
+        .map_err(with_path(origin))
+}
+
+/// PNG colour type 3 (indexed): byte 25 of the file is the IHDR colour type.
+fn png_is_palette(path: &Path) -> bool {
+    use std::io::Read as _;
+    let mut head = [0u8; 26];
+    std::fs::File::open(path)
+        .and_then(|mut f| f.read_exact(&mut head))
+        .is_ok_and(|()| &head[12..16] == b"IHDR" && head[25] == 3)
+}
+
+/// The grey values `g ∈ [0, 1]` of interleaved samples with `channels` per pixel (1 to 4):
+/// grey and grey+alpha directly; RGB and RGBA only where `R = G = B` at every pixel (alpha
+/// is ignored). `max` is the largest sample value (255 or 65535).
+pub(super) fn grey_of_samples<T: Copy + Into<f64> + PartialEq + std::fmt::Display>(
+    samples: &[T],
+    channels: usize,
+    nx: usize,
+    max: f64,
+) -> std::result::Result<Vec<f64>, String> {
+    if channels <= 2 {
+        return Ok(samples
+            .chunks_exact(channels)
+            .map(|p| p[0].into() / max)
+            .collect());
+    }
+    let mut grey = Vec::with_capacity(samples.len() / channels);
+    for (i, p) in samples.chunks_exact(channels).enumerate() {
+        for (c, name) in [(1, 'G'), (2, 'B')] {
+            if p[c] != p[0] {
+                return Err(format!(
+                    "not grey: pixel (column {}, row {}) has R = {} but {name} = {}; a height \
+                     field stored as RGB/RGBA needs R = G = B",
+                    i % nx,
+                    i / nx,
+                    p[0],
+                    p[c]
+                ));
+            }
+        }
+        grey.push(p[0].into() / max);
+    }
+    Ok(grey)
+}
+
+/// Decodes a grey PNG into values `g ∈ [0, 1]`, row-major: 8/16-bit grey (with or without
+/// alpha), and what tools and the thesis write for grey: RGB/RGBA with `R = G = B`
+/// (8/16-bit) and palette images whose colours are all grey. Alpha is ignored.
 fn read_png(path: &Path) -> Result<(usize, usize, Vec<f64>)> {
     let image_err = |msg: String| Error::Image {
         path: path.to_path_buf(),
@@ -293,27 +380,46 @@ fn read_png(path: &Path) -> Result<(usize, usize, Vec<f64>)> {
     let img = reader
         .decode()
         .map_err(|e| image_err(format!("cannot decode: {e}")))?;
+    // The decoder expands a palette to RGB(A); say so, or "RGB" would puzzle the user.
+    let what = if png_is_palette(path) {
+        "palette image"
+    } else {
+        "image"
+    };
+    grey_of_image(&img, what, path)
+}
+
+/// The grey values of a decoded image ([`grey_of_samples`]); `what` names the image kind
+/// in the error.
+fn grey_of_image(
+    img: &image::DynamicImage,
+    what: &str,
+    path: &Path,
+) -> Result<(usize, usize, Vec<f64>)> {
+    let image_err = |msg: String| Error::Image {
+        path: path.to_path_buf(),
+        msg,
+    };
     let (nx, ny) = (img.width() as usize, img.height() as usize);
-    use image::ColorType as C;
-    let grey: Vec<f64> = match img.color() {
-        C::L8 | C::La8 => img
-            .to_luma8()
-            .into_raw()
-            .into_iter()
-            .map(|v| f64::from(v) / 255.0)
-            .collect(),
-        C::L16 | C::La16 => img
-            .to_luma16()
-            .into_raw()
-            .into_iter()
-            .map(|v| f64::from(v) / 65535.0)
-            .collect(),
+    let ch = usize::from(img.color().channel_count());
+    use image::DynamicImage as D;
+    let grey = match img {
+        D::ImageLuma8(_) | D::ImageLumaA8(_) | D::ImageRgb8(_) | D::ImageRgba8(_) => {
+            grey_of_samples(img.as_bytes(), ch, nx, 255.0)
+        }
+        D::ImageLuma16(b) => grey_of_samples(b.as_raw(), ch, nx, 65535.0),
+        D::ImageLumaA16(b) => grey_of_samples(b.as_raw(), ch, nx, 65535.0),
+        D::ImageRgb16(b) => grey_of_samples(b.as_raw(), ch, nx, 65535.0),
+        D::ImageRgba16(b) => grey_of_samples(b.as_raw(), ch, nx, 65535.0),
         other => {
             return Err(image_err(format!(
-                "{other:?} image; a height field must be a grayscale (8- or 16-bit) image"
+                "{:?} image; a height field must be an 8- or 16-bit grey image (grey, or \
+                 RGB/RGBA/palette with R = G = B)",
+                other.color()
             )))
         }
-    };
+    }
+    .map_err(|m| image_err(format!("{what} {m}")))?;
     Ok((nx, ny, grey))
 }
 
