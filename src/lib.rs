@@ -23,5 +23,6 @@ pub mod profile;
 pub mod render;
 pub mod scene;
 pub mod spectrum;
+pub mod view;
 
 pub use error::{Error, Result};

@@ -27,6 +27,8 @@ enum Command {
     Profile(diffract::profile::ProfileArgs),
     /// List the shader variants: per-pixel fetches, memory, the default.
     Variants,
+    /// Show a scene in a window: orbit camera, light, exposure, variants, hot reload.
+    View(diffract::view::ViewArgs),
 }
 
 fn main() -> ExitCode {
@@ -37,6 +39,7 @@ fn main() -> ExitCode {
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),
+        Command::View(a) => diffract::view::run(a),
         Command::Variants => {
             print!("{}", diffract::render::variant::list());
             Ok(())
