@@ -479,6 +479,8 @@ impl Viewer {
     ) -> Result<bool> {
         self.poll_reload();
         if self.needs_recreate && !self.recreate_swapchain(settings.vsync)? {
+            // Minimised: nothing to draw; do not spin the event loop at full speed.
+            std::thread::sleep(Duration::from_millis(16));
             return Ok(false);
         }
         if self.swapchain.is_none() && !self.recreate_swapchain(settings.vsync)? {
