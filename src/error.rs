@@ -29,6 +29,9 @@ pub enum Error {
     /// The Vulkan loader or a usable device is missing.
     #[error("Vulkan unavailable: {0}")]
     NoVulkan(String),
+    /// No window can be shown: no display, no surface support, or no device that presents.
+    #[error("cannot show a window: {0}")]
+    NoPresentation(String),
     /// A Vulkan call failed; `what` names the call.
     #[error("Vulkan error in {what}: {result}")]
     Vulkan {

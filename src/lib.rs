@@ -29,5 +29,6 @@ pub mod scene;
 pub mod skin;
 pub mod spectrum;
 pub mod stability;
+pub mod view;
 
 pub use error::{Error, Result};

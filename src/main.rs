@@ -32,6 +32,8 @@ enum Command {
     /// Stability matrix: error of each evaluator against the f64 reference over heights,
     /// light angles, wavelengths and expansions, with the terms used and pass/warned/refused.
     Stability(diffract::stability::StabilityArgs),
+    /// Show a scene in a window: orbit camera, light, exposure, variants, hot reload.
+    View(diffract::view::ViewArgs),
 }
 
 fn main() -> ExitCode {
@@ -43,6 +45,7 @@ fn main() -> ExitCode {
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),
+        Command::View(a) => diffract::view::run(a),
         Command::Variants => {
             print!("{}", diffract::render::variant::list());
             Ok(())

@@ -2,11 +2,16 @@
 //! a debug messenger when asked), physical-device choice, one graphics queue, the
 //! gpu-allocator instance, object naming and one-shot command submission.
 //!
+//! Headless is the default. Presentation is an optional extra for the viewer:
+//! [`Instance::with_surface_extensions`] adds the window system's surface extensions and
+//! [`Device::on_surface`] picks a queue family that can present to a given surface and
+//! enables `VK_KHR_swapchain`; the surface and swapchain themselves live in `swapchain.rs`.
+//!
 //! Ownership is a chain of `Arc`s so destruction order is enforced by the types: every
 //! resource holds an `Arc<Device>`, the device holds an `Arc<Instance>`, and each `Drop`
 //! destroys its own handle before the fields it depends on are released.
 
-use std::ffi::{c_void, CStr, CString};
+use std::ffi::{c_char, c_void, CStr, CString};
 use std::mem::ManuallyDrop;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
@@ -120,6 +125,23 @@ impl Instance {
     /// (with synchronisation validation when available) and a WARNING/ERROR messenger are
     /// enabled; a missing layer is an error then, not a silent downgrade.
     pub fn new(validation: bool) -> Result<Arc<Self>> {
+        Self::create(validation, &[])
+    }
+
+    /// [`Instance::new`] plus the surface extensions the window system of `display` needs
+    /// (`VK_KHR_surface` and e.g. `VK_KHR_xlib_surface`). A loader without them is
+    /// [`Error::NoPresentation`].
+    pub fn with_surface_extensions(
+        validation: bool,
+        display: raw_window_handle::RawDisplayHandle,
+    ) -> Result<Arc<Self>> {
+        let required = ash_window::enumerate_required_extensions(display).map_err(|e| {
+            Error::NoPresentation(format!("no Vulkan surface for this window system ({e})"))
+        })?;
+        Self::create(validation, required)
+    }
+
+    fn create(validation: bool, surface_extensions: &[*const c_char]) -> Result<Arc<Self>> {
         // SAFETY: loading the system Vulkan library runs its initialisers; we trust the
         // installed loader like any Vulkan application does.
         let entry = unsafe { ash::Entry::load() }
@@ -152,8 +174,19 @@ impl Instance {
             ));
         }
 
-        let mut layers: Vec<*const i8> = Vec::new();
-        let mut ext_names: Vec<*const i8> = Vec::new();
+        let mut layers: Vec<*const c_char> = Vec::new();
+        let mut ext_names: Vec<*const c_char> = Vec::new();
+        for &name in surface_extensions {
+            // SAFETY: ash_window returns pointers to NUL-terminated 'static extension names.
+            let name_c = unsafe { CStr::from_ptr(name) };
+            if !has_ext(&extensions, name_c) {
+                return Err(Error::NoPresentation(format!(
+                    "the Vulkan loader lacks {}",
+                    name_c.to_string_lossy()
+                )));
+            }
+            ext_names.push(name);
+        }
         if debug_utils_enabled {
             ext_names.push(ash::ext::debug_utils::NAME.as_ptr());
         }
@@ -252,6 +285,11 @@ impl Instance {
     pub fn canary(&self) -> &Arc<Canary> {
         &self.canary
     }
+
+    /// The loader's entry points (surface creation needs them).
+    pub(crate) fn entry(&self) -> &ash::Entry {
+        &self.entry
+    }
 }
 
 impl Drop for Instance {
@@ -302,6 +340,15 @@ pub struct Device {
     instance: Arc<Instance>,
 }
 
+/// Whether physical device `pd` offers device extension `name`.
+fn device_has_extension(inst: &ash::Instance, pd: vk::PhysicalDevice, name: &CStr) -> bool {
+    // SAFETY: pd was enumerated from this live instance.
+    unsafe { inst.enumerate_device_extension_properties(pd) }.is_ok_and(|list| {
+        list.iter()
+            .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == name))
+    })
+}
+
 /// Preference order of device types: discrete, integrated, virtual, CPU (lavapipe), other.
 fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
     match t {
@@ -323,6 +370,22 @@ impl Device {
     /// Picks a physical device with a graphics queue and Vulkan ≥ 1.1 and creates the
     /// logical device on it.
     pub fn on(instance: Arc<Instance>) -> Result<Arc<Self>> {
+        Self::create(instance, None)
+    }
+
+    /// Like [`Device::on`], but the graphics queue must also present to `surface`, and
+    /// `VK_KHR_swapchain` is enabled. No such device is [`Error::NoPresentation`].
+    pub fn on_surface(
+        instance: Arc<Instance>,
+        surface: &super::swapchain::Surface,
+    ) -> Result<Arc<Self>> {
+        Self::create(instance, Some(surface))
+    }
+
+    fn create(
+        instance: Arc<Instance>,
+        present: Option<&super::swapchain::Surface>,
+    ) -> Result<Arc<Self>> {
         let inst = &instance.raw;
         // SAFETY: inst is a live instance.
         let physicals = unsafe { inst.enumerate_physical_devices() }
@@ -336,18 +399,28 @@ impl Device {
             }
             // SAFETY: as above.
             let families = unsafe { inst.get_physical_device_queue_family_properties(pd) };
-            let Some(family) = families
-                .iter()
-                .position(|f| f.queue_flags.contains(vk::QueueFlags::GRAPHICS))
-            else {
+            let Some(family) = families.iter().enumerate().position(|(i, f)| {
+                f.queue_flags.contains(vk::QueueFlags::GRAPHICS)
+                    && present.is_none_or(|s| s.supported_by(pd, i as u32))
+            }) else {
                 continue;
             };
+            if present.is_some() && !device_has_extension(inst, pd, ash::khr::swapchain::NAME) {
+                continue;
+            }
             let rank = type_rank(props.device_type);
             if best.as_ref().is_none_or(|b| rank < b.0) {
                 best = Some((rank, pd, family as u32, props));
             }
         }
         let Some((_, physical, queue_family, props)) = best else {
+            if present.is_some() {
+                return Err(Error::NoPresentation(
+                    "no Vulkan device can present to this window (graphics queue with surface \
+                     support and VK_KHR_swapchain)"
+                        .into(),
+                ));
+            }
             return Err(Error::NoVulkan(
                 "no Vulkan 1.1 device with a graphics queue was found".into(),
             ));
@@ -368,9 +441,17 @@ impl Device {
         let queue_info = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
-        let create_info = vk::DeviceCreateInfo::default().queue_create_infos(&queue_info);
-        // SAFETY: create_info and its arrays outlive the call; no extensions or features
-        // beyond Vulkan 1.0 core are requested.
+        let swapchain_ext = [ash::khr::swapchain::NAME.as_ptr()];
+        let device_exts: &[*const c_char] = if present.is_some() {
+            &swapchain_ext
+        } else {
+            &[]
+        };
+        let create_info = vk::DeviceCreateInfo::default()
+            .queue_create_infos(&queue_info)
+            .enabled_extension_names(device_exts);
+        // SAFETY: create_info and its arrays outlive the call; no features beyond Vulkan 1.0
+        // core are requested, and VK_KHR_swapchain (when asked) was checked to exist.
         let raw = unsafe { inst.create_device(physical, &create_info, None) }
             .map_err(Error::vk("vkCreateDevice"))?;
         // SAFETY: one queue of this family was requested above.
@@ -436,6 +517,27 @@ impl Device {
         device.set_name(device.queue, "graphics queue");
         device.set_name(device.command_pool, "one-shot command pool");
         Ok(Arc::new(device))
+    }
+
+    /// The instance this device was created on.
+    pub fn instance(&self) -> &Arc<Instance> {
+        &self.instance
+    }
+
+    /// The physical device in use.
+    pub fn physical(&self) -> vk::PhysicalDevice {
+        self.physical
+    }
+
+    /// The graphics queue (callers that submit outside [`Device::submit_once`] hold
+    /// [`Device::queue_lock`] while doing so).
+    pub fn queue(&self) -> vk::Queue {
+        self.queue
+    }
+
+    /// The lock that externally synchronises the queue (Vulkan spec, "Threading Behavior").
+    pub fn queue_lock(&self) -> MutexGuard<'_, ()> {
+        lock(&self.submit_lock)
     }
 
     /// The `ash` device table.

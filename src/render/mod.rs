@@ -10,6 +10,7 @@
 
 mod command;
 mod frame;
+mod pass;
 pub mod variant;
 
 use std::sync::Arc;
@@ -18,6 +19,7 @@ use std::time::Instant;
 use ash::vk;
 
 pub use command::{run, validation_requested, RenderArgs, TableArgs};
+pub use pass::{PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 
 use crate::brdf;
@@ -32,7 +34,8 @@ use crate::gpu::{shaders, Device, StorageFormat};
 use crate::material::PreparedMaterial;
 use crate::scene::Scene;
 use crate::{Error, Result};
-use frame::{mesh_vertex_layout, record_frame, Geometry, Transforms};
+use frame::{mesh_vertex_layout, Transforms};
+use pass::MeshBuffers;
 use variant::{DrawSetup, PreparedVariant, SPEC_COUNT};
 
 /// Capacity of the shader's per-term decode table (`MAX_TERMS` in interface.glsl).
@@ -124,7 +127,13 @@ pub struct Renderer {
     table: TableOptions,
     keep_models: bool,
     cache_dir: Option<std::path::PathBuf>,
-    prepared: Option<(PreparedKey, Box<dyn PreparedVariant>)>,
+    prepared: Option<(PreparedKey, Arc<dyn PreparedVariant>)>,
+    /// Table variants: when positive, built for the needed region widened by this much and
+    /// reused while later regions fall inside it (the viewer); 0: built for exactly the region.
+    region_margin: f64,
+    /// Run-time SPIR-V by glsl file name (`flss.frag`, `diffraction.vert`, ...) that
+    /// replaces the SPIR-V built in (hot reload).
+    shader_overrides: std::collections::HashMap<String, Vec<u8>>,
     linear: Sampler,
     vert_map: ShaderModule,
     vert_mesh: ShaderModule,
@@ -137,7 +146,11 @@ impl Renderer {
     /// its WARNING/ERROR messages are counted in [`Renderer::validation_messages`]. Draws
     /// with `flss` until [`Renderer::set_variant`] says otherwise.
     pub fn new(validation: bool) -> Result<Self> {
-        let dev = Device::new(validation)?;
+        Self::on(Device::new(validation)?)
+    }
+
+    /// A renderer on an existing device (the viewer's, which can present).
+    pub fn on(dev: Arc<Device>) -> Result<Self> {
         Ok(Self {
             storage: StorageFormat::default(),
             variant: VariantKind::Flss,
@@ -145,6 +158,8 @@ impl Renderer {
             keep_models: false,
             cache_dir: None,
             prepared: None,
+            region_margin: 0.0,
+            shader_overrides: Default::default(),
             linear: Sampler::new(
                 &dev,
                 "surface texture (linear)",
@@ -213,6 +228,19 @@ impl Renderer {
         self.cache_dir = dir;
     }
 
+    /// Table variants: build for the needed `(u, v, w)` region widened by `margin` and reuse
+    /// the table while later frames' regions fall inside it (0, the default: build for
+    /// exactly each frame's region).
+    pub fn set_region_margin(&mut self, margin: f64) {
+        self.region_margin = margin.max(0.0);
+    }
+
+    /// Replaces built-in SPIR-V by glsl file name (e.g. `flss.frag`) for the passes built
+    /// from now on; an empty map restores the built-in shaders.
+    pub fn set_shader_overrides(&mut self, spirv: std::collections::HashMap<String, Vec<u8>>) {
+        self.shader_overrides = spirv;
+    }
+
     /// Keep the f64 tables of table variants on the CPU (for [`Renderer::table_model`]);
     /// off by default, since they take as much memory again as the GPU copy in f64.
     pub fn set_keep_models(&mut self, keep: bool) {
@@ -262,16 +290,23 @@ impl Renderer {
             lambda_nm.map_or(0.0, |l| (l * 1e-3) as f32),
         ];
         params.map_info = [size as f32, 0.0, 0.0, 0.0];
-        let mut frame = self.draw(
+        let target = OffscreenTarget::new(&self.dev, size, size)?;
+        let options = PassOptions {
+            fresnel: prepared.shading.fresnel,
+            shadowing: prepared.shading.shadowing,
+            texture_blending: false,
+        };
+        let pass = self.build_pass(
             prepared,
-            &params,
+            params,
             output,
-            false,
-            Geometry::FullScreen,
-            (size, size),
+            options,
+            None,
             [0.0; 4],
             None,
+            target.render_pass,
         )?;
+        let mut frame = self.draw(&pass, &target)?;
         frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(frame)
     }
@@ -282,16 +317,67 @@ impl Renderer {
     /// scene's exposure; uncovered pixels hold the background colour as given.
     pub fn render_scene(&mut self, scene: &Scene, prepared: &PreparedMaterial) -> Result<Frame> {
         let start = Instant::now();
-        // World space: the placement is already applied, so the model matrix is identity.
-        let mesh = scene.mesh.load()?;
-        if mesh.indices.is_empty() {
-            return Err(Error::invalid(
-                "mesh",
-                format!("'{}' has no triangles", mesh.name),
-            ));
-        }
         let out = &scene.output;
-        let region = scene_region(scene, &mesh).unwrap_or(Region::ALL);
+        let options = PassOptions {
+            fresnel: prepared.shading.fresnel,
+            shadowing: prepared.shading.shadowing,
+            texture_blending: true,
+        };
+        let mesh = load_scene_mesh(scene)?;
+        let target = OffscreenTarget::new(&self.dev, out.width, out.height)?;
+        let pass = self.scene_pass_of(
+            scene,
+            &mesh,
+            prepared,
+            options,
+            target.render_pass,
+            out.aspect(),
+        )?;
+        let mut frame = self.draw(&pass, &target)?;
+        frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(frame)
+    }
+
+    /// The objects of `scene`'s frames (mesh, uniforms, pipeline), built for `render_pass`
+    /// and the target aspect `aspect`: record it into any compatible target, move the camera
+    /// with [`ScenePass::set_view`]. The viewer uses this with its swapchain.
+    pub fn scene_pass(
+        &mut self,
+        scene: &Scene,
+        prepared: &PreparedMaterial,
+        options: PassOptions,
+        render_pass: vk::RenderPass,
+        aspect: f32,
+    ) -> Result<ScenePass> {
+        let mesh = load_scene_mesh(scene)?;
+        self.scene_pass_of(scene, &mesh, prepared, options, render_pass, aspect)
+    }
+
+    /// Whether the prepared table covers what `scene`'s view needs, so a pass built now
+    /// would reuse it (always true for flss, which reads the whole band).
+    pub fn covers_view(&self, scene: &Scene) -> Result<bool> {
+        let Some((key, _)) = &self.prepared else {
+            return Ok(false);
+        };
+        let Some(built) = key.region else {
+            return Ok(true);
+        };
+        let mesh = load_scene_mesh(scene)?;
+        let need = scene_region(scene, &mesh).unwrap_or(Region::ALL);
+        Ok(region_contains(&built.map(f64::from_bits), &need))
+    }
+
+    fn scene_pass_of(
+        &mut self,
+        scene: &Scene,
+        mesh: &crate::mesh::Mesh,
+        prepared: &PreparedMaterial,
+        options: PassOptions,
+        render_pass: vk::RenderPass,
+        aspect: f32,
+    ) -> Result<ScenePass> {
+        let out = &scene.output;
+        let region = scene_region(scene, mesh).unwrap_or(Region::ALL);
         self.prepare_variant(prepared, region, OutputMode::Mesh)?;
         let mut params = self.params(prepared);
         let eye = scene.camera.eye;
@@ -303,8 +389,8 @@ impl Renderer {
         let bg = out.background;
 
         let texture = match &scene.texture {
-            Some(t) => Some(self.upload_texture(t)?),
-            None => None,
+            Some(t) if options.texture_blending => Some(self.upload_texture(t)?),
+            _ => None,
         };
         let vertices = Buffer::with_data(
             &self.dev,
@@ -320,25 +406,25 @@ impl Renderer {
         )?;
         let transforms = Transforms {
             model: glam::Mat4::IDENTITY.to_cols_array(),
-            view_proj: scene.camera.view_proj(out.aspect()).to_cols_array(),
+            view_proj: scene.camera.view_proj(aspect).to_cols_array(),
         };
-        let mut frame = self.draw(
+        self.build_pass(
             prepared,
-            &params,
+            params,
             OutputMode::Mesh,
-            texture.is_some(),
-            Geometry::Mesh {
-                vertices: &vertices,
-                indices: &indices,
-                index_count: mesh.indices.len() as u32,
+            options,
+            Some((
+                MeshBuffers {
+                    vertices,
+                    indices,
+                    index_count: mesh.indices.len() as u32,
+                },
                 transforms,
-            },
-            (out.width, out.height),
+            )),
             [bg[0], bg[1], bg[2], 1.0],
-            texture.as_ref(),
-        )?;
-        frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
-        Ok(frame)
+            texture,
+            render_pass,
+        )
     }
 
     /// Builds (or reuses) the current variant's resources for `prepared` over `region`.
@@ -349,6 +435,13 @@ impl Renderer {
         output: OutputMode,
     ) -> Result<()> {
         variant::require_spectral(self.variant, output)?;
+        let covering = self.region_margin > 0.0 && self.variant != VariantKind::Flss;
+        let needed = region;
+        let region = if covering {
+            widen(&region, self.region_margin)
+        } else {
+            region
+        };
         let hf = &prepared.heightfield;
         let (lo, hi) = hf.range();
         let key = PreparedKey {
@@ -374,6 +467,20 @@ impl Renderer {
         if self.prepared.as_ref().is_some_and(|(k, _)| *k == key) {
             return Ok(());
         }
+        if covering {
+            if let Some((k, _)) = &self.prepared {
+                let same_but_region = PreparedKey {
+                    region: k.region,
+                    ..key.clone()
+                } == *k;
+                if same_but_region
+                    && k.region
+                        .is_some_and(|r| region_contains(&r.map(f64::from_bits), &needed))
+                {
+                    return Ok(());
+                }
+            }
+        }
         // Free the old resources before building new ones.
         self.prepared = None;
         let setup = DrawSetup {
@@ -386,7 +493,7 @@ impl Renderer {
             cache_dir: self.cache_dir.as_deref(),
         };
         let built = self.variant.implementation().prepare(&self.dev, &setup)?;
-        self.prepared = Some((key, built));
+        self.prepared = Some((key, Arc::from(built)));
         Ok(())
     }
 
@@ -440,19 +547,30 @@ impl Renderer {
         params
     }
 
-    /// Creates the per-frame objects, records and submits one frame, reads it back.
+    /// The fragment shader of the current variant, or the vertex shader `name`: the
+    /// run-time override when there is one, else the SPIR-V built in.
+    fn shader(&self, name: &str, built_in: &'static [u8]) -> Result<ShaderModule> {
+        let spirv = self
+            .shader_overrides
+            .get(name)
+            .map_or(built_in, Vec::as_slice);
+        ShaderModule::new(&self.dev, name, spirv)
+    }
+
+    /// Builds a pass: layout, uniform and colour buffers, descriptor set and a pipeline for
+    /// `render_pass` specialised for `output` and `options`.
     #[allow(clippy::too_many_arguments)]
-    fn draw(
-        &mut self,
+    fn build_pass(
+        &self,
         prepared: &PreparedMaterial,
-        params: &ParamsUbo,
+        params: ParamsUbo,
         output: OutputMode,
-        texture_blending: bool,
-        geometry: Geometry<'_>,
-        (width, height): (u32, u32),
+        options: PassOptions,
+        mesh: Option<(MeshBuffers, Transforms)>,
         clear: [f32; 4],
-        texture: Option<&Image>,
-    ) -> Result<Frame> {
+        texture: Option<Image>,
+        render_pass: vk::RenderPass,
+    ) -> Result<ScenePass> {
         let dev = &self.dev;
         let Some((_, variant)) = &self.prepared else {
             return Err(Error::invalid("variant", "no variant prepared"));
@@ -486,11 +604,12 @@ impl Renderer {
                 std::mem::size_of::<Transforms>() as u32,
             ),
         )?;
+        // Device-written per frame (ScenePass::record), so TRANSFER_DST too.
         let ubo = Buffer::with_data(
             dev,
             "params",
-            vk::BufferUsageFlags::UNIFORM_BUFFER,
-            std::slice::from_ref(params),
+            vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
+            std::slice::from_ref(&params),
         )?;
         let table = &prepared.colour;
         let weights: Vec<[f32; 4]> = table
@@ -505,59 +624,63 @@ impl Renderer {
             vk::BufferUsageFlags::STORAGE_BUFFER,
             &weights,
         )?;
+        let texture_blending = texture.is_some();
         // The texture binding is statically used by the shader, so it always needs an
         // image; a scene without a texture gets 1×1 white (the variant never samples it).
-        let dummy;
         let texture = match texture {
             Some(t) => t,
-            None => {
-                dummy = Image::sampled_with_data(
-                    dev,
-                    "no texture (1×1 white)",
-                    ImageDesc {
-                        format: vk::Format::R8G8B8A8_UNORM,
-                        width: 1,
-                        height: 1,
-                        layers: 1,
-                        usage: vk::ImageUsageFlags::SAMPLED,
-                        aspect: vk::ImageAspectFlags::COLOR,
-                        view_type: vk::ImageViewType::TYPE_2D,
-                    },
-                    4,
-                    &[255u8; 4],
-                )?;
-                &dummy
-            }
+            None => Image::sampled_with_data(
+                dev,
+                "no texture (1×1 white)",
+                ImageDesc {
+                    format: vk::Format::R8G8B8A8_UNORM,
+                    width: 1,
+                    height: 1,
+                    layers: 1,
+                    usage: vk::ImageUsageFlags::SAMPLED,
+                    aspect: vk::ImageAspectFlags::COLOR,
+                    view_type: vk::ImageViewType::TYPE_2D,
+                },
+                4,
+                &[255u8; 4],
+            )?,
         };
         let mut resources = vec![
             (0, Resource::Uniform(&ubo)),
             (2, Resource::Storage(&colour)),
-            (3, Resource::Sampled(texture, &self.linear)),
+            (3, Resource::Sampled(&texture, &self.linear)),
         ];
         resources.extend(variant.resources());
         let set = DescriptorSet::new(dev, "diffraction set", &layout, &resources)?;
-        let target = OffscreenTarget::new(dev, width, height)?;
-        let (vertex, vertex_layout, depth_test) = match geometry {
-            Geometry::FullScreen => (&self.vert_map, None, false),
-            Geometry::Mesh { .. } => (&self.vert_mesh, Some(mesh_vertex_layout()), true),
+        let (vertex_name, vertex_layout, depth_test) = match mesh {
+            None => ("brdfmap.vert", None, false),
+            Some(_) => ("diffraction.vert", Some(mesh_vertex_layout()), true),
         };
-        let shading = prepared.shading;
+        let override_vertex = if self.shader_overrides.contains_key(vertex_name) {
+            Some(self.shader(vertex_name, &[])?)
+        } else {
+            None
+        };
+        let vertex = match (&override_vertex, mesh.is_some()) {
+            (Some(v), _) => v,
+            (None, false) => &self.vert_map,
+            (None, true) => &self.vert_mesh,
+        };
         let mut spec = [0u32; SPEC_COUNT];
-        spec[4] = shading.shadowing as u32;
-        spec[5] = shading.fresnel as u32;
+        spec[4] = options.shadowing as u32;
+        spec[5] = options.fresnel as u32;
         spec[6] = texture_blending as u32;
         spec[8] = output as u32;
         variant.specialise(&mut spec);
-        let fragment = ShaderModule::new(
-            dev,
-            stats.name.as_str(),
+        let fragment = self.shader(
+            fragment_file(self.variant),
             self.variant.implementation().fragment_spirv(),
         )?;
         let name = format!(
             "{} {output:?}{}{}{}",
             variant.pipeline_name(),
-            if shading.fresnel { " fresnel" } else { "" },
-            if shading.shadowing { " shadowing" } else { "" },
+            if options.fresnel { " fresnel" } else { "" },
+            if options.shadowing { " shadowing" } else { "" },
             if texture_blending { " texture" } else { "" },
         );
         let pipeline = Pipeline::new(
@@ -569,25 +692,48 @@ impl Renderer {
                 spec: &spec,
                 vertex_layout: vertex_layout.as_ref(),
                 layout: &layout,
-                render_pass: target.render_pass,
+                render_pass,
                 depth_test,
             },
         )?;
+        let (mesh, transforms) = match mesh {
+            Some((m, t)) => (Some(m), t),
+            None => (
+                None,
+                Transforms {
+                    model: [0.0; 16],
+                    view_proj: [0.0; 16],
+                },
+            ),
+        };
+        Ok(ScenePass {
+            pipeline,
+            set,
+            layout,
+            ubo,
+            _colour: colour,
+            _texture: texture,
+            mesh,
+            params,
+            transforms,
+            clear,
+            stats,
+            _variant: Arc::clone(variant),
+            _fragment: fragment,
+            dev: dev.clone(),
+        })
+    }
+
+    /// Records `pass` into the offscreen `target` between timestamps, submits, waits and
+    /// reads the linear result back.
+    fn draw(&self, pass: &ScenePass, target: &OffscreenTarget) -> Result<Frame> {
+        let dev = &self.dev;
         let timer = GpuTimer::new(dev, "frame timestamps")?;
         dev.submit_once("diffraction frame", |cb| {
             if let Some(t) = &timer {
                 t.record_start(cb);
             }
-            record_frame(
-                dev,
-                cb,
-                &target.frame(),
-                &pipeline,
-                &layout,
-                &set,
-                &geometry,
-                clear,
-            );
+            pass.record(cb, &target.frame());
             if let Some(t) = &timer {
                 t.record_end(cb);
             }
@@ -604,14 +750,54 @@ impl Renderer {
             .map(|p| [p[0], p[1], p[2]])
             .collect();
         Ok(Frame {
-            width,
-            height,
+            width: target.extent.width,
+            height: target.extent.height,
             rgb,
             gpu_ms,
             wall_ms: 0.0,
-            variant: stats,
+            variant: pass.stats.clone(),
         })
     }
+}
+
+/// The glsl file of a variant's fragment shader (`chebyshev-w` → `chebyshev_w.frag`), the
+/// key of hot-reloaded SPIR-V.
+pub fn fragment_file(kind: VariantKind) -> &'static str {
+    match kind.resolve() {
+        VariantKind::Flss => "flss.frag",
+        VariantKind::Nmm => "nmm.frag",
+        VariantKind::Dhillon => "dhillon.frag",
+        VariantKind::ChebyshevW => "chebyshev_w.frag",
+        // resolve() never returns the alias.
+        VariantKind::Volume | VariantKind::Default => "volume.frag",
+    }
+}
+
+/// A scene's mesh in world space (the placement is already applied, so the model matrix is
+/// identity); a mesh without triangles is an error.
+fn load_scene_mesh(scene: &Scene) -> Result<crate::mesh::Mesh> {
+    let mesh = scene.mesh.load()?;
+    if mesh.indices.is_empty() {
+        return Err(Error::invalid(
+            "mesh",
+            format!("'{}' has no triangles", mesh.name),
+        ));
+    }
+    Ok(mesh)
+}
+
+/// `r` widened by `margin` on every side, within what is physically possible.
+fn widen(r: &Region, margin: f64) -> Region {
+    let all = Region::ALL;
+    Region {
+        lo: std::array::from_fn(|i| (r.lo[i] - margin).max(all.lo[i])),
+        hi: std::array::from_fn(|i| (r.hi[i] + margin).min(all.hi[i])),
+    }
+}
+
+/// Whether the box `[lo0, lo1, lo2, hi0, hi1, hi2]` contains `need`.
+fn region_contains(built: &[f64; 6], need: &Region) -> bool {
+    (0..3).all(|i| built[i] <= need.lo[i] && need.hi[i] <= built[i + 3])
 }
 
 /// Range checks of a BRDF map's arguments.
