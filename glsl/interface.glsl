@@ -39,13 +39,13 @@ const float PI = 3.14159265358979;
 layout(set = 0, binding = 0, std140) uniform Params {
     vec4 eyeWorld;        // xyz: eye position in world space (mesh mode)
     vec4 lightDirWorld;   // xyz: direction the light travels, world space (mesh mode)
-    vec4 lighting;        // x: light intensity, y: exposure, z: w_diffuse (Algorithm 4)
+    vec4 lighting;        // x: light intensity, y: exposure, z: w_diffuse (Algorithm 4), w: ambient
     vec4 mapWi;           // xyz: ωi of a BRDF map (tangent space), w: λ in µm (spectral map)
     vec4 mapInfo;         // x: map size S in pixels
     ivec4 spectrumSize;   // x: N_x, y: N_y, z: b_x = floor(N_x/2), w: b_y = floor(N_y/2)
     ivec4 band;           // x0, y0, width, height of the stored texels
     vec4 lookup;          // x: dH (µm), y: 1/(2σx²), z: 1/(2σy²), w: Chebyshev half range A (µm)
-    vec4 shading;         // x: Schlick R0
+    vec4 shading;         // x: Schlick R0, y: texture gain
     // Per term: value = (x + stored.r * y, z + stored.g * w) (thesis eq. 1.1 inverted).
     vec4 decode[MAX_TERMS];
 } params;

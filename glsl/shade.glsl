@@ -30,16 +30,20 @@ void main() {
         vec3 wi = safeNormalize(inWi);
         vec3 wr = safeNormalize(inWr);
         vec3 cDiffraction = xyzToLinearSrgb(diffractionXyz(wi, wr));  // line 28, eq. 1.10
-        vec3 c = cDiffraction;
+        // Irradiance of the directional light on the surface.
+        float irradiance = max(wi.z, 0.0) * params.lighting.x;
+        vec3 c = cDiffraction * irradiance;
         if (TEXTURE_BLENDING) {
-            vec3 cTexture = texture(surfaceTexture, inUv).rgb;
+            // t = gain·texture; Algorithm 4 lit by the sun, plus the sky's ambient·t
+            // (scene::TextureSpec::shade states the same on the CPU).
+            vec3 cTexture = params.shading.y * texture(surfaceTexture, inUv).rgb;
             vec3 h = safeNormalize(wi + wr);
             float f = schlickFresnel(clamp(dot(wr, h), 0.0, 1.0));
-            c = textureBlend(cDiffraction, cTexture, f, params.lighting.z);
+            c = textureBlend(cDiffraction, cTexture, f, params.lighting.z) * irradiance
+              + params.lighting.w * cTexture;
         }
-        // Irradiance of the directional light on the surface, then the camera's exposure.
-        float irradiance = max(wi.z, 0.0) * params.lighting.x;
-        outColour = vec4(finiteOrZero(c * irradiance * params.lighting.y), 1.0);
+        // Then the camera's exposure.
+        outColour = vec4(finiteOrZero(c * params.lighting.y), 1.0);
         return;
     }
 

@@ -267,7 +267,7 @@ pub fn render_args(args: &crate::render::RenderArgs, scene: &crate::scene::Scene
         if let Some(m) = &scene.mesh.path {
             inputs.push(("mesh", m.clone()));
         }
-        if let Some(t) = &scene.texture {
+        if let Some(t) = scene.texture.as_ref().filter(|t| !t.is_builtin()) {
             inputs.push(("texture", t.path.clone()));
         }
     }
@@ -276,7 +276,7 @@ pub fn render_args(args: &crate::render::RenderArgs, scene: &crate::scene::Scene
         if let Some(m) = &scene.mesh.path {
             crate::fsutil::check_input_file(m, "mesh", crate::fsutil::MAX_OBJ_BYTES)?;
         }
-        if let Some(t) = &scene.texture {
+        if let Some(t) = scene.texture.as_ref().filter(|t| !t.is_builtin()) {
             crate::fsutil::check_input_file(&t.path, "texture", crate::fsutil::MAX_PNG_BYTES)?;
         }
     }

@@ -329,10 +329,15 @@ impl TextureSpec {
         })
     }
 
+    /// Whether the texture is generated (`builtin:elaphe-skin`), not read from a file.
+    pub fn is_builtin(&self) -> bool {
+        self.path.as_os_str() == ELAPHE_SKIN_BUILTIN
+    }
+
     /// Reads the texture: `(width, height, sRGB-encoded RGB bytes)`, top row first.
     /// `builtin:elaphe-skin` is the procedural corn-snake skin ([`crate::skin`]).
     pub fn load(&self) -> Result<(u32, u32, Vec<[u8; 3]>)> {
-        if self.path.as_os_str() == ELAPHE_SKIN_BUILTIN {
+        if self.is_builtin() {
             let (w, h) = ELAPHE_SKIN_SIZE;
             return Ok((w, h, elaphe_skin(w, h)));
         }

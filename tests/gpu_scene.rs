@@ -307,3 +307,49 @@ w_diffuse = 0.3
         }
     }
 }
+
+/// `render` of the default close-up scene resolves its supersampling and exposure on the
+/// CPU: the PNG has the asked size, and the background comes out as the scene gives it
+/// (not multiplied by the exposure of 400), while the snake is lit.
+#[test]
+fn render_command_resolves_supersampling_and_exposure() {
+    if renderer().is_none() {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("diffract-resolve-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("s.png");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+        .args([
+            "render",
+            "--variant",
+            "flss",
+            "--width",
+            "24",
+            "--height",
+            "16",
+            "-o",
+        ])
+        .arg(&out)
+        .env("DIFFRACT_CACHE", "")
+        .env("DIFFRACT_VALIDATION", "1")
+        .output()
+        .expect("run diffract");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let (w, h, px) = image_io::read_png_rgb8(&out).unwrap();
+    assert_eq!((w, h), (24, 16));
+    let scene = Scene::default_scene();
+    let bg = scene.output.background;
+    let mut tone = vec![bg];
+    image_io::apply_tone(&mut tone, 1.0, scene.output.tone, scene.output.white).unwrap();
+    let want = diffract::colour::linear_to_srgb8(tone[0].map(f64::from), 1.0);
+    let corner = px[0];
+    for c in 0..3 {
+        assert!(
+            (corner[c] as i32 - want[c] as i32).abs() <= 2,
+            "corner {corner:?} vs background {want:?}"
+        );
+    }
+    assert!(px.iter().any(|p| p != &corner), "only background");
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -384,8 +384,13 @@ impl Renderer {
         params.eye_world = [eye[0], eye[1], eye[2], 1.0];
         let d = scene.light.direction;
         params.light_dir_world = [d[0], d[1], d[2], 0.0];
-        let w_diffuse = scene.texture.as_ref().map_or(0.0, |t| t.w_diffuse);
-        params.lighting = [scene.light.intensity, out.exposure, w_diffuse, 0.0];
+        // Algorithm 4's weight, the sky's ambient light on the skin, the texture's gain.
+        let (w_diffuse, ambient, gain) = scene
+            .texture
+            .as_ref()
+            .map_or((0.0, 0.0, 1.0), |t| (t.w_diffuse, t.ambient, t.gain));
+        params.lighting = [scene.light.intensity, out.exposure, w_diffuse, ambient];
+        params.shading[1] = gain;
         let bg = out.background;
 
         let texture = match &scene.texture {
@@ -538,7 +543,7 @@ impl Renderer {
             spectrum_size: [0; 4],
             band: [0; 4],
             lookup: [0.0; 4],
-            shading: [brdf::schlick_r0(prepared.shading.ior) as f32, 0.0, 0.0, 0.0],
+            shading: [brdf::schlick_r0(prepared.shading.ior) as f32, 1.0, 0.0, 0.0],
             decode: [[0.0; 4]; MAX_TERMS],
         };
         if let Some((_, v)) = &self.prepared {

@@ -127,6 +127,9 @@ mod tests {
         assert_ne!(v.camera.eye, scene.camera.eye);
         v.zoom(0.5);
         assert!((dist(&v) - 0.5 * r0).abs() < 1e-3 * r0);
+        // A light perpendicular to the up axis moves by 2·sin(0.1) ≈ 0.2 when turned by 0.2
+        // about it, whatever the scene's own light.
+        v.light_dir = v.up().any_orthonormal_vector();
         let before = v.light_dir;
         v.turn_light(0.2, 0.0);
         assert!((v.light_dir.length() - 1.0).abs() < 1e-5);
