@@ -37,7 +37,7 @@ fn main() {
     let material = Material {
         heightfield: "builtin:blazed".into(),
         expansion: Expansion::Chebyshev,
-        terms: 3,
+        terms: diffract::material::Terms::Fixed(3),
         window_radius: 1,
         lambda_step_nm: 20,
         ..Material::default()
