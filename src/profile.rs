@@ -316,7 +316,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
         let mut frame = match map(renderer) {
             Ok(f) => f,
             Err(e @ Error::Invalid { .. }) => {
-                progress.suspend(|| eprintln!("note: {} skipped: {e}", variant.name));
+                progress.suspend(|| eprintln!("warning: {} skipped: {e}", variant.name));
                 progress.inc(1);
                 continue;
             }

@@ -266,7 +266,7 @@ fn render_resolved(
     let out = &scene.output;
     if scene.light.angular_diameter_deg > 0.0 && scene.light.disk_samples > 1 {
         eprintln!(
-            "note: the sun's disc ({}°) is not integrated on the GPU yet: the scene is lit from its centre",
+            "warning: the sun's disc ({}°) is not integrated on the GPU yet: the scene is lit from its centre",
             scene.light.angular_diameter_deg
         );
     }

@@ -60,7 +60,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let (spec, coarsened) = setup.table.spec(kind, material, hi - lo, setup.region)?;
     if let Some(asked) = coarsened {
         eprintln!(
-            "note: {kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB",
+            "warning: {kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB",
             spec.region.lo[0],
             spec.region.hi[0],
             spec.region.lo[1],
