@@ -1,7 +1,8 @@
 #version 450
 // Thesis Algorithm 2 (vertex diffraction shader): the tangent frame (N, T, B) from the
-// vertex normal and tangent via the model matrix, ωi and ωr projected into it, and the
-// clip-space position p = P·C⁻¹·M·p_local (eq. 1.2).
+// vertex normal and tangent via the model matrix, ωr projected into it, and the clip-space
+// position p = P·C⁻¹·M·p_local (eq. 1.2). ωi is projected per fragment instead (shade.glsl),
+// once for each direction over the light's disc: the frame is passed on for that.
 #include "interface.glsl"
 
 layout(location = 0) in vec3 inPosition;
@@ -14,9 +15,11 @@ layout(push_constant) uniform Transforms {
     mat4 viewProj; // P·C⁻¹ (Vulkan clip space)
 } transforms;
 
-layout(location = 0) out vec3 outWi;
+layout(location = 0) out vec3 outTangent;
 layout(location = 1) out vec3 outWr;
 layout(location = 2) out vec2 outUv;
+layout(location = 3) out vec3 outBitangent;
+layout(location = 4) out vec3 outNormal;
 
 // projectVectorOnTo(): coordinates of v in the orthonormal frame (T, B, N).
 vec3 projectVectorOnTo(vec3 v, vec3 t, vec3 b, vec3 n) {
@@ -39,11 +42,15 @@ void main() {
     // MODEL §1 has B = N × T; a mirrored UV map (w = −1) mirrors the grating with the texture.
     vec3 b = (inTangent.w < 0.0 ? -1.0 : 1.0) * cross(n, t);
 
-    // Lines 6–10: ωr towards the eye, ωi towards the (directional) light.
+    // Lines 6–10: ωr towards the eye. ωi towards the light (lines 7–8) needs one projection
+    // per direction over the sun's disc: the frame goes to the fragment stage, where
+    // projecting onto the interpolated frame equals interpolating per-vertex projections
+    // (projection is linear in the frame), so a point light gives Algorithm 2's ωi.
     vec4 position = transforms.model * vec4(inPosition, 1.0);
     vec3 viewerDir = params.eyeWorld.xyz - position.xyz / position.w;
-    vec3 lightDir = -safeNormalize(params.lightDirWorld.xyz, vec3(0.0, 0.0, -1.0));
-    outWi = safeNormalize(projectVectorOnTo(lightDir, t, b, n), vec3(0.0, 0.0, 1.0));
+    outTangent = t;
+    outBitangent = b;
+    outNormal = n;
     // Line 10 normalises ωr per vertex; it is normalised per fragment instead, because
     // eye − position is linear in the position: interpolated unnormalised it is the exact
     // per-pixel direction on flat triangles, while normalised vectors interpolate wrongly

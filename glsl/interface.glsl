@@ -33,6 +33,8 @@ const int LAMBDA_MAX_NM = 780;
 const int LAMBDA_COUNT = (LAMBDA_MAX_NM - LAMBDA_MIN_NM) / LAMBDA_STEP_NM + 1;
 // Capacity of the per-term decode table; Material::validate caps T at 64.
 const int MAX_TERMS = 65;
+// Capacity of the light's disc directions; light::MAX_DISK_SAMPLES on the CPU.
+const int MAX_DISK_SAMPLES = 256;
 const float PI = 3.14159265358979;
 
 // --- descriptor set 0 ----------------------------------------------------------------
@@ -46,8 +48,12 @@ layout(set = 0, binding = 0, std140) uniform Params {
     ivec4 band;           // x0, y0, width, height of the stored texels
     vec4 lookup;          // x: dH (µm), y: 1/(2σx²), z: 1/(2σy²), w: Chebyshev half range A (µm)
     vec4 shading;         // x: Schlick R0, y: texture gain
+    ivec4 lightInfo;      // x: directions over the light's disc in lightDisk (1: a point light)
     // Per term: value = (x + stored.r * y, z + stored.g * w) (thesis eq. 1.1 inverted).
     vec4 decode[MAX_TERMS];
+    // Mesh mode: xyz towards a point of the light's disc (world space, unit), w its weight;
+    // the weights of the first lightInfo.x entries sum to 1 (light::sun_disk_samples).
+    vec4 lightDisk[MAX_DISK_SAMPLES];
 } params;
 
 // Per spectral sample j: xyz = CIE weight of ColourTable::weights[j], w = λ_j in nm.

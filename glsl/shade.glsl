@@ -10,9 +10,12 @@
 #include "gain.glsl"
 #include "colour.glsl"
 
-layout(location = 0) in vec3 inWi;
+// Mesh mode: the tangent frame (T, B, N) in world space and ωr in it (diffraction.vert).
+layout(location = 0) in vec3 inTangent;
 layout(location = 1) in vec3 inWr;
 layout(location = 2) in vec2 inUv;
+layout(location = 3) in vec3 inBitangent;
+layout(location = 4) in vec3 inNormal;
 
 layout(location = 0) out vec4 outColour;
 
@@ -27,20 +30,36 @@ vec3 finiteOrZero(vec3 c) {
 
 void main() {
     if (OUTPUT_MODE == MODE_MESH) {
-        vec3 wi = safeNormalize(inWi);
         vec3 wr = safeNormalize(inWr);
-        vec3 cDiffraction = xyzToLinearSrgb(diffractionXyz(wi, wr));  // line 28, eq. 1.10
-        // Irradiance of the directional light on the surface.
-        float irradiance = max(wi.z, 0.0) * params.lighting.x;
-        vec3 c = cDiffraction * irradiance;
+        vec3 cTexture = vec3(0.0);
         if (TEXTURE_BLENDING) {
-            // t = gain·texture; Algorithm 4 lit by the sun, plus the sky's ambient·t
-            // (scene::TextureSpec::shade states the same on the CPU).
-            vec3 cTexture = params.shading.y * texture(surfaceTexture, inUv).rgb;
-            vec3 h = safeNormalize(wi + wr);
-            float f = schlickFresnel(clamp(dot(wr, h), 0.0, 1.0));
-            c = textureBlend(cDiffraction, cTexture, f, params.lighting.z) * irradiance
-              + params.lighting.w * cTexture;
+            cTexture = params.shading.y * texture(surfaceTexture, inUv).rgb;
+        }
+        // The light's disc: Σ_k weight_k · shade(ωi_k), every direction shaded in full
+        // (scene::TextureSpec::shade states the same on the CPU); one entry for a point.
+        vec3 c = vec3(0.0);
+        int samples = clamp(params.lightInfo.x, 1, MAX_DISK_SAMPLES);
+        for (int k = 0; k < samples; ++k) {
+            vec3 towardsLight = params.lightDisk[k].xyz;
+            // Algorithm 2, lines 7–8, on the interpolated frame.
+            vec3 wi = safeNormalize(vec3(dot(towardsLight, inTangent),
+                                         dot(towardsLight, inBitangent),
+                                         dot(towardsLight, inNormal)));
+            vec3 cDiffraction = xyzToLinearSrgb(diffractionXyz(wi, wr));  // line 28, eq. 1.10
+            // Irradiance of this part of the light on the surface.
+            float irradiance = max(wi.z, 0.0) * params.lighting.x;
+            vec3 ck = cDiffraction;
+            if (TEXTURE_BLENDING) {
+                // t = gain·texture; Algorithm 4 lit by the sun.
+                vec3 h = safeNormalize(wi + wr);
+                float f = schlickFresnel(clamp(dot(wr, h), 0.0, 1.0));
+                ck = textureBlend(cDiffraction, cTexture, f, params.lighting.z);
+            }
+            c += params.lightDisk[k].w * irradiance * ck;
+        }
+        // Plus the sky's ambient·t on the skin.
+        if (TEXTURE_BLENDING) {
+            c += params.lighting.w * cTexture;
         }
         // Then the camera's exposure.
         outColour = vec4(finiteOrZero(c * params.lighting.y), 1.0);

@@ -161,8 +161,22 @@ fn plane_pixels_match_cpu_model() {
         .as_dmat4()
         .inverse();
     let eye = glam::DVec3::from(scene.camera.eye.map(|c| c as f64));
-    let wi = (-glam::DVec3::from(scene.light.direction.map(|c| c as f64))).normalize();
-    let scale = wi.z * scene.light.intensity as f64 * scene.output.exposure as f64;
+    // The sun's disc (the scene's default 0.53°, 8 directions): the shader sums the shaded
+    // colour over these directions with their weights; the plane's tangent frame is the
+    // world frame.
+    let disk: Vec<(glam::DVec3, f64)> = scene
+        .light
+        .disk_samples()
+        .iter()
+        .map(|s| {
+            (
+                glam::DVec3::from(s.towards_light.map(f64::from)),
+                s.weight as f64,
+            )
+        })
+        .collect();
+    assert_eq!(disk.len(), 8, "the plane scene uses the default disc");
+    let scale = scene.light.intensity as f64 * scene.output.exposure as f64;
     let mut pixels: Vec<(u32, u32)> = (0..w).map(|i| (i, h / 2)).collect();
     pixels.extend((0..12).map(|k| ((k * 37 + 5) % w, (k * 23 + 3) % h)));
     let mut coloured = 0;
@@ -189,16 +203,22 @@ fn plane_pixels_match_cpu_model() {
             continue;
         }
         let wr = (eye - hit).normalize();
-        let xyz = brdf::model::xyz(
-            &p.stack,
-            p.terms(),
-            &p.window,
-            &p.shading,
-            &p.colour,
-            wi.to_array(),
-            wr.to_array(),
-        );
-        let expected = xyz_to_linear_srgb(xyz).map(|c| c * scale);
+        let mut expected = [0.0f64; 3];
+        for &(wi, weight) in &disk {
+            let xyz = brdf::model::xyz(
+                &p.stack,
+                p.terms(),
+                &p.window,
+                &p.shading,
+                &p.colour,
+                wi.to_array(),
+                wr.to_array(),
+            );
+            let rgb = xyz_to_linear_srgb(xyz);
+            for c in 0..3 {
+                expected[c] += weight * wi.z * scale * rgb[c];
+            }
+        }
         for c in 0..3 {
             let err = (gpu[c] as f64 - expected[c]).abs();
             assert!(
@@ -219,6 +239,61 @@ fn plane_pixels_match_cpu_model() {
     assert!(
         coloured >= 3,
         "only {coloured} saturated pixels on the middle row"
+    );
+}
+
+/// The sun's disc is integrated, not sampled once: the disc render equals the weighted sum
+/// of point-light renders from each of its directions (one draw, the loop in the shader),
+/// and it differs from the point light at the disc's centre where the orders are (the
+/// disc, 0.0093 rad across, is wider than a coherence lobe, ~0.005 in `u`).
+#[test]
+fn sun_disc_is_the_weighted_sum_of_its_point_lights() {
+    let Some(mut r) = renderer() else { return };
+    let scene = Scene::from_toml_str(PLANE_SCENE, Path::new("plane.toml")).expect("scene");
+    let p = prepare(&scene.material);
+    let disc = r.render_scene(&scene, &p).expect("render the disc");
+    let point_scene = |towards: [f32; 3]| {
+        let mut s = scene.clone();
+        s.light.direction = towards.map(|c| -c);
+        s.light.angular_diameter_deg = 0.0;
+        s.light.disk_samples = 1;
+        s
+    };
+    let samples = scene.light.disk_samples();
+    assert_eq!(samples.len(), 8);
+    let mut sum = vec![[0.0f64; 3]; disc.rgb.len()];
+    for s in &samples {
+        let f = r
+            .render_scene(&point_scene(s.towards_light), &p)
+            .expect("render a point light");
+        for (acc, px) in sum.iter_mut().zip(&f.rgb) {
+            for c in 0..3 {
+                acc[c] += s.weight as f64 * px[c] as f64;
+            }
+        }
+    }
+    let centre = r
+        .render_scene(&point_scene(scene.light.towards_light().to_array()), &p)
+        .expect("render the centre");
+    assert_no_validation(&r);
+    let max = disc.rgb.iter().flatten().fold(0.0f32, |a, b| a.max(*b)) as f64;
+    assert!(max > 0.05, "max {max}: the orders were missed");
+    let mut worst_sum = 0.0f64;
+    let mut worst_centre = 0.0f64;
+    for ((d, s), c) in disc.rgb.iter().zip(&sum).zip(&centre.rgb) {
+        for k in 0..3 {
+            worst_sum = worst_sum.max((d[k] as f64 - s[k]).abs());
+            worst_centre = worst_centre.max((d[k] as f64 - c[k] as f64).abs());
+        }
+    }
+    // float32 sums in a different order: a few ulps of the brightest pixel.
+    assert!(
+        worst_sum <= 1e-5 * max,
+        "disc vs Σ weight·point: {worst_sum:e} (max {max})"
+    );
+    assert!(
+        worst_centre >= 0.05 * max,
+        "the disc changes the orders by only {worst_centre:e} of max {max}: is it integrated?"
     );
 }
 

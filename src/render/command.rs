@@ -264,12 +264,6 @@ fn render_resolved(
     out_path: &std::path::Path,
 ) -> Result<Frame> {
     let out = &scene.output;
-    if scene.light.angular_diameter_deg > 0.0 && scene.light.disk_samples > 1 {
-        eprintln!(
-            "warning: the sun's disc ({}°) is not integrated on the GPU yet: the scene is lit from its centre",
-            scene.light.angular_diameter_deg
-        );
-    }
     let (rw, rh) = out.render_size();
     let mut big = scene.clone();
     big.output.width = rw;

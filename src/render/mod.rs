@@ -91,7 +91,24 @@ pub(crate) struct ParamsUbo {
     pub band: [i32; 4],
     pub lookup: [f32; 4],
     shading: [f32; 4],
+    light_info: [i32; 4],
     pub decode: [[f32; 4]; MAX_TERMS],
+    light_disk: [[f32; 4]; crate::light::MAX_DISK_SAMPLES as usize],
+}
+
+impl ParamsUbo {
+    /// The light's disc: the directions towards it (world space) and their weights, at most
+    /// [`crate::light::MAX_DISK_SAMPLES`] (what `Light::disk_samples` gives).
+    pub(crate) fn set_light(&mut self, light: &crate::scene::Light) {
+        let disk = light.disk_samples();
+        let d = light.direction;
+        self.light_dir_world = [d[0], d[1], d[2], 0.0];
+        self.light_info = [disk.len() as i32, 0, 0, 0];
+        for (slot, s) in self.light_disk.iter_mut().zip(&disk) {
+            let t = s.towards_light;
+            *slot = [t[0], t[1], t[2], s.weight];
+        }
+    }
 }
 
 // SAFETY: repr(C) of 4-byte scalars in 16-byte groups: no padding.
@@ -382,8 +399,7 @@ impl Renderer {
         let mut params = self.params(prepared);
         let eye = scene.camera.eye;
         params.eye_world = [eye[0], eye[1], eye[2], 1.0];
-        let d = scene.light.direction;
-        params.light_dir_world = [d[0], d[1], d[2], 0.0];
+        params.set_light(&scene.light);
         // Algorithm 4's weight, the sky's ambient light on the skin, the texture's gain.
         let (w_diffuse, ambient, gain) = scene
             .texture
@@ -544,7 +560,9 @@ impl Renderer {
             band: [0; 4],
             lookup: [0.0; 4],
             shading: [brdf::schlick_r0(prepared.shading.ior) as f32, 1.0, 0.0, 0.0],
+            light_info: [1, 0, 0, 0],
             decode: [[0.0; 4]; MAX_TERMS],
+            light_disk: [[0.0, 0.0, 1.0, 1.0]; crate::light::MAX_DISK_SAMPLES as usize],
         };
         if let Some((_, v)) = &self.prepared {
             v.fill_params(&mut params);
@@ -841,13 +859,20 @@ fn check_map_args(
 }
 
 /// The `(u, v, w)` a scene's mesh can reach: the tangent-frame `−ωi − ωr` of every vertex of
-/// a triangle that has a lit, visible vertex (as diffraction.vert computes them), with a
-/// margin for the renormalised interpolation between vertices. `None` when nothing is lit.
+/// a triangle that has a lit, visible vertex (as the shaders compute them), for every
+/// direction over the light's disc, with a margin for the renormalised interpolation
+/// between vertices. `None` when nothing is lit.
 fn scene_region(scene: &Scene, mesh: &crate::mesh::Mesh) -> Option<Region> {
     use glam::Vec3;
-    let to_light = -Vec3::from(scene.light.direction).normalize_or(Vec3::NEG_Z);
+    let lights: Vec<Vec3> = scene
+        .light
+        .disk_samples()
+        .iter()
+        .map(|s| Vec3::from(s.towards_light))
+        .collect();
     let eye = Vec3::from(scene.camera.eye);
-    let uvw: Vec<(bool, [f64; 3])> = mesh
+    // Per vertex: whether any direction lights it (and the eye sees it), and its points.
+    let uvw: Vec<(bool, Vec<[f64; 3]>)> = mesh
         .vertices
         .iter()
         .map(|v| {
@@ -856,24 +881,28 @@ fn scene_region(scene: &Scene, mesh: &crate::mesh::Mesh) -> Option<Region> {
             let t = (t0 - n * n.dot(t0)).normalize_or(n.any_orthonormal_vector());
             let b = if v.tangent[3] < 0.0 { -1.0 } else { 1.0 } * n.cross(t);
             let frame = |d: Vec3| Vec3::new(d.dot(t), d.dot(b), d.dot(n));
-            let wi = frame(to_light).normalize_or(Vec3::Z);
             let wr = frame(eye - Vec3::from(v.position)).normalize_or(Vec3::Z);
-            let lit = wi.z > 0.0 && wr.z > 0.0;
-            (
-                lit,
-                [
-                    -(wi.x + wr.x) as f64,
-                    -(wi.y + wr.y) as f64,
-                    -(wi.z + wr.z) as f64,
-                ],
-            )
+            let mut lit = false;
+            let points = lights
+                .iter()
+                .map(|&l| {
+                    let wi = frame(l).normalize_or(Vec3::Z);
+                    lit |= wi.z > 0.0 && wr.z > 0.0;
+                    [
+                        -(wi.x + wr.x) as f64,
+                        -(wi.y + wr.y) as f64,
+                        -(wi.z + wr.z) as f64,
+                    ]
+                })
+                .collect();
+            (lit, points)
         })
         .collect();
     let points = mesh.indices.chunks_exact(3).flat_map(|tri| {
         let any_lit = tri.iter().any(|&i| uvw[i as usize].0);
         tri.iter()
             .filter(move |_| any_lit)
-            .map(|&i| uvw[i as usize].1)
+            .flat_map(|&i| uvw[i as usize].1.iter().copied())
             .collect::<Vec<_>>()
     });
     Region::around(points, 0.02)

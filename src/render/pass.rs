@@ -17,7 +17,7 @@ use crate::gpu::memory::{bytes_of, Buffer, Image};
 use crate::gpu::pipeline::{DescriptorSet, Pipeline, PipelineLayout, ShaderModule};
 use crate::gpu::target::FrameTarget;
 use crate::gpu::Device;
-use crate::scene::Camera;
+use crate::scene::{Camera, Light};
 
 /// Feature switches a pass is specialised for (the viewer toggles them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -62,13 +62,13 @@ impl ScenePass {
         &self.stats
     }
 
-    /// Moves the camera and the light and sets the exposure; takes effect in the next
-    /// recorded frame. `aspect` is the target's width/height. Mesh passes only (a BRDF map
-    /// has no camera).
-    pub fn set_view(&mut self, camera: &Camera, light_dir: [f32; 3], aspect: f32, exposure: f32) {
+    /// Moves the camera and the light (its direction and disc) and sets the exposure; takes
+    /// effect in the next recorded frame. `aspect` is the target's width/height. Mesh passes
+    /// only (a BRDF map has no camera).
+    pub fn set_view(&mut self, camera: &Camera, light: &Light, aspect: f32, exposure: f32) {
         let eye = camera.eye;
         self.params.eye_world = [eye[0], eye[1], eye[2], 1.0];
-        self.params.light_dir_world = [light_dir[0], light_dir[1], light_dir[2], 0.0];
+        self.params.set_light(light);
         self.params.lighting[1] = exposure;
         self.transforms.view_proj = camera.view_proj(aspect).to_cols_array();
     }

@@ -418,12 +418,7 @@ impl Viewer {
             .scene_pass(&view, prepared, options, render_pass, aspect);
         match built {
             Ok(mut pass) => {
-                pass.set_view(
-                    &view.camera,
-                    view.light.direction,
-                    aspect,
-                    self.state.exposure,
-                );
+                pass.set_view(&view.camera, &view.light, aspect, self.state.exposure);
                 let s = pass.stats();
                 println!(
                     "variant {}: pass built in {:.0} ms (table build {:.0} ms, {:.1} MB)",
@@ -503,12 +498,7 @@ impl Viewer {
         let Some(pass) = &mut self.pass else {
             return Ok(false);
         };
-        pass.set_view(
-            &view.camera,
-            view.light.direction,
-            aspect,
-            self.state.exposure,
-        );
+        pass.set_view(&view.camera, &view.light, aspect, self.state.exposure);
         self.view_changed = false;
 
         let dev = self.renderer.device().clone();
