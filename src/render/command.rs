@@ -253,37 +253,20 @@ fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
     }
 }
 
-/// Renders `scene` at its supersampled size with unit exposure, then box-filters it down
-/// and applies the exposure (and, for a PNG, the tone curve) on the CPU
-/// ([`crate::scene::Output::resolve`]), and writes `out`. The background is passed divided
-/// by the exposure, so it comes out as given. The returned frame holds the written pixels.
+/// Renders `scene` as the output file holds it ([`Renderer::render_output`]: an EXR stays
+/// linear, a PNG is tone-mapped) and writes `out`. The returned frame holds the written
+/// pixels.
 fn render_resolved(
     renderer: &mut Renderer,
     scene: &Scene,
     prepared: &crate::material::PreparedMaterial,
     out_path: &std::path::Path,
 ) -> Result<Frame> {
-    let out = &scene.output;
-    let (rw, rh) = out.render_size();
-    let mut big = scene.clone();
-    big.output.width = rw;
-    big.output.height = rh;
-    big.output.exposure = 1.0;
-    big.output.background = out.background.map(|c| c / out.exposure);
-    let mut frame = renderer.render_scene(&big, prepared)?;
-    let rgb = match crate::image_io::output_format(out_path)? {
-        crate::image_io::OutputFormat::Exr => {
-            let (_, _, px) =
-                crate::image_io::box_downsample(rw, rh, &frame.rgb, out.supersample.max(1))?;
-            px.into_iter()
-                .map(|p| p.map(|c| c * out.exposure))
-                .collect()
-        }
-        _ => out.resolve(&frame.rgb)?,
-    };
-    crate::image_io::write_image(out_path, out.width, out.height, &rgb, 1.0)?;
-    frame.width = out.width;
-    frame.height = out.height;
-    frame.rgb = rgb;
+    let tone = !matches!(
+        crate::image_io::output_format(out_path)?,
+        crate::image_io::OutputFormat::Exr
+    );
+    let frame = renderer.render_output(scene, prepared, tone)?;
+    crate::image_io::write_image(out_path, frame.width, frame.height, &frame.rgb, 1.0)?;
     Ok(frame)
 }

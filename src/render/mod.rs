@@ -355,6 +355,39 @@ impl Renderer {
         Ok(frame)
     }
 
+    /// `scene` as `diffract render` writes it, at the output size: drawn at the supersampled
+    /// size ([`crate::scene::Output::render_size`]) with unit exposure, box-filtered in linear
+    /// light, then exposed and, with `tone`, tone-mapped ([`crate::scene::Output::resolve`]);
+    /// without `tone` (EXR) it stays linear after the exposure. The background is drawn
+    /// divided by the exposure, so it comes out as given (before the tone curve).
+    pub fn render_output(
+        &mut self,
+        scene: &Scene,
+        prepared: &PreparedMaterial,
+        tone: bool,
+    ) -> Result<Frame> {
+        let out = &scene.output;
+        let (rw, rh) = out.render_size();
+        let mut big = scene.clone();
+        big.output.width = rw;
+        big.output.height = rh;
+        big.output.exposure = 1.0;
+        big.output.background = out.background.map(|c| c / out.exposure);
+        let mut frame = self.render_scene(&big, prepared)?;
+        frame.rgb = if tone {
+            out.resolve(&frame.rgb)?
+        } else {
+            let (_, _, px) =
+                crate::image_io::box_downsample(rw, rh, &frame.rgb, out.supersample.max(1))?;
+            px.into_iter()
+                .map(|p| p.map(|c| c * out.exposure))
+                .collect()
+        };
+        frame.width = out.width;
+        frame.height = out.height;
+        Ok(frame)
+    }
+
     /// The objects of `scene`'s frames (mesh, uniforms, pipeline), built for `render_pass`
     /// and the target aspect `aspect`: record it into any compatible target, move the camera
     /// with [`ScenePass::set_view`]. The viewer uses this with its swapchain.

@@ -2,6 +2,8 @@
 //! has no Vulkan at all), the validation canary check, and materials for small fast cases.
 #![allow(dead_code)]
 
+pub mod golden;
+
 use diffract::material::{Material, PreparedMaterial, Terms};
 use diffract::render::Renderer;
 use diffract::spectrum::Expansion;
