@@ -19,7 +19,7 @@ use std::time::Instant;
 use ash::vk;
 
 pub use command::{run, validation_requested, RenderArgs, TableArgs};
-pub use pass::{PassOptions, ScenePass};
+pub use pass::{MapView, PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 
 use crate::brdf;
@@ -370,9 +370,10 @@ impl Renderer {
     }
 
     /// The viewer's BRDF map (thesis §5, as [`Renderer::render_brdf_map`] draws it) as a pass
-    /// for `render_pass`: light from `wi` (tangent frame, `z ≥ 0`), drawn into the top-left
-    /// `size`² pixels of whatever target it is recorded into, as displayable colour: the
-    /// shader turns the map's XYZ into linear sRGB and multiplies it by `exposure`
+    /// for `render_pass`: light from `map.wi` (tangent frame, `z ≥ 0`), drawn into the
+    /// top-left `map.size`² pixels of whatever target it is recorded into, as displayable
+    /// colour: the shader turns the map's XYZ into linear sRGB and multiplies it by
+    /// `map.exposure`
     /// (`OUTPUT_MODE` = MODE_MAP_DISPLAY) and the sRGB target applies the transfer curve, as
     /// `render --brdf-map --png --exposure E` does on the CPU. Move the light and resize with
     /// [`ScenePass::set_map`]. Table variants are prepared for the map's region joined with
@@ -381,13 +382,12 @@ impl Renderer {
     pub fn brdf_map_pass(
         &mut self,
         prepared: &PreparedMaterial,
-        wi: [f64; 3],
-        size: u32,
-        exposure: f32,
+        map: MapView,
         options: PassOptions,
         beside: Option<&Scene>,
         render_pass: vk::RenderPass,
     ) -> Result<ScenePass> {
+        let MapView { wi, size, exposure } = map;
         if size == 0 || size > MAX_MAP_SIZE {
             return Err(Error::invalid(
                 "BRDF map size",

@@ -28,6 +28,15 @@ pub struct PassOptions {
     pub texture_blending: bool,
 }
 
+/// What a BRDF-map pass of the viewer draws: the light `wi` (tangent frame), the map's side
+/// in pixels and the exposure of its displayable colour.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapView {
+    pub wi: [f64; 3],
+    pub size: u32,
+    pub exposure: f32,
+}
+
 /// Mesh buffers a pass owns.
 pub(crate) struct MeshBuffers {
     pub vertices: Buffer,

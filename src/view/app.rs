@@ -25,7 +25,7 @@ use crate::gpu::timer::GpuTimer;
 use crate::gpu::{Device, Instance, StorageFormat};
 use crate::material::PreparedMaterial;
 use crate::mesh::Mesh;
-use crate::render::{PassOptions, Renderer, ScenePass, TableOptions, VariantKind};
+use crate::render::{MapView, PassOptions, Renderer, ScenePass, TableOptions, VariantKind};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -833,15 +833,14 @@ impl Viewer {
         let exposure = state.map_exposure;
         self.wait_idle();
         let start = Instant::now();
-        let built = self.renderer.brdf_map_pass(
-            prepared,
+        let map = MapView {
             wi,
-            side,
+            size: side,
             exposure,
-            options,
-            Some(&view),
-            render_pass,
-        );
+        };
+        let built = self
+            .renderer
+            .brdf_map_pass(prepared, map, options, Some(&view), render_pass);
         match built {
             Ok(pass) => {
                 println!(
