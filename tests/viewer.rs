@@ -20,7 +20,7 @@ use diffract::colour::{linear_to_srgb8, xyz_to_linear_srgb};
 use diffract::image_io;
 use diffract::render::VariantKind;
 use diffract::scene::Scene;
-use diffract::view::input::{tangent_frame_near, Controls, Effect, ViewState, HELP};
+use diffract::view::input::{tangent_frame_at_view, Controls, Effect, ViewState, HELP};
 use diffract::view::reload::ShaderReload;
 use glam::Vec3;
 use gpu_util::*;
@@ -482,7 +482,7 @@ fn synthetic_input_drives_the_controls() {
 fn map_light_follows_the_light_control() {
     let scene = Scene::load(&rainbow_scene_path()).expect("scene");
     let mesh = scene.mesh.load().expect("mesh");
-    let frame = tangent_frame_near(&mesh, Vec3::from(scene.camera.target)).expect("frame");
+    let frame = tangent_frame_at_view(&mesh, &scene.camera).expect("frame");
     let mut c = Controls::new(ViewState::from_scene(&scene), VariantKind::Flss);
     let (theta, phi) = c.state.map_light_angles(frame);
     assert!(
@@ -626,7 +626,7 @@ fn map_mode_screenshot_matches_offscreen_brdf_map() {
     scene.material.heightfield = GROWN.into();
     scene.output.exposure = 300.0;
     let mesh = scene.mesh.load().expect("mesh");
-    let frame = tangent_frame_near(&mesh, Vec3::from(scene.camera.target)).expect("frame");
+    let frame = tangent_frame_at_view(&mesh, &scene.camera).expect("frame");
     let (theta, phi) = ViewState::from_scene(&scene).map_light_angles(frame);
     assert!(
         stdout.contains(&format!("θi = {theta:.6}°, φi = {phi:.6}°")),

@@ -16,7 +16,7 @@ use winit::keyboard::{Key, NamedKey};
 use winit::raw_window_handle::{HasDisplayHandle, HasWindowHandle};
 use winit::window::{Window, WindowId};
 
-use super::input::{tangent_frame_near, Controls, Effect, ViewState, HELP};
+use super::input::{tangent_frame_at_view, Controls, Effect, ViewState, HELP};
 use super::reload::ShaderReload;
 use super::ScriptAction;
 use crate::gpu::memory::Buffer;
@@ -794,9 +794,9 @@ impl Viewer {
         }
     }
 
-    /// The map's light `ωi`: the light in the tangent frame of the mesh vertex nearest the
-    /// camera's target (the surface the view is centred on), as `render_brdf_map` computes it
-    /// from `(θi, φi)`.
+    /// The map's light `ωi`: the light in the tangent frame of the surface at the centre of
+    /// the view ([`tangent_frame_at_view`]), as `render_brdf_map` computes it from
+    /// `(θi, φi)`.
     fn map_wi(&self) -> [f64; 3] {
         let (theta, phi) = self.map_angles();
         crate::brdf::direction(theta, phi)
@@ -804,8 +804,7 @@ impl Viewer {
 
     fn map_angles(&self) -> (f64, f64) {
         let state = &self.controls.state;
-        let target = glam::Vec3::from(state.camera.target);
-        let frame = tangent_frame_near(&self.mesh, target).unwrap_or([
+        let frame = tangent_frame_at_view(&self.mesh, &state.camera).unwrap_or([
             glam::Vec3::X,
             glam::Vec3::Y,
             glam::Vec3::Z,

@@ -8,7 +8,7 @@ use glam::Vec3;
 use winit::event::{MouseButton, MouseScrollDelta};
 use winit::keyboard::{Key, ModifiersState, NamedKey};
 
-use crate::mesh::Mesh;
+use crate::mesh::{Mesh, Vertex};
 use crate::render::VariantKind;
 use crate::scene::{Camera, Scene};
 
@@ -208,15 +208,32 @@ fn on_off(b: bool) -> &'static str {
     }
 }
 
-/// The tangent frame `(t, b, n)` of the mesh vertex nearest `point`, built as
-/// diffraction.vert builds it (Gram–Schmidt tangent, bitangent with the handedness sign).
-/// `None` for a mesh without vertices.
-pub fn tangent_frame_near(mesh: &Mesh, point: Vec3) -> Option<[Vec3; 3]> {
-    let v = mesh.vertices.iter().min_by(|a, b| {
-        let da = Vec3::from(a.position).distance_squared(point);
-        let db = Vec3::from(b.position).distance_squared(point);
-        da.total_cmp(&db)
-    })?;
+/// The vertex nearest the line through `eye` along the unit `axis`.
+fn nearest_to_axis<'a>(
+    vertices: impl Iterator<Item = &'a Vertex>,
+    eye: Vec3,
+    axis: Vec3,
+) -> Option<&'a Vertex> {
+    let off_axis = |v: &Vertex| {
+        let d = Vec3::from(v.position) - eye;
+        (d - axis * d.dot(axis)).length_squared()
+    };
+    vertices.min_by(|a, b| off_axis(a).total_cmp(&off_axis(b)))
+}
+
+/// The tangent frame `(t, b, n)` of the surface at the centre of `camera`'s view: of the
+/// vertices that face the eye, the one nearest the line of sight (eye → target); all
+/// vertices when none faces it. Built as diffraction.vert builds it (Gram–Schmidt tangent,
+/// bitangent with the handedness sign). `None` for a mesh without vertices.
+pub fn tangent_frame_at_view(mesh: &Mesh, camera: &Camera) -> Option<[Vec3; 3]> {
+    let eye = Vec3::from(camera.eye);
+    let axis = (Vec3::from(camera.target) - eye).normalize_or(Vec3::NEG_Z);
+    let facing = |v: &&Vertex| {
+        let p = Vec3::from(v.position);
+        Vec3::from(v.normal).dot(eye - p) > 0.0 && (p - eye).dot(axis) > 0.0
+    };
+    let v = nearest_to_axis(mesh.vertices.iter().filter(facing), eye, axis)
+        .or_else(|| nearest_to_axis(mesh.vertices.iter(), eye, axis))?;
     let n = Vec3::from(v.normal).normalize_or(Vec3::Z);
     let t0 = Vec3::new(v.tangent[0], v.tangent[1], v.tangent[2]);
     let t = (t0 - n * n.dot(t0)).normalize_or(n.any_orthonormal_vector());
@@ -298,7 +315,7 @@ impl ViewState {
     }
 
     /// The BRDF map's light as `(θi, φi)` in degrees — the arguments of
-    /// `Renderer::render_brdf_map` — in `frame` (from [`tangent_frame_near`]): the direction
+    /// `Renderer::render_brdf_map` — in `frame` (from [`tangent_frame_at_view`]): the direction
     /// to the light, dropped onto the horizon when the light is below it (the map then shows
     /// grazing light; the mesh there is unlit).
     pub fn map_light_angles(&self, frame: [Vec3; 3]) -> (f64, f64) {
