@@ -243,6 +243,38 @@ fn no_display_is_one_error_line() {
     }
 }
 
+/// Bad viewer options (the map's exposure, the `--at` hook): one `error:` line naming the
+/// option, exit 1, before any window opens.
+#[test]
+fn bad_view_options_are_one_error_line() {
+    for (args, names) in [
+        (&["--map-exposure", "-1"][..], "map exposure"),
+        (&["--map-exposure", "inf"][..], "map exposure"),
+        (&["--exposure", "-2"][..], "exposure"),
+        (&["--at", "b"][..], "--at"),
+        (&["--at", "x:b"][..], "--at"),
+        (&["--at", "1:resize=0x4"][..], "--at"),
+        (&["--at", "1:minimise=0"][..], "--at"),
+        (&["--at", "1:jump"][..], "--at"),
+    ] {
+        let out = diffract()
+            .args(["view", "--frames", "1"])
+            .args(args)
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .output()
+            .expect("run diffract view");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        let lines: Vec<&str> = stderr.lines().collect();
+        assert_eq!(lines.len(), 1, "{args:?}: one line expected:\n{stderr}");
+        assert!(
+            lines[0].starts_with("error: invalid ") && lines[0].contains(names),
+            "{args:?}: {stderr}"
+        );
+    }
+}
+
 /// A syntax error in a watched shader: the reload reports `flss.frag:<line>` and the last
 /// good SPIR-V stays; fixing it compiles again.
 #[test]

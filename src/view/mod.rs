@@ -40,7 +40,7 @@ pub struct ViewArgs {
     #[arg(long)]
     pub height: Option<u32>,
     /// Initial exposure (overrides the scene).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub exposure: Option<f32>,
     /// Initial shader variant (V cycles through them).
     #[arg(long, value_enum, default_value_t = VariantKind::Default)]
@@ -78,7 +78,7 @@ pub struct ViewArgs {
     #[arg(long)]
     pub map: bool,
     /// Exposure of the BRDF map ([ and ] change it) [default: 30].
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub map_exposure: Option<f32>,
     /// Test hook: before frame N, press a key (`N:b`, `N:left`, ...), request a window size
     /// (`N:resize=WxH`) or treat the window as minimised for K redraws (`N:minimise=K`).
