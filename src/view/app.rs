@@ -123,8 +123,13 @@ impl ApplicationHandler for App {
                 event_loop.exit();
                 Ok(())
             }
-            WindowEvent::Resized(_) => {
-                v.needs_recreate = true;
+            WindowEvent::Resized(size) => {
+                // The hook's resize recreates at once; X's event for it then changes nothing
+                // (an out-of-date swapchain of the same size is caught by acquire/present).
+                let current = v.swapchain.as_ref().map(|sc| sc.extent);
+                if current.is_none_or(|e| (e.width, e.height) != (size.width, size.height)) {
+                    v.needs_recreate = true;
+                }
                 Ok(())
             }
             WindowEvent::RedrawRequested => {
@@ -926,6 +931,35 @@ impl Drop for Viewer {
         // the window.
         for s in &mut self.slots {
             s.timer = None;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn extent(width: u32, height: u32) -> vk::Extent2D {
+        vk::Extent2D { width, height }
+    }
+
+    #[test]
+    fn map_takes_the_left_square_and_the_mesh_the_rest() {
+        let (mesh, map) = layout(extent(128, 64), true);
+        let map = map.expect("a map");
+        assert_eq!((map.offset.x, map.offset.y), (0, 0));
+        assert_eq!(map.extent, extent(64, 64));
+        assert_eq!((mesh.offset.x, mesh.offset.y), (64, 0));
+        assert_eq!(mesh.extent, extent(64, 64));
+        // Tall window: the map's side is half the width, top-aligned.
+        let (mesh, map) = layout(extent(100, 300), true);
+        assert_eq!(map.expect("a map").extent, extent(50, 50));
+        assert_eq!(mesh.extent, extent(50, 300));
+        // Map off, or no room for it: the mesh fills the target.
+        for (e, on) in [(extent(128, 64), false), (extent(1, 64), true)] {
+            let (mesh, map) = layout(e, on);
+            assert!(map.is_none());
+            assert_eq!(mesh.extent, e);
         }
     }
 }
