@@ -15,7 +15,7 @@ layout(constant_id = 4) const bool SHADOWING = true;   // Stam's V-cavity S
 layout(constant_id = 5) const bool FRESNEL = true;     // Schlick R/R0
 layout(constant_id = 6) const bool TEXTURE_BLENDING = false; // thesis Algorithm 4
 layout(constant_id = 7) const int STORAGE = 0;         // STORAGE_RG32F / _RG16F / _UNORM16
-layout(constant_id = 8) const int OUTPUT_MODE = 0;     // MODE_MESH / _MAP_XYZ / _MAP_SPECTRAL
+layout(constant_id = 8) const int OUTPUT_MODE = 0;     // MODE_MESH / _MAP_XYZ / _MAP_SPECTRAL / _MAP_DISPLAY
 layout(constant_id = 9) const int TABLE_TERMS = 16;    // table variants: coefficients K
 
 const int EXPANSION_TAYLOR = 0;
@@ -26,6 +26,8 @@ const int STORAGE_UNORM16 = 2;
 const int MODE_MESH = 0;
 const int MODE_MAP_XYZ = 1;
 const int MODE_MAP_SPECTRAL = 2;
+// The viewer's map: XYZ as linear sRGB × exposure (params.lighting.y) for an sRGB target.
+const int MODE_MAP_DISPLAY = 3;
 
 const int LAMBDA_MIN_NM = 380;
 const int LAMBDA_MAX_NM = 780;

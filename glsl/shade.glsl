@@ -87,7 +87,12 @@ void main() {
         return;
     }
 #endif
-    outColour = vec4(finiteOrZero(diffractionXyz(wi, wr)), 1.0);
+    vec3 c = diffractionXyz(wi, wr);
+    if (OUTPUT_MODE == MODE_MAP_DISPLAY) {
+        // The viewer draws the map into its sRGB swapchain, which applies the curve.
+        c = xyzToLinearSrgb(c) * params.lighting.y;
+    }
+    outColour = vec4(finiteOrZero(c), 1.0);
 }
 
 #endif

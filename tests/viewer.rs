@@ -1,6 +1,9 @@
 //! The desktop viewer under Xvfb with lavapipe: it opens a window, presents frames through the
 //! swapchain with validation on and no messages, and its screenshot matches the offscreen
-//! render of the same camera within the golden-image tolerance (tests/gpu_golden.rs). Also:
+//! render of the same camera within the golden-image tolerance (tests/gpu_golden.rs); with
+//! the BRDF map beside the mesh (`B`) the map matches `render_brdf_map` of the same light;
+//! a window resized (and minimised) during the run recreates its swapchain and the next
+//! screenshot has the new size. Also: synthetic mouse and key input drives the controls;
 //! no display → one `error:` line; a shader edit with a syntax error reports file:line and
 //! keeps the last good SPIR-V.
 //!
@@ -13,11 +16,17 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
-use diffract::colour::linear_to_srgb8;
+use diffract::colour::{linear_to_srgb8, xyz_to_linear_srgb};
 use diffract::image_io;
+use diffract::render::VariantKind;
 use diffract::scene::Scene;
+use diffract::view::input::{tangent_frame_at_view, Controls, Effect, ViewState, HELP};
 use diffract::view::reload::ShaderReload;
+use glam::Vec3;
 use gpu_util::*;
+use winit::dpi::PhysicalPosition;
+use winit::event::{MouseButton, MouseScrollDelta};
+use winit::keyboard::{Key, ModifiersState, NamedKey};
 
 /// Limits of tests/gpu_golden.rs: the swapchain path must agree with the offscreen path as
 /// closely as lavapipe agrees with a golden image.
@@ -234,6 +243,38 @@ fn no_display_is_one_error_line() {
     }
 }
 
+/// Bad viewer options (the map's exposure, the `--at` hook): one `error:` line naming the
+/// option, exit 1, before any window opens.
+#[test]
+fn bad_view_options_are_one_error_line() {
+    for (args, names) in [
+        (&["--map-exposure", "-1"][..], "map exposure"),
+        (&["--map-exposure", "inf"][..], "map exposure"),
+        (&["--exposure", "-2"][..], "exposure"),
+        (&["--at", "b"][..], "--at"),
+        (&["--at", "x:b"][..], "--at"),
+        (&["--at", "1:resize=0x4"][..], "--at"),
+        (&["--at", "1:minimise=0"][..], "--at"),
+        (&["--at", "1:jump"][..], "--at"),
+    ] {
+        let out = diffract()
+            .args(["view", "--frames", "1"])
+            .args(args)
+            .env_remove("DISPLAY")
+            .env_remove("WAYLAND_DISPLAY")
+            .output()
+            .expect("run diffract view");
+        let stderr = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(1), "{args:?}: {stderr}");
+        let lines: Vec<&str> = stderr.lines().collect();
+        assert_eq!(lines.len(), 1, "{args:?}: one line expected:\n{stderr}");
+        assert!(
+            lines[0].starts_with("error: invalid ") && lines[0].contains(names),
+            "{args:?}: {stderr}"
+        );
+    }
+}
+
 /// A syntax error in a watched shader: the reload reports `flss.frag:<line>` and the last
 /// good SPIR-V stays; fixing it compiles again.
 #[test]
@@ -299,5 +340,448 @@ fn shader_syntax_error_keeps_last_good_and_reports_line() {
         .unwrap();
     assert!(reload.changed().unwrap());
     reload.compile_all().expect("fixed again");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+fn key(c: &str) -> Key {
+    Key::Character(c.into())
+}
+
+fn eye_distance(c: &Controls) -> f32 {
+    Vec3::from(c.state.camera.eye).distance(Vec3::from(c.state.camera.target))
+}
+
+/// Synthetic mouse and keys through the viewer's input handling: drags orbit, pan and turn
+/// the light, the wheel zooms, keys change exposure, variant, switches and the map, `H`
+/// asks for the help, and nothing moves without a button held.
+#[test]
+fn synthetic_input_drives_the_controls() {
+    let scene = Scene::load(&rainbow_scene_path()).expect("scene");
+    let mut c = Controls::new(ViewState::from_scene(&scene), VariantKind::Flss);
+    let start = c.clone();
+    let r0 = eye_distance(&c);
+
+    // Left drag orbits: the eye moves on its sphere about the fixed target.
+    c.button(MouseButton::Left, true);
+    assert_eq!(
+        c.cursor_moved(10.0, 10.0),
+        Effect::None,
+        "first position: no drag yet"
+    );
+    assert_eq!(c.cursor_moved(40.0, 25.0), Effect::View);
+    assert_ne!(
+        c.state.camera.eye, start.state.camera.eye,
+        "orbit moves the eye"
+    );
+    assert_eq!(c.state.camera.target, start.state.camera.target);
+    assert!(
+        (eye_distance(&c) - r0).abs() < 1e-4 * r0,
+        "orbit keeps the distance"
+    );
+    assert_eq!(
+        c.state.light_dir, start.state.light_dir,
+        "orbit leaves the light"
+    );
+    c.button(MouseButton::Left, false);
+
+    // No button: moving does nothing.
+    let before = c.state.camera.clone();
+    assert_eq!(c.cursor_moved(80.0, 80.0), Effect::None);
+    assert_eq!(c.state.camera.eye, before.eye);
+
+    // Middle drag and shift + left drag pan: eye and target shift together.
+    for (k, (button, shift)) in [(MouseButton::Middle, false), (MouseButton::Left, true)]
+        .into_iter()
+        .enumerate()
+    {
+        let before = c.state.camera.clone();
+        c.modifiers(if shift {
+            ModifiersState::SHIFT
+        } else {
+            ModifiersState::empty()
+        });
+        c.button(button, true);
+        assert_eq!(c.cursor_moved(100.0 + 30.0 * k as f64, 90.0), Effect::View);
+        c.button(button, false);
+        c.modifiers(ModifiersState::empty());
+        let shift_eye = Vec3::from(c.state.camera.eye) - Vec3::from(before.eye);
+        let shift_target = Vec3::from(c.state.camera.target) - Vec3::from(before.target);
+        assert!(
+            shift_eye.length() > 1e-3,
+            "{button:?}: pan moves the camera"
+        );
+        assert!(
+            shift_eye.distance(shift_target) < 1e-5,
+            "{button:?}: eye and target move together"
+        );
+    }
+
+    // Wheel: a line up brings the eye 10 % closer; pixel deltas count 40 px per line.
+    let r = eye_distance(&c);
+    assert_eq!(c.wheel(MouseScrollDelta::LineDelta(0.0, 2.0)), Effect::View);
+    assert!((eye_distance(&c) - 0.81 * r).abs() < 1e-4 * r);
+    assert_eq!(
+        c.wheel(MouseScrollDelta::PixelDelta(PhysicalPosition::new(
+            0.0, -80.0
+        ))),
+        Effect::View
+    );
+    assert!((eye_distance(&c) - r).abs() < 1e-4 * r, "zoomed back out");
+
+    // Right drag and arrow keys turn the light; the camera stays.
+    let cam = c.state.camera.clone();
+    let l0 = c.state.light_dir;
+    c.button(MouseButton::Right, true);
+    c.cursor_moved(0.0, 0.0);
+    assert_eq!(c.cursor_moved(20.0, 0.0), Effect::View);
+    c.button(MouseButton::Right, false);
+    assert!(
+        c.state.light_dir.distance(l0) > 0.05,
+        "right drag turns the light"
+    );
+    assert!((c.state.light_dir.length() - 1.0).abs() < 1e-5);
+    assert_eq!(c.state.camera.eye, cam.eye);
+    for arrow in [NamedKey::ArrowLeft, NamedKey::ArrowUp] {
+        let l = c.state.light_dir;
+        assert_eq!(c.key(&Key::Named(arrow)), Effect::View);
+        assert!(
+            c.state.light_dir.distance(l) > 0.02,
+            "{arrow:?} turns the light"
+        );
+    }
+
+    // Exposure.
+    let e = c.state.exposure;
+    assert_eq!(c.key(&key("+")), Effect::View);
+    assert!((c.state.exposure - 1.25 * e).abs() < 1e-6);
+    c.key(&key("-"));
+    c.key(&key("-"));
+    assert!((c.state.exposure - e / 1.25).abs() < 1e-6);
+    let m = c.state.map_exposure;
+    assert_eq!(c.key(&key("]")), Effect::View);
+    assert!((c.state.map_exposure - 1.25 * m).abs() < 1e-4);
+    assert!(
+        (c.state.exposure - e / 1.25).abs() < 1e-6,
+        "] leaves the mesh's exposure"
+    );
+    c.key(&key("["));
+    assert!((c.state.map_exposure - m).abs() < 1e-4);
+
+    // V cycles every variant and wraps around.
+    let mut seen = vec![c.variant];
+    for _ in 0..VariantKind::ALL.len() {
+        match c.key(&key("v")) {
+            Effect::Rebuild(line) => assert!(line.contains(c.variant.name()), "{line}"),
+            other => panic!("V: {other:?}"),
+        }
+        seen.push(c.variant);
+    }
+    assert_eq!(seen.first(), seen.last(), "wraps around: {seen:?}");
+    for k in VariantKind::ALL {
+        assert!(seen.contains(&k), "{k:?} reached: {seen:?}");
+    }
+
+    // F / S / T toggle the switches (upper case too) and ask for a rebuild.
+    let s0 = c.state.clone();
+    assert!(matches!(c.key(&key("f")), Effect::Rebuild(l) if l.starts_with("Fresnel")));
+    assert!(matches!(c.key(&key("S")), Effect::Rebuild(l) if l.starts_with("shadowing")));
+    assert!(matches!(c.key(&key("t")), Effect::Rebuild(l) if l.starts_with("texture")));
+    assert_eq!(
+        (c.state.fresnel, c.state.shadowing, c.state.texture),
+        (!s0.fresnel, !s0.shadowing, !s0.texture)
+    );
+
+    // B toggles the map, H the help, P a screenshot, Q / Esc quit, others nothing.
+    assert!(!c.map);
+    assert_eq!(c.key(&key("b")), Effect::Map);
+    assert!(c.map);
+    assert_eq!(c.key(&key("B")), Effect::Map);
+    assert!(!c.map);
+    assert_eq!(c.key(&key("h")), Effect::Help);
+    assert!(HELP.contains("BRDF map"), "the help lists B:\n{HELP}");
+    assert_eq!(c.key(&key("p")), Effect::Screenshot);
+    assert_eq!(c.key(&key("q")), Effect::Quit);
+    assert_eq!(c.key(&Key::Named(NamedKey::Escape)), Effect::Quit);
+    assert_eq!(c.key(&key("z")), Effect::None);
+    assert_eq!(c.key(&Key::Named(NamedKey::Tab)), Effect::None);
+}
+
+/// The map's light is the scene light in the tangent frame of the surface the camera looks
+/// at: the rainbow plane (normal +z, tangent +x) lit along (0.23, 0, −0.973) gives
+/// θi = atan(0.23/0.973), φi = 180°; turning the light moves it; a light below the horizon
+/// is laid onto it (θi = 90°).
+#[test]
+fn map_light_follows_the_light_control() {
+    let scene = Scene::load(&rainbow_scene_path()).expect("scene");
+    let mesh = scene.mesh.load().expect("mesh");
+    let frame = tangent_frame_at_view(&mesh, &scene.camera).expect("frame");
+    let mut c = Controls::new(ViewState::from_scene(&scene), VariantKind::Flss);
+    let (theta, phi) = c.state.map_light_angles(frame);
+    assert!(
+        (theta - (0.23f64 / 0.973).atan().to_degrees()).abs() < 1e-3,
+        "θi {theta}"
+    );
+    assert!((phi.abs() - 180.0).abs() < 1e-3, "φi {phi}");
+    c.key(&Key::Named(NamedKey::ArrowRight));
+    let (t2, p2) = c.state.map_light_angles(frame);
+    assert!(
+        (t2, p2) != (theta, phi),
+        "the light key moves the map's light"
+    );
+    c.state.light_dir = Vec3::new(0.3, 0.0, 0.95).normalize();
+    let (t3, _) = c.state.map_light_angles(frame);
+    assert!((t3 - 90.0).abs() < 1e-9, "below the horizon: {t3}");
+}
+
+/// Runs `diffract view` on the display with validation on; fails on a non-zero exit or any
+/// validation message. Returns stdout.
+fn run_view(x: &Xvfb, dir: &Path, args: &[&str]) -> String {
+    let out = diffract()
+        .arg("view")
+        .args(args)
+        .env("DISPLAY", &x.display)
+        .env_remove("WAYLAND_DISPLAY")
+        .env("DIFFRACT_VALIDATION", "1")
+        .env("DIFFRACT_CACHE", dir)
+        .output()
+        .expect("run diffract view");
+    let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(
+        out.status.success(),
+        "diffract view {args:?} failed ({}):\n{stdout}\n{stderr}",
+        out.status
+    );
+    assert!(
+        !stderr.contains("[vulkan"),
+        "validation messages from the viewer:\n{stderr}"
+    );
+    stdout
+}
+
+/// Linear values of the sub-rectangle `(x0, y0, w, h)` of a screenshot.
+fn crop(px: &[[u8; 3]], width: u32, (x0, y0, w, h): (u32, u32, u32, u32)) -> Vec<[f32; 3]> {
+    let mut out = Vec::with_capacity((w * h) as usize);
+    for y in y0..y0 + h {
+        for x in x0..x0 + w {
+            out.push(px[(y * width + x) as usize].map(srgb8_to_linear));
+        }
+    }
+    out
+}
+
+/// Linear values after the 8-bit sRGB round trip the swapchain applies.
+fn through_srgb8(rgb: &[[f32; 3]]) -> Vec<[f32; 3]> {
+    rgb.iter()
+        .map(|p| linear_to_srgb8(p.map(|c| c as f64), 1.0).map(srgb8_to_linear))
+        .collect()
+}
+
+fn check_close(what: &str, actual: &[[f32; 3]], expected: &[[f32; 3]], side: (u32, u32)) {
+    let diff = image_io::compare_images(actual, expected);
+    eprintln!("{what}: {diff}");
+    let ok = diff.mean_delta_e <= MAX_MEAN_DELTA_E
+        && diff.p95_delta_e <= MAX_P95_DELTA_E
+        && diff.p99_abs <= MAX_P99_ABS;
+    if !ok {
+        let o = output_dir();
+        let (w, h) = side;
+        let name = what.replace(' ', "_");
+        image_io::write_png_srgb(&o.join(format!("{name}_actual.png")), w, h, actual, 1.0).unwrap();
+        image_io::write_png_srgb(&o.join(format!("{name}_expected.png")), w, h, expected, 1.0)
+            .unwrap();
+        let d = image_io::difference_image(actual, expected);
+        image_io::write_png_srgb(&o.join(format!("{name}_diff.png")), w, h, &d, 10.0).unwrap();
+        panic!(
+            "{what}: {diff} (limits: mean ΔE {MAX_MEAN_DELTA_E}, p95 ΔE {MAX_P95_DELTA_E}, p99 \
+             |Δ| {MAX_P99_ABS}); see {}",
+            o.display()
+        );
+    }
+}
+
+/// A height field whose map has broad lobes: a 64² map of the rainbow's blazed grating
+/// misses its thin lines between pixel centres.
+const GROWN: &str = "builtin:elaphe-grown";
+
+/// `B` pressed after the first frame (through the `--at` hook, the path of a real key): the
+/// map takes the left square of a 128×64 window, the mesh the right one. The map is lit
+/// inside its disk, black outside, and equals the offscreen `render_brdf_map` of the same
+/// light shown as sRGB with the same exposure (300); the mesh equals the offscreen render of its
+/// 64×64 viewport. `H` prints the help again.
+#[test]
+fn map_mode_screenshot_matches_offscreen_brdf_map() {
+    let Some(x) = Xvfb::start() else { return };
+    let dir = temp_dir("map");
+    let shot = dir.join("map.png");
+    let scene_path = rainbow_scene_path();
+    let stdout = run_view(
+        &x,
+        &dir,
+        &[
+            "--scene",
+            scene_path.to_str().unwrap(),
+            "--variant",
+            "flss",
+            "--width",
+            "128",
+            "--height",
+            "64",
+            "--vsync",
+            "off",
+            "--frames",
+            "3",
+            "--heightfield",
+            GROWN,
+            "--map-exposure",
+            "300",
+            "--exposure",
+            "300",
+            "--at",
+            "1:b",
+            "--at",
+            "1:h",
+            "--screenshot",
+            shot.to_str().unwrap(),
+        ],
+    );
+    assert!(stdout.contains("BRDF map on"), "{stdout}");
+    assert_eq!(
+        stdout.matches("keys and mouse").count(),
+        2,
+        "help at start and on H:\n{stdout}"
+    );
+    let (w, h, px) = image_io::read_png_rgb8(&shot).expect("screenshot PNG");
+    assert_eq!((w, h), (128, 64));
+
+    let mut scene = Scene::load(&scene_path).expect("scene");
+    scene.material.heightfield = GROWN.into();
+    scene.output.exposure = 300.0;
+    let mesh = scene.mesh.load().expect("mesh");
+    let frame = tangent_frame_at_view(&mesh, &scene.camera).expect("frame");
+    let (theta, phi) = ViewState::from_scene(&scene).map_light_angles(frame);
+    assert!(
+        stdout.contains(&format!("θi = {theta:.6}°, φi = {phi:.6}°")),
+        "the viewer drew the map for θi {theta}, φi {phi}:\n{stdout}"
+    );
+
+    let Some(mut r) = renderer() else { return };
+    r.set_variant(VariantKind::Flss);
+    let prepared = prepare(&scene.material);
+    let side = 64;
+    let map = r
+        .render_brdf_map(&prepared, theta, phi, side, None)
+        .expect("offscreen map");
+    let exposure = 300.0;
+    let expected: Vec<[f32; 3]> = through_srgb8(
+        &map.rgb
+            .iter()
+            .map(|p| xyz_to_linear_srgb(p.map(|c| c as f64)).map(|c| (c * exposure) as f32))
+            .collect::<Vec<_>>(),
+    );
+    let actual = crop(&px, w, (0, 0, side, side));
+    let (mut lit, mut inside) = (0, 0);
+    for j in 0..side {
+        for i in 0..side {
+            let p = actual[(j * side + i) as usize];
+            match map_direction(i, j, side) {
+                Some(_) => {
+                    inside += 1;
+                    lit += usize::from(p.iter().any(|&c| c > 0.02));
+                }
+                None => assert_eq!(p, [0.0; 3], "({i}, {j}) outside the disk is black"),
+            }
+        }
+    }
+    eprintln!("map: {lit} of {inside} disk pixels lit");
+    assert!(
+        lit * 50 >= inside,
+        "the map is lit inside its disk: {lit} of {inside}"
+    );
+    check_close("viewer map", &actual, &expected, (side, side));
+
+    let mut mesh_scene = scene.clone();
+    mesh_scene.output.width = 64;
+    mesh_scene.output.height = 64;
+    let offscreen = r
+        .render_scene(&mesh_scene, &prepared)
+        .expect("offscreen render");
+    assert_no_validation(&r);
+    let expected = through_srgb8(&offscreen.rgb);
+    let actual = crop(&px, w, (64, 0, 64, 64));
+    let lit = actual
+        .iter()
+        .filter(|p| p.iter().any(|&c| c > 0.02))
+        .count();
+    eprintln!("mesh: {lit} of 4096 pixels lit");
+    assert!(lit >= 40, "the mesh beside the map is lit: {lit} pixels");
+    check_close("viewer mesh beside the map", &actual, &expected, (64, 64));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// A window resized during the run (the `--at` hook asks X for a new size, as a user's drag
+/// would) recreates the swapchain without validation messages and the screenshot after it
+/// has the new size and equals the offscreen render at that size; a zero extent (what a
+/// minimised window reports) skips frames and recreates the swapchain when it ends.
+#[test]
+fn resize_and_minimise_recreate_the_swapchain() {
+    let Some(x) = Xvfb::start() else { return };
+    let dir = temp_dir("resize");
+    let shot = dir.join("resized.png");
+    let scene_path = rainbow_scene_path();
+    let stdout = run_view(
+        &x,
+        &dir,
+        &[
+            "--scene",
+            scene_path.to_str().unwrap(),
+            "--variant",
+            "flss",
+            "--width",
+            "48",
+            "--height",
+            "32",
+            "--vsync",
+            "off",
+            "--frames",
+            "6",
+            "--at",
+            "1:resize=80x48",
+            "--at",
+            "3:minimise=2",
+            "--screenshot",
+            shot.to_str().unwrap(),
+        ],
+    );
+    assert!(
+        stdout.contains("swapchain recreated: 48×32 → 80×48"),
+        "resize recreates the swapchain:\n{stdout}"
+    );
+    assert!(
+        stdout.contains("window minimised (zero extent): frames skipped"),
+        "{stdout}"
+    );
+    assert!(
+        stdout.contains("swapchain recreated: 80×48 → 80×48"),
+        "recreated after the zero extent:\n{stdout}"
+    );
+    let (w, h, px) = image_io::read_png_rgb8(&shot).expect("screenshot PNG");
+    assert_eq!((w, h), (80, 48), "the screenshot has the new size");
+
+    let Some(mut r) = renderer() else { return };
+    r.set_variant(VariantKind::Flss);
+    let mut scene = Scene::load(&scene_path).expect("scene");
+    scene.output.width = 80;
+    scene.output.height = 48;
+    let prepared = prepare(&scene.material);
+    let offscreen = r.render_scene(&scene, &prepared).expect("offscreen render");
+    assert_no_validation(&r);
+    let actual = crop(&px, w, (0, 0, w, h));
+    check_close(
+        "viewer after resize",
+        &actual,
+        &through_srgb8(&offscreen.rgb),
+        (w, h),
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

@@ -62,7 +62,23 @@ pub(crate) fn record_frame(
     geometry: &Geometry<'_>,
     clear: [f32; 4],
 ) {
-    let raw = dev.raw();
+    let whole = vk::Rect2D {
+        offset: vk::Offset2D { x: 0, y: 0 },
+        extent: target.extent,
+    };
+    begin_frame(dev, cb, target, clear);
+    record_draw(dev, cb, pipeline, layout, set, geometry, whole);
+    end_frame(dev, cb);
+}
+
+/// Begins `target`'s render pass over the whole target, clearing colour to `clear` and
+/// depth to 1. Draws follow with [`record_draw`], then [`end_frame`].
+pub(crate) fn begin_frame(
+    dev: &Device,
+    cb: vk::CommandBuffer,
+    target: &FrameTarget,
+    clear: [f32; 4],
+) {
     let clears = [
         vk::ClearValue {
             color: vk::ClearColorValue { float32: clear },
@@ -83,23 +99,42 @@ pub(crate) fn record_frame(
         .framebuffer(target.framebuffer)
         .render_area(area)
         .clear_values(&clears);
+    dev.begin_label(cb, "diffraction pass");
+    // SAFETY: cb is recording outside a render pass; the framebuffer belongs to the render
+    // pass and lives until the submission completes (the caller waits).
+    unsafe {
+        dev.raw()
+            .cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE)
+    };
+}
+
+/// One draw inside the render pass begun by [`begin_frame`], confined to `rect` of the
+/// target (viewport and scissor).
+pub(crate) fn record_draw(
+    dev: &Device,
+    cb: vk::CommandBuffer,
+    pipeline: &Pipeline,
+    layout: &PipelineLayout,
+    set: &DescriptorSet,
+    geometry: &Geometry<'_>,
+    rect: vk::Rect2D,
+) {
+    let raw = dev.raw();
     let viewport = vk::Viewport {
-        x: 0.0,
-        y: 0.0,
-        width: target.extent.width as f32,
-        height: target.extent.height as f32,
+        x: rect.offset.x as f32,
+        y: rect.offset.y as f32,
+        width: rect.extent.width as f32,
+        height: rect.extent.height as f32,
         min_depth: 0.0,
         max_depth: 1.0,
     };
-    dev.begin_label(cb, "diffraction pass");
-    // SAFETY: cb is recording outside a render pass; every bound object is live until the
-    // submission completes (the caller waits), and the pipeline was built for this render
-    // pass and layout.
+    // SAFETY: cb is inside a render pass (begin_frame); every bound object is live until the
+    // submission completes (the caller waits), and the pipeline was built for a compatible
+    // render pass and this layout (viewport and scissor are dynamic state).
     unsafe {
-        raw.cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE);
         raw.cmd_bind_pipeline(cb, vk::PipelineBindPoint::GRAPHICS, pipeline.raw);
         raw.cmd_set_viewport(cb, 0, &[viewport]);
-        raw.cmd_set_scissor(cb, 0, &[area]);
+        raw.cmd_set_scissor(cb, 0, &[rect]);
         raw.cmd_bind_descriptor_sets(
             cb,
             vk::PipelineBindPoint::GRAPHICS,
@@ -128,7 +163,12 @@ pub(crate) fn record_frame(
                 raw.cmd_draw_indexed(cb, *index_count, 1, 0, 0, 0);
             }
         }
-        raw.cmd_end_render_pass(cb);
     }
+}
+
+/// Ends the render pass begun by [`begin_frame`].
+pub(crate) fn end_frame(dev: &Device, cb: vk::CommandBuffer) {
+    // SAFETY: cb is inside the render pass begun by begin_frame.
+    unsafe { dev.raw().cmd_end_render_pass(cb) };
     dev.end_label(cb);
 }

@@ -19,7 +19,7 @@ use std::time::Instant;
 use ash::vk;
 
 pub use command::{run, validation_requested, RenderArgs, TableArgs};
-pub use pass::{PassOptions, ScenePass};
+pub use pass::{MapView, PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 
 use crate::brdf;
@@ -76,6 +76,8 @@ pub(crate) enum OutputMode {
     Mesh = 0,
     MapXyz = 1,
     MapSpectral = 2,
+    /// The viewer's map: linear sRGB × exposure for an sRGB target.
+    MapDisplay = 3,
 }
 
 /// Mirror of `Params` in glsl/interface.glsl (std140: vec4-sized members only).
@@ -415,6 +417,82 @@ impl Renderer {
         let mesh = load_scene_mesh(scene)?;
         let need = scene_region(scene, &mesh).unwrap_or(Region::ALL);
         Ok(region_contains(&built.map(f64::from_bits), &need))
+    }
+
+    /// The viewer's BRDF map (thesis §5, as [`Renderer::render_brdf_map`] draws it) as a pass
+    /// for `render_pass`: light from `map.wi` (tangent frame, `z ≥ 0`), drawn into the
+    /// top-left `map.size`² pixels of whatever target it is recorded into, as displayable
+    /// colour: the shader turns the map's XYZ into linear sRGB and multiplies it by
+    /// `map.exposure`
+    /// (`OUTPUT_MODE` = MODE_MAP_DISPLAY) and the sRGB target applies the transfer curve, as
+    /// `render --brdf-map --png --exposure E` does on the CPU. Move the light and resize with
+    /// [`ScenePass::set_map`]. Table variants are prepared for the map's region joined with
+    /// the view of `beside` (the mesh drawn next to the map), so that the two passes share
+    /// one table and neither makes the other rebuild it.
+    pub fn brdf_map_pass(
+        &mut self,
+        prepared: &PreparedMaterial,
+        map: MapView,
+        options: PassOptions,
+        beside: Option<&Scene>,
+        render_pass: vk::RenderPass,
+    ) -> Result<ScenePass> {
+        let MapView { wi, size, exposure } = map;
+        if size == 0 || size > MAX_MAP_SIZE {
+            return Err(Error::invalid(
+                "BRDF map size",
+                format!("{size}; expected 1..={MAX_MAP_SIZE} pixels"),
+            ));
+        }
+        if !(wi.iter().all(|c| c.is_finite()) && wi[2] >= 0.0) {
+            return Err(Error::invalid(
+                "BRDF map light",
+                format!("{wi:?}; expected a finite direction with z ≥ 0"),
+            ));
+        }
+        let wi32 = wi.map(|c| c as f32 as f64);
+        let mut region = Region::brdf_map(wi32).widened(1e-5);
+        if let Some(scene) = beside {
+            let mesh = load_scene_mesh(scene)?;
+            if let Some(r) = scene_region(scene, &mesh) {
+                region = Region {
+                    lo: std::array::from_fn(|a| region.lo[a].min(r.lo[a])),
+                    hi: std::array::from_fn(|a| region.hi[a].max(r.hi[a])),
+                };
+            }
+        }
+        self.prepare_variant(prepared, region, OutputMode::MapDisplay)?;
+        let mut params = self.params(prepared);
+        params.map_wi = [wi32[0] as f32, wi32[1] as f32, wi32[2] as f32, 0.0];
+        params.map_info = [size as f32, 0.0, 0.0, 0.0];
+        params.lighting[1] = exposure;
+        let options = PassOptions {
+            texture_blending: false,
+            ..options
+        };
+        self.build_pass(
+            prepared,
+            params,
+            OutputMode::MapDisplay,
+            options,
+            None,
+            [0.0; 4],
+            None,
+            render_pass,
+        )
+    }
+
+    /// Whether the prepared table covers a BRDF map under light `wi` (tangent frame), so a
+    /// [`Renderer::brdf_map_pass`] built now would reuse it (always true for flss).
+    pub fn covers_brdf_map(&self, wi: [f64; 3]) -> bool {
+        let Some((key, _)) = &self.prepared else {
+            return false;
+        };
+        let Some(built) = key.region else {
+            return true;
+        };
+        let need = Region::brdf_map(wi.map(|c| c as f32 as f64)).widened(1e-5);
+        region_contains(&built.map(f64::from_bits), &need)
     }
 
     fn scene_pass_of(

@@ -10,7 +10,7 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::frame::{record_frame, Geometry, Transforms};
+use super::frame::{begin_frame, end_frame, record_draw, record_frame, Geometry, Transforms};
 use super::variant::{PreparedVariant, VariantStats};
 use super::ParamsUbo;
 use crate::gpu::memory::{bytes_of, Buffer, Image};
@@ -26,6 +26,15 @@ pub struct PassOptions {
     pub shadowing: bool,
     /// Blend the scene's texture (ignored when the scene has none).
     pub texture_blending: bool,
+}
+
+/// What a BRDF-map pass of the viewer draws: the light `wi` (tangent frame), the map's side
+/// in pixels and the exposure of its displayable colour.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MapView {
+    pub wi: [f64; 3],
+    pub size: u32,
+    pub exposure: f32,
 }
 
 /// Mesh buffers a pass owns.
@@ -73,10 +82,77 @@ impl ScenePass {
         self.transforms.view_proj = camera.view_proj(aspect).to_cols_array();
     }
 
+    /// Sets the light of a BRDF-map pass ([`Renderer::brdf_map_pass`](super::Renderer::
+    /// brdf_map_pass)): `wi` in the tangent frame (as `ωi` of the map), the map's side `size`
+    /// in pixels (it fills the top-left `size`² pixels of the target) and the exposure its
+    /// XYZ → linear sRGB values are multiplied by. Takes effect in the next recorded frame.
+    pub fn set_map(&mut self, wi: [f32; 3], size: u32, exposure: f32) {
+        self.params.map_wi = [wi[0], wi[1], wi[2], self.params.map_wi[3]];
+        self.params.map_info[0] = size as f32;
+        self.params.lighting[1] = exposure;
+    }
+
     /// Records the frame into `target`: the uniform update (ordered after earlier frames'
     /// reads and before this frame's), then clear, bind, draw. `target`'s render pass must be
     /// compatible with the one the pass was built for.
     pub fn record(&self, cb: vk::CommandBuffer, target: &FrameTarget) {
+        self.record_uniforms(cb);
+        record_frame(
+            &self.dev,
+            cb,
+            target,
+            &self.pipeline,
+            &self.layout,
+            &self.set,
+            &self.geometry(),
+            self.clear,
+        );
+    }
+
+    /// Records several passes into one frame of `target`, each confined to its rectangle
+    /// (the viewer's mesh beside its BRDF map): every pass's uniform update, then one render
+    /// pass cleared to the first pass's clear colour, then the draws in order. As
+    /// [`ScenePass::record`], it does not know whether `target` is a swapchain image.
+    pub fn record_views(
+        cb: vk::CommandBuffer,
+        target: &FrameTarget,
+        views: &[(&ScenePass, vk::Rect2D)],
+    ) {
+        let Some((first, _)) = views.first() else {
+            return;
+        };
+        for (pass, _) in views {
+            pass.record_uniforms(cb);
+        }
+        begin_frame(&first.dev, cb, target, first.clear);
+        for (pass, rect) in views {
+            record_draw(
+                &pass.dev,
+                cb,
+                &pass.pipeline,
+                &pass.layout,
+                &pass.set,
+                &pass.geometry(),
+                *rect,
+            );
+        }
+        end_frame(&first.dev, cb);
+    }
+
+    fn geometry(&self) -> Geometry<'_> {
+        match &self.mesh {
+            None => Geometry::FullScreen,
+            Some(m) => Geometry::Mesh {
+                vertices: &m.vertices,
+                indices: &m.indices,
+                index_count: m.index_count,
+                transforms: self.transforms,
+            },
+        }
+    }
+
+    /// The uniform block's update, outside a render pass.
+    fn record_uniforms(&self, cb: vk::CommandBuffer) {
         let raw = self.dev.raw();
         let shaders =
             vk::PipelineStageFlags::VERTEX_SHADER | vk::PipelineStageFlags::FRAGMENT_SHADER;
@@ -126,24 +202,5 @@ impl ScenePass {
                 &[],
             );
         }
-        let geometry = match &self.mesh {
-            None => Geometry::FullScreen,
-            Some(m) => Geometry::Mesh {
-                vertices: &m.vertices,
-                indices: &m.indices,
-                index_count: m.index_count,
-                transforms: self.transforms,
-            },
-        };
-        record_frame(
-            &self.dev,
-            cb,
-            target,
-            &self.pipeline,
-            &self.layout,
-            &self.set,
-            &geometry,
-            self.clear,
-        );
     }
 }

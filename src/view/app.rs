@@ -1,6 +1,7 @@
 //! The winit application: window, Vulkan objects of presentation, frame pacing (two frames
 //! in flight, each with its command buffer, fence, acquire semaphore and timestamp pair),
-//! input handling, the title's statistics, screenshots and hot reload.
+//! the layout of the mesh beside its BRDF map, the title's statistics, screenshots, hot
+//! reload and the hidden `--at` test hook. What an input means is [`super::input`]'s.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -9,20 +10,22 @@ use std::time::{Duration, Instant};
 use ash::vk;
 use winit::application::ApplicationHandler;
 use winit::dpi::PhysicalSize;
-use winit::event::{ElementState, MouseButton, MouseScrollDelta, WindowEvent};
+use winit::event::{ElementState, WindowEvent};
 use winit::event_loop::{ActiveEventLoop, ControlFlow, EventLoop};
-use winit::keyboard::{Key, ModifiersState, NamedKey};
+use winit::keyboard::{Key, NamedKey};
 use winit::raw_window_handle::{HasDisplayHandle, HasWindowHandle};
 use winit::window::{Window, WindowId};
 
-use super::input::{ViewState, HELP};
+use super::input::{tangent_frame_at_view, Controls, Effect, ViewState, HELP};
 use super::reload::ShaderReload;
+use super::ScriptAction;
 use crate::gpu::memory::Buffer;
 use crate::gpu::swapchain::{Surface, Swapchain, Vsync};
 use crate::gpu::timer::GpuTimer;
 use crate::gpu::{Device, Instance, StorageFormat};
 use crate::material::PreparedMaterial;
-use crate::render::{PassOptions, Renderer, ScenePass, TableOptions, VariantKind};
+use crate::mesh::Mesh;
+use crate::render::{MapView, PassOptions, Renderer, ScenePass, TableOptions, VariantKind};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -43,6 +46,11 @@ pub(super) struct Settings {
     pub frames: Option<u32>,
     pub screenshot: Option<PathBuf>,
     pub validation: bool,
+    /// Test hook (`--at`): actions before the frame of the given index.
+    pub script: Vec<(u32, ScriptAction)>,
+    /// Start with the BRDF map beside the mesh.
+    pub map: bool,
+    pub map_exposure: f32,
 }
 
 /// Opens the display, prepares the material, runs the event loop.
@@ -115,49 +123,49 @@ impl ApplicationHandler for App {
                 event_loop.exit();
                 Ok(())
             }
-            WindowEvent::Resized(_) => {
-                v.needs_recreate = true;
+            WindowEvent::Resized(size) => {
+                // The hook's resize recreates at once; X's event for it then changes nothing
+                // (an out-of-date swapchain of the same size is caught by acquire/present).
+                let current = v.swapchain.as_ref().map(|sc| sc.extent);
+                if current.is_none_or(|e| (e.width, e.height) != (size.width, size.height)) {
+                    v.needs_recreate = true;
+                }
                 Ok(())
             }
-            WindowEvent::RedrawRequested => v
-                .frame(&self.scene, &self.prepared, &self.settings)
-                .map(|done| {
-                    if done {
-                        event_loop.exit();
-                    }
-                }),
+            WindowEvent::RedrawRequested => {
+                v.run_script(event_loop);
+                v.frame(&self.scene, &self.prepared, &self.settings)
+                    .map(|done| {
+                        if done {
+                            event_loop.exit();
+                        }
+                    })
+            }
             WindowEvent::ModifiersChanged(m) => {
-                v.modifiers = m.state();
+                v.controls.modifiers(m.state());
                 Ok(())
             }
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
-                v.key(&event.logical_key, event_loop)
+                let effect = v.controls.key(&event.logical_key);
+                v.apply(effect, event_loop);
+                Ok(())
             }
             WindowEvent::MouseInput { state, button, .. } => {
-                let down = state == ElementState::Pressed;
-                match button {
-                    MouseButton::Left => v.buttons[0] = down,
-                    MouseButton::Right => v.buttons[1] = down,
-                    MouseButton::Middle => v.buttons[2] = down,
-                    _ => {}
-                }
+                v.controls.button(button, state == ElementState::Pressed);
                 Ok(())
             }
             WindowEvent::CursorMoved { position, .. } => {
-                let p = (position.x as f32, position.y as f32);
-                if let Some(last) = v.cursor {
-                    v.drag(p.0 - last.0, p.1 - last.1);
-                }
-                v.cursor = Some(p);
+                let effect = v.controls.cursor_moved(position.x, position.y);
+                v.apply(effect, event_loop);
+                Ok(())
+            }
+            WindowEvent::CursorLeft { .. } => {
+                v.controls.cursor_left();
                 Ok(())
             }
             WindowEvent::MouseWheel { delta, .. } => {
-                let steps = match delta {
-                    MouseScrollDelta::LineDelta(_, y) => y,
-                    MouseScrollDelta::PixelDelta(p) => p.y as f32 / 40.0,
-                };
-                v.state.zoom(0.9f32.powf(steps));
-                v.view_changed = true;
+                let effect = v.controls.wheel(delta);
+                v.apply(effect, event_loop);
                 Ok(())
             }
             _ => Ok(()),
@@ -192,12 +200,21 @@ struct Viewer {
     slots: Vec<FrameSlot>,
     pool: vk::CommandPool,
     pass: Option<ScenePass>,
+    /// The BRDF map beside the mesh (while `controls.map`).
+    map_pass: Option<ScenePass>,
     swapchain: Option<Swapchain>,
     renderer: Renderer,
     surface: Surface,
     reload: Option<ShaderReload>,
-    state: ViewState,
-    variant: VariantKind,
+    controls: Controls,
+    /// The scene's mesh in world space: the map's tangent frame is read from it.
+    mesh: Mesh,
+    /// `--at` actions not yet run, by frame index.
+    script: Vec<(u32, ScriptAction)>,
+    /// `--at N:minimise=K`: the window counts as zero-sized for K more redraws.
+    fake_minimised: u32,
+    /// The last recreation saw a zero extent (printed once).
+    minimised: bool,
     current: usize,
     frames_done: u32,
     needs_recreate: bool,
@@ -205,9 +222,6 @@ struct Viewer {
     rebuild: bool,
     screenshot_next: Option<PathBuf>,
     screenshots_taken: u32,
-    buttons: [bool; 3],
-    modifiers: ModifiersState,
-    cursor: Option<(f32, f32)>,
     stats: TitleStats,
     /// Over the whole run, after the first frame: frames, GPU ms summed, GPU samples.
     totals: (Option<Instant>, u32, f64, u32),
@@ -230,6 +244,7 @@ impl Viewer {
         settings: &Settings,
         prepared: &PreparedMaterial,
     ) -> Result<Self> {
+        let mesh = scene.mesh.load()?;
         let out = &scene.output;
         let attrs = Window::default_attributes()
             .with_title("diffract")
@@ -266,16 +281,23 @@ impl Viewer {
         let pool = unsafe { dev.raw().create_command_pool(&pool_info, None) }
             .map_err(Error::vk("vkCreateCommandPool"))?;
         dev.set_name(pool, "viewer command pool");
+        let mut controls = Controls::new(ViewState::from_scene(scene), settings.variant);
+        controls.map = settings.map;
+        controls.state.map_exposure = settings.map_exposure;
         let mut viewer = Viewer {
             slots: Vec::new(),
             pool,
             pass: None,
+            map_pass: None,
             swapchain: None,
             renderer,
             surface,
             reload: None,
-            state: ViewState::from_scene(scene),
-            variant: settings.variant,
+            controls,
+            mesh,
+            script: settings.script.clone(),
+            fake_minimised: 0,
+            minimised: false,
             current: 0,
             frames_done: 0,
             needs_recreate: false,
@@ -283,9 +305,6 @@ impl Viewer {
             rebuild: true,
             screenshot_next: None,
             screenshots_taken: 0,
-            buttons: [false; 3],
-            modifiers: ModifiersState::empty(),
-            cursor: None,
             stats: TitleStats {
                 since: Instant::now(),
                 frames: 0,
@@ -364,13 +383,22 @@ impl Viewer {
     fn recreate_swapchain(&mut self, vsync: Vsync) -> Result<bool> {
         self.wait_idle();
         let size = self.window.inner_size();
-        let want = vk::Extent2D {
+        let mut want = vk::Extent2D {
             width: size.width,
             height: size.height,
         };
+        if self.fake_minimised > 0 {
+            self.fake_minimised -= 1;
+            want = vk::Extent2D::default();
+        }
         if want.width == 0 || want.height == 0 {
+            if !self.minimised {
+                println!("window minimised (zero extent): frames skipped");
+                self.minimised = true;
+            }
             return Ok(false);
         }
+        let old = self.swapchain.as_ref().map(|sc| sc.extent);
         let ok = match &mut self.swapchain {
             Some(sc) => {
                 let format = sc.format;
@@ -392,6 +420,13 @@ impl Viewer {
         if ok {
             self.needs_recreate = false;
             self.view_changed = true;
+            self.minimised = false;
+            if let (Some(old), Some(sc)) = (old, &self.swapchain) {
+                println!(
+                    "swapchain recreated: {}×{} → {}×{}",
+                    old.width, old.height, sc.extent.width, sc.extent.height
+                );
+            }
         }
         Ok(ok)
     }
@@ -400,16 +435,22 @@ impl Viewer {
     /// view). The old pass is kept when the new one fails (e.g. a reloaded shader that does
     /// not link).
     fn rebuild_pass(&mut self, scene: &Scene, prepared: &PreparedMaterial) -> Result<()> {
+        // The map first: table variants then prepare one table for the map and the mesh,
+        // which the mesh pass reuses.
+        if self.controls.map {
+            self.build_map(scene, prepared);
+        }
         let Some(sc) = &self.swapchain else {
             return Ok(());
         };
         let aspect = sc.extent.width as f32 / sc.extent.height as f32;
         let render_pass = sc.render_pass;
-        let view = self.state.apply(scene);
+        let state = &self.controls.state;
+        let view = state.apply(scene);
         let options = PassOptions {
-            fresnel: self.state.fresnel,
-            shadowing: self.state.shadowing,
-            texture_blending: self.state.texture,
+            fresnel: state.fresnel,
+            shadowing: state.shadowing,
+            texture_blending: state.texture,
         };
         self.wait_idle();
         let start = Instant::now();
@@ -418,7 +459,7 @@ impl Viewer {
             .scene_pass(&view, prepared, options, render_pass, aspect);
         match built {
             Ok(mut pass) => {
-                pass.set_view(&view.camera, &view.light, aspect, self.state.exposure);
+                pass.set_view(&view.camera, &view.light, aspect, state.exposure);
                 let s = pass.stats();
                 println!(
                     "variant {}: pass built in {:.0} ms (table build {:.0} ms, {:.1} MB)",
@@ -484,21 +525,39 @@ impl Viewer {
         let Some(sc) = &self.swapchain else {
             return Ok(false);
         };
-        let aspect = sc.extent.width as f32 / sc.extent.height as f32;
+        let (mesh_rect, map_rect) = layout(sc.extent, self.controls.map);
+        let aspect = mesh_rect.extent.width as f32 / mesh_rect.extent.height as f32;
+        let map_wi = self.controls.map.then(|| self.map_wi());
         if self.view_changed && !self.rebuild && self.renderer.variant() != VariantKind::Flss {
-            // Table variants: rebuild only when the view left the table's region.
-            if !self.renderer.covers_view(&self.state.apply(scene))? {
+            // Table variants: rebuild only when the view (or the map's light) left the
+            // table's region.
+            let covered = self
+                .renderer
+                .covers_view(&self.controls.state.apply(scene))?
+                && map_wi.is_none_or(|wi| self.renderer.covers_brdf_map(wi));
+            if !covered {
                 self.rebuild = true;
             }
         }
         if self.rebuild || self.pass.is_none() {
             self.rebuild_pass(scene, prepared)?;
+        } else if self.controls.map && self.map_pass.is_none() {
+            self.build_map(scene, prepared);
         }
-        let view = self.state.apply(scene);
+        let state = &self.controls.state;
+        let view = state.apply(scene);
         let Some(pass) = &mut self.pass else {
             return Ok(false);
         };
-        pass.set_view(&view.camera, &view.light, aspect, self.state.exposure);
+        pass.set_view(&view.camera, &view.light, aspect, state.exposure);
+        let pass = &*pass;
+        let map = match (&mut self.map_pass, map_wi, map_rect) {
+            (Some(m), Some(wi), Some(rect)) if self.controls.map => {
+                m.set_map(wi.map(|c| c as f32), rect.extent.width, state.map_exposure);
+                Some((&*m, rect))
+            }
+            _ => None,
+        };
         self.view_changed = false;
 
         let dev = self.renderer.device().clone();
@@ -552,8 +611,13 @@ impl Viewer {
         if let Some(t) = &slot.timer {
             t.record_start(slot.cb);
         }
-        let pass = self.pass.as_ref().expect("built above");
-        pass.record(slot.cb, &sc.frame_target(index));
+        let target = sc.frame_target(index);
+        match map {
+            Some((map, map_rect)) => {
+                ScenePass::record_views(slot.cb, &target, &[(pass, mesh_rect), (map, map_rect)])
+            }
+            None => pass.record(slot.cb, &target),
+        }
         if let Some(t) = &slot.timer {
             t.record_end(slot.cb);
         }
@@ -651,7 +715,9 @@ impl Viewer {
         let name = self
             .pass
             .as_ref()
-            .map_or(self.variant.name().to_string(), |p| p.stats().name.clone());
+            .map_or(self.controls.variant.name().to_string(), |p| {
+                p.stats().name.clone()
+            });
         self.window
             .set_title(&format!("diffract — {name} — GPU {gpu} — {fps:.1} fps"));
         self.stats = TitleStats {
@@ -662,80 +728,173 @@ impl Viewer {
         };
     }
 
-    /// A mouse move of `(dx, dy)` pixels with the current buttons.
-    fn drag(&mut self, dx: f32, dy: f32) {
-        let k = 0.01;
-        let pan = self.buttons[2] || (self.buttons[0] && self.modifiers.shift_key());
-        if pan {
-            self.state.pan(dx * 0.002, dy * 0.002);
-        } else if self.buttons[0] {
-            self.state.orbit(dx * k, dy * k);
-        } else if self.buttons[1] {
-            self.state.turn_light(dx * k, dy * k);
-        } else {
-            return;
+    /// Acts on what an input changed.
+    fn apply(&mut self, effect: Effect, event_loop: &ActiveEventLoop) {
+        match effect {
+            Effect::None => {}
+            Effect::View => self.view_changed = true,
+            Effect::Rebuild(what) => {
+                println!("{what}");
+                self.renderer.set_variant(self.controls.variant);
+                self.rebuild = true;
+            }
+            Effect::Map => {
+                println!("BRDF map {}", if self.controls.map { "on" } else { "off" });
+                if !self.controls.map {
+                    // Frames in flight may still read the map's objects.
+                    self.wait_idle();
+                    self.map_pass = None;
+                }
+                self.view_changed = true;
+            }
+            Effect::Help => println!("{HELP}"),
+            Effect::Screenshot => {
+                self.screenshots_taken += 1;
+                self.screenshot_next = Some(PathBuf::from(format!(
+                    "diffract-view-{}.png",
+                    self.screenshots_taken
+                )));
+            }
+            Effect::Quit => event_loop.exit(),
         }
-        self.view_changed = true;
     }
 
-    fn key(&mut self, key: &Key, event_loop: &ActiveEventLoop) -> Result<()> {
-        let step = 3f32.to_radians();
-        match key {
-            Key::Named(NamedKey::Escape) => event_loop.exit(),
-            Key::Named(NamedKey::ArrowLeft) => self.state.turn_light(-step, 0.0),
-            Key::Named(NamedKey::ArrowRight) => self.state.turn_light(step, 0.0),
-            Key::Named(NamedKey::ArrowUp) => self.state.turn_light(0.0, -step),
-            Key::Named(NamedKey::ArrowDown) => self.state.turn_light(0.0, step),
-            Key::Character(c) => match c.to_lowercase().as_str() {
-                "q" => event_loop.exit(),
-                "+" | "=" => self.state.exposure *= 1.25,
-                "-" => self.state.exposure /= 1.25,
-                "h" => println!("{HELP}"),
-                "v" => {
-                    let all = VariantKind::ALL;
-                    let i = all.iter().position(|k| *k == self.variant).unwrap_or(0);
-                    self.variant = all[(i + 1) % all.len()];
-                    self.renderer.set_variant(self.variant);
-                    println!("variant → {}", self.variant.name());
-                    self.rebuild = true;
+    /// Runs the `--at` actions due before the next frame: keys go through the same
+    /// [`Controls`] as real ones.
+    fn run_script(&mut self, event_loop: &ActiveEventLoop) {
+        let now = self.frames_done;
+        let due: Vec<ScriptAction> = self
+            .script
+            .iter()
+            .filter(|(at, _)| *at == now)
+            .map(|(_, a)| a.clone())
+            .collect();
+        self.script.retain(|(at, _)| *at != now);
+        for action in due {
+            match action {
+                ScriptAction::Key(name) => {
+                    let key = match name.as_str() {
+                        "left" => Key::Named(NamedKey::ArrowLeft),
+                        "right" => Key::Named(NamedKey::ArrowRight),
+                        "up" => Key::Named(NamedKey::ArrowUp),
+                        "down" => Key::Named(NamedKey::ArrowDown),
+                        "esc" => Key::Named(NamedKey::Escape),
+                        c => Key::Character(c.into()),
+                    };
+                    let effect = self.controls.key(&key);
+                    self.apply(effect, event_loop);
                 }
-                "f" => {
-                    self.state.fresnel = !self.state.fresnel;
-                    println!("Fresnel {}", on_off(self.state.fresnel));
-                    self.rebuild = true;
+                ScriptAction::Resize(w, h) => {
+                    println!("requesting a {w}×{h} window");
+                    // X11 answers with a Resized event (None here); where the size applies
+                    // at once, the recreation is due all the same.
+                    let _ = self.window.request_inner_size(PhysicalSize::new(w, h));
+                    self.needs_recreate = true;
                 }
-                "s" => {
-                    self.state.shadowing = !self.state.shadowing;
-                    println!("shadowing {}", on_off(self.state.shadowing));
-                    self.rebuild = true;
+                ScriptAction::Minimise(frames) => {
+                    self.fake_minimised = frames;
+                    self.needs_recreate = true;
                 }
-                "t" => {
-                    self.state.texture = !self.state.texture;
-                    println!("texture blending {}", on_off(self.state.texture));
-                    self.rebuild = true;
-                }
-                "p" => {
-                    self.screenshots_taken += 1;
-                    self.screenshot_next = Some(PathBuf::from(format!(
-                        "diffract-view-{}.png",
-                        self.screenshots_taken
-                    )));
-                }
-                _ => return Ok(()),
-            },
-            _ => return Ok(()),
+            }
         }
-        self.view_changed = true;
-        Ok(())
+    }
+
+    /// The map's light `ωi`: the light in the tangent frame of the surface at the centre of
+    /// the view ([`tangent_frame_at_view`]), as `render_brdf_map` computes it from
+    /// `(θi, φi)`.
+    fn map_wi(&self) -> [f64; 3] {
+        let (theta, phi) = self.map_angles();
+        crate::brdf::direction(theta, phi)
+    }
+
+    fn map_angles(&self) -> (f64, f64) {
+        let state = &self.controls.state;
+        let frame = tangent_frame_at_view(&self.mesh, &state.camera).unwrap_or([
+            glam::Vec3::X,
+            glam::Vec3::Y,
+            glam::Vec3::Z,
+        ]);
+        state.map_light_angles(frame)
+    }
+
+    /// Builds the BRDF map's pass for the current light. A failure is printed: the previous
+    /// map pass stays, or without one the map is switched off.
+    fn build_map(&mut self, scene: &Scene, prepared: &PreparedMaterial) {
+        let Some(sc) = &self.swapchain else {
+            return;
+        };
+        let render_pass = sc.render_pass;
+        let side = layout(sc.extent, true).1.map_or(1, |r| r.extent.width);
+        let (theta, phi) = self.map_angles();
+        let wi = crate::brdf::direction(theta, phi);
+        let state = &self.controls.state;
+        let view = state.apply(scene);
+        let options = PassOptions {
+            fresnel: state.fresnel,
+            shadowing: state.shadowing,
+            texture_blending: false,
+        };
+        let exposure = state.map_exposure;
+        self.wait_idle();
+        let start = Instant::now();
+        let map = MapView {
+            wi,
+            size: side,
+            exposure,
+        };
+        let built = self
+            .renderer
+            .brdf_map_pass(prepared, map, options, Some(&view), render_pass);
+        match built {
+            Ok(pass) => {
+                println!(
+                    "BRDF map: θi = {theta:.6}°, φi = {phi:.6}° ({}, built in {:.0} ms)",
+                    pass.stats().name,
+                    start.elapsed().as_secs_f64() * 1e3
+                );
+                self.map_pass = Some(pass);
+            }
+            Err(e) if self.map_pass.is_some() => {
+                eprintln!("error: BRDF map: {e} (keeping the previous map pipeline)");
+            }
+            Err(e) => {
+                eprintln!("error: BRDF map: {e} (map off)");
+                self.controls.map = false;
+            }
+        }
     }
 }
 
-fn on_off(b: bool) -> &'static str {
-    if b {
-        "on"
-    } else {
-        "off"
+/// Where the mesh and the BRDF map go in a target of `extent`: without the map the mesh
+/// fills it; with it the map is the square of side `min(width/2, height)` at the top left
+/// (the map shader reads `gl_FragCoord` from the target's origin) and the mesh the rest.
+fn layout(extent: vk::Extent2D, map: bool) -> (vk::Rect2D, Option<vk::Rect2D>) {
+    let whole = vk::Rect2D {
+        offset: vk::Offset2D::default(),
+        extent,
+    };
+    let side = (extent.width / 2).min(extent.height);
+    if !map || side == 0 {
+        return (whole, None);
     }
+    let mesh = vk::Rect2D {
+        offset: vk::Offset2D {
+            x: side as i32,
+            y: 0,
+        },
+        extent: vk::Extent2D {
+            width: extent.width - side,
+            height: extent.height,
+        },
+    };
+    let map = vk::Rect2D {
+        offset: vk::Offset2D::default(),
+        extent: vk::Extent2D {
+            width: side,
+            height: side,
+        },
+    };
+    (mesh, Some(map))
 }
 
 /// Writes the read-back swapchain texels (already sRGB-encoded) to a PNG.
@@ -772,6 +931,35 @@ impl Drop for Viewer {
         // the window.
         for s in &mut self.slots {
             s.timer = None;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn extent(width: u32, height: u32) -> vk::Extent2D {
+        vk::Extent2D { width, height }
+    }
+
+    #[test]
+    fn map_takes_the_left_square_and_the_mesh_the_rest() {
+        let (mesh, map) = layout(extent(128, 64), true);
+        let map = map.expect("a map");
+        assert_eq!((map.offset.x, map.offset.y), (0, 0));
+        assert_eq!(map.extent, extent(64, 64));
+        assert_eq!((mesh.offset.x, mesh.offset.y), (64, 0));
+        assert_eq!(mesh.extent, extent(64, 64));
+        // Tall window: the map's side is half the width, top-aligned.
+        let (mesh, map) = layout(extent(100, 300), true);
+        assert_eq!(map.expect("a map").extent, extent(50, 50));
+        assert_eq!(mesh.extent, extent(50, 300));
+        // Map off, or no room for it: the mesh fills the target.
+        for (e, on) in [(extent(128, 64), false), (extent(1, 64), true)] {
+            let (mesh, map) = layout(e, on);
+            assert!(map.is_none());
+            assert_eq!(mesh.extent, e);
         }
     }
 }

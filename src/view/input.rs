@@ -1,9 +1,15 @@
 //! What the mouse and keys change: an orbit camera (left drag orbits, right drag moves the
-//! light, middle drag or shift+left pans, wheel zooms), the light direction, exposure and
-//! feature switches. Pure state, no Vulkan and no window: the app applies it.
+//! light, middle drag or shift+left pans, wheel zooms), the light direction, exposure,
+//! variant, feature switches and the BRDF map beside the mesh. Pure state, no Vulkan and no
+//! window: [`Controls`] takes winit's events (or a test's synthetic ones) and says what
+//! changed ([`Effect`]); the app applies it.
 
 use glam::Vec3;
+use winit::event::{MouseButton, MouseScrollDelta};
+use winit::keyboard::{Key, ModifiersState, NamedKey};
 
+use crate::mesh::{Mesh, Vertex};
+use crate::render::VariantKind;
 use crate::scene::{Camera, Scene};
 
 /// The key table, printed at start and on `H`.
@@ -13,8 +19,26 @@ diffract view — keys and mouse
   middle drag      pan (or shift + left)     right drag    move the light
   arrow keys       move the light            + / -         exposure ×1.25 / ÷1.25
   V                next shader variant       F / S / T     toggle Fresnel / shadowing / texture
+  B                BRDF map beside the mesh  [ / ]         map exposure ÷1.25 / ×1.25
   P                screenshot (PNG)          H             this help
   Esc / Q          quit";
+
+/// Exposure of the BRDF map without `--map-exposure`: a BRDF is much smaller than the
+/// radiance a scene's exposure is chosen for (the README's map figures use 30 to 300).
+pub const DEFAULT_MAP_EXPOSURE: f32 = 30.0;
+
+/// Radians per pixel of an orbit or light drag.
+const DRAG_RADIANS: f32 = 0.01;
+/// Fraction of the eye's distance per pixel of a pan.
+const PAN_PER_PIXEL: f32 = 0.002;
+/// Zoom factor per wheel line (0.9: a line towards the target brings the eye 10 % closer).
+const ZOOM_PER_LINE: f32 = 0.9;
+/// Pixels of a touchpad's pixel scroll that count as one wheel line.
+const PIXELS_PER_LINE: f32 = 40.0;
+/// Light turn per arrow key press (degrees).
+const ARROW_DEGREES: f32 = 3.0;
+/// Exposure factor of `+` / `-`.
+const EXPOSURE_STEP: f32 = 1.25;
 
 /// Camera and light state of the viewer.
 #[derive(Debug, Clone)]
@@ -23,9 +47,198 @@ pub struct ViewState {
     /// Direction the light travels (world), unit length.
     pub light_dir: Vec3,
     pub exposure: f32,
+    /// Exposure of the BRDF map (its XYZ → linear sRGB values are multiplied by it).
+    pub map_exposure: f32,
     pub fresnel: bool,
     pub shadowing: bool,
     pub texture: bool,
+}
+
+/// What an input changed, for the app to act on.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum Effect {
+    /// Not a control (or a mouse move with no button held).
+    None,
+    /// Camera, light or exposure moved: the same pipeline draws the next frame.
+    View,
+    /// The variant or a feature switch changed: the pass is rebuilt. The line says what.
+    Rebuild(String),
+    /// `B`: the BRDF map beside the mesh was switched on or off ([`Controls::map`]).
+    Map,
+    /// `H`: print [`HELP`].
+    Help,
+    /// `P`: save the next frame.
+    Screenshot,
+    /// `Esc` / `Q`.
+    Quit,
+}
+
+/// The interactive controls: the [`ViewState`], the variant, the BRDF-map switch and the
+/// mouse buttons held. The app feeds it winit's window events; tests feed it synthetic ones.
+#[derive(Debug, Clone)]
+pub struct Controls {
+    pub state: ViewState,
+    pub variant: VariantKind,
+    /// The BRDF map is drawn beside the mesh.
+    pub map: bool,
+    /// Left, right, middle.
+    buttons: [bool; 3],
+    shift: bool,
+    cursor: Option<(f64, f64)>,
+}
+
+impl Controls {
+    pub fn new(state: ViewState, variant: VariantKind) -> Self {
+        Self {
+            state,
+            variant: variant.resolve(),
+            map: false,
+            buttons: [false; 3],
+            shift: false,
+            cursor: None,
+        }
+    }
+
+    /// A key press (releases are not controls).
+    pub fn key(&mut self, key: &Key) -> Effect {
+        let step = ARROW_DEGREES.to_radians();
+        let s = &mut self.state;
+        match key {
+            Key::Named(NamedKey::Escape) => return Effect::Quit,
+            Key::Named(NamedKey::ArrowLeft) => s.turn_light(-step, 0.0),
+            Key::Named(NamedKey::ArrowRight) => s.turn_light(step, 0.0),
+            Key::Named(NamedKey::ArrowUp) => s.turn_light(0.0, -step),
+            Key::Named(NamedKey::ArrowDown) => s.turn_light(0.0, step),
+            Key::Character(c) => match c.to_lowercase().as_str() {
+                "q" => return Effect::Quit,
+                "+" | "=" => s.exposure *= EXPOSURE_STEP,
+                "-" => s.exposure /= EXPOSURE_STEP,
+                "]" => s.map_exposure *= EXPOSURE_STEP,
+                "[" => s.map_exposure /= EXPOSURE_STEP,
+                "h" => return Effect::Help,
+                "p" => return Effect::Screenshot,
+                "b" => {
+                    self.map = !self.map;
+                    return Effect::Map;
+                }
+                "v" => {
+                    let all = VariantKind::ALL;
+                    let i = all.iter().position(|k| *k == self.variant).unwrap_or(0);
+                    self.variant = all[(i + 1) % all.len()];
+                    return Effect::Rebuild(format!("variant → {}", self.variant.name()));
+                }
+                "f" => {
+                    s.fresnel = !s.fresnel;
+                    return Effect::Rebuild(format!("Fresnel {}", on_off(s.fresnel)));
+                }
+                "s" => {
+                    s.shadowing = !s.shadowing;
+                    return Effect::Rebuild(format!("shadowing {}", on_off(s.shadowing)));
+                }
+                "t" => {
+                    s.texture = !s.texture;
+                    return Effect::Rebuild(format!("texture blending {}", on_off(s.texture)));
+                }
+                _ => return Effect::None,
+            },
+            _ => return Effect::None,
+        }
+        Effect::View
+    }
+
+    /// The modifier keys held (shift + left drag pans).
+    pub fn modifiers(&mut self, m: ModifiersState) {
+        self.shift = m.shift_key();
+    }
+
+    /// A mouse button pressed or released.
+    pub fn button(&mut self, button: MouseButton, pressed: bool) {
+        match button {
+            MouseButton::Left => self.buttons[0] = pressed,
+            MouseButton::Right => self.buttons[1] = pressed,
+            MouseButton::Middle => self.buttons[2] = pressed,
+            _ => {}
+        }
+    }
+
+    /// The cursor moved to `(x, y)` (window pixels): a drag with the buttons held.
+    pub fn cursor_moved(&mut self, x: f64, y: f64) -> Effect {
+        let last = self.cursor.replace((x, y));
+        let Some((lx, ly)) = last else {
+            return Effect::None;
+        };
+        let (dx, dy) = ((x - lx) as f32, (y - ly) as f32);
+        let [left, right, middle] = self.buttons;
+        if middle || (left && self.shift) {
+            self.state.pan(dx * PAN_PER_PIXEL, dy * PAN_PER_PIXEL);
+        } else if left {
+            self.state.orbit(dx * DRAG_RADIANS, dy * DRAG_RADIANS);
+        } else if right {
+            self.state.turn_light(dx * DRAG_RADIANS, dy * DRAG_RADIANS);
+        } else {
+            return Effect::None;
+        }
+        Effect::View
+    }
+
+    /// The cursor left the window: the next move starts a new drag.
+    pub fn cursor_left(&mut self) {
+        self.cursor = None;
+    }
+
+    /// A wheel or touchpad scroll: up (positive) zooms in.
+    pub fn wheel(&mut self, delta: MouseScrollDelta) -> Effect {
+        let lines = match delta {
+            MouseScrollDelta::LineDelta(_, y) => y,
+            MouseScrollDelta::PixelDelta(p) => p.y as f32 / PIXELS_PER_LINE,
+        };
+        if lines == 0.0 || !lines.is_finite() {
+            return Effect::None;
+        }
+        self.state.zoom(ZOOM_PER_LINE.powf(lines));
+        Effect::View
+    }
+}
+
+fn on_off(b: bool) -> &'static str {
+    if b {
+        "on"
+    } else {
+        "off"
+    }
+}
+
+/// The vertex nearest the line through `eye` along the unit `axis`.
+fn nearest_to_axis<'a>(
+    vertices: impl Iterator<Item = &'a Vertex>,
+    eye: Vec3,
+    axis: Vec3,
+) -> Option<&'a Vertex> {
+    let off_axis = |v: &Vertex| {
+        let d = Vec3::from(v.position) - eye;
+        (d - axis * d.dot(axis)).length_squared()
+    };
+    vertices.min_by(|a, b| off_axis(a).total_cmp(&off_axis(b)))
+}
+
+/// The tangent frame `(t, b, n)` of the surface at the centre of `camera`'s view: of the
+/// vertices that face the eye, the one nearest the line of sight (eye → target); all
+/// vertices when none faces it. Built as diffraction.vert builds it (Gram–Schmidt tangent,
+/// bitangent with the handedness sign). `None` for a mesh without vertices.
+pub fn tangent_frame_at_view(mesh: &Mesh, camera: &Camera) -> Option<[Vec3; 3]> {
+    let eye = Vec3::from(camera.eye);
+    let axis = (Vec3::from(camera.target) - eye).normalize_or(Vec3::NEG_Z);
+    let facing = |v: &&Vertex| {
+        let p = Vec3::from(v.position);
+        Vec3::from(v.normal).dot(eye - p) > 0.0 && (p - eye).dot(axis) > 0.0
+    };
+    let v = nearest_to_axis(mesh.vertices.iter().filter(facing), eye, axis)
+        .or_else(|| nearest_to_axis(mesh.vertices.iter(), eye, axis))?;
+    let n = Vec3::from(v.normal).normalize_or(Vec3::Z);
+    let t0 = Vec3::new(v.tangent[0], v.tangent[1], v.tangent[2]);
+    let t = (t0 - n * n.dot(t0)).normalize_or(n.any_orthonormal_vector());
+    let b = if v.tangent[3] < 0.0 { -1.0 } else { 1.0 } * n.cross(t);
+    Some([t, b, n])
 }
 
 impl ViewState {
@@ -34,6 +247,7 @@ impl ViewState {
             camera: scene.camera.clone(),
             light_dir: Vec3::from(scene.light.direction).normalize_or(Vec3::NEG_Y),
             exposure: scene.output.exposure,
+            map_exposure: DEFAULT_MAP_EXPOSURE,
             fresnel: scene.material.fresnel,
             shadowing: scene.material.shadowing,
             texture: true,
@@ -98,6 +312,20 @@ impl ViewState {
             }
         }
         self.light_dir = d.normalize();
+    }
+
+    /// The BRDF map's light as `(θi, φi)` in degrees — the arguments of
+    /// `Renderer::render_brdf_map` — in `frame` (from [`tangent_frame_at_view`]): the direction
+    /// to the light, dropped onto the horizon when the light is below it (the map then shows
+    /// grazing light; the mesh there is unlit).
+    pub fn map_light_angles(&self, frame: [Vec3; 3]) -> (f64, f64) {
+        let to_light = -self.light_dir;
+        let [t, b, n] = frame;
+        let local = Vec3::new(to_light.dot(t), to_light.dot(b), to_light.dot(n).max(0.0));
+        let l = local.normalize_or(Vec3::Z);
+        let theta = (l.z as f64).clamp(-1.0, 1.0).acos().to_degrees().min(90.0);
+        let phi = (l.y as f64).atan2(l.x as f64).to_degrees();
+        (theta, phi)
     }
 
     /// `scene` with this state's camera, light and exposure (the switches are pass options,

@@ -40,7 +40,7 @@ pub struct ViewArgs {
     #[arg(long)]
     pub height: Option<u32>,
     /// Initial exposure (overrides the scene).
-    #[arg(long)]
+    #[arg(long, allow_negative_numbers = true)]
     pub exposure: Option<f32>,
     /// Initial shader variant (V cycles through them).
     #[arg(long, value_enum, default_value_t = VariantKind::Default)]
@@ -74,6 +74,58 @@ pub struct ViewArgs {
     /// With --frames: save the last frame (the swapchain image) to this PNG.
     #[arg(long, requires = "frames")]
     pub screenshot: Option<PathBuf>,
+    /// Start with the BRDF map beside the mesh (B toggles it).
+    #[arg(long)]
+    pub map: bool,
+    /// Exposure of the BRDF map ([ and ] change it) [default: 30].
+    #[arg(long, allow_negative_numbers = true)]
+    pub map_exposure: Option<f32>,
+    /// Test hook: before frame N, press a key (`N:b`, `N:left`, ...), request a window size
+    /// (`N:resize=WxH`) or treat the window as minimised for K redraws (`N:minimise=K`).
+    #[arg(long = "at", value_name = "N:ACTION", hide = true)]
+    pub at: Vec<String>,
+}
+
+/// One `--at` action (a test hook: tests drive the controls and the window through it).
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum ScriptAction {
+    /// A key press as [`input::Controls::key`] sees it: one character, or `left`, `right`,
+    /// `up`, `down`, `esc`.
+    Key(String),
+    /// Ask the window system for this inner size.
+    Resize(u32, u32),
+    /// The window counts as zero-sized for this many redraws (what a minimised window
+    /// reports; Xvfb has no window manager to minimise it).
+    Minimise(u32),
+}
+
+/// Parses `N:ACTION` of `--at`.
+pub fn parse_at(s: &str) -> Result<(u32, ScriptAction)> {
+    let bad = |why: &str| Error::invalid("--at", format!("'{s}': {why}"));
+    let (n, action) = s.split_once(':').ok_or_else(|| bad("expected N:ACTION"))?;
+    let n: u32 = n.parse().map_err(|_| bad("N must be a frame index"))?;
+    let action = if let Some(size) = action.strip_prefix("resize=") {
+        let (w, h) = size
+            .split_once('x')
+            .ok_or_else(|| bad("expected resize=WxH"))?;
+        let (w, h): (u32, u32) = match (w.parse(), h.parse()) {
+            (Ok(w), Ok(h)) if (1..=8192).contains(&w) && (1..=8192).contains(&h) => (w, h),
+            _ => return Err(bad("W and H must be 1..=8192")),
+        };
+        ScriptAction::Resize(w, h)
+    } else if let Some(k) = action.strip_prefix("minimise=") {
+        match k.parse() {
+            Ok(k) if (1..=1000).contains(&k) => ScriptAction::Minimise(k),
+            _ => return Err(bad("minimise=K needs K in 1..=1000")),
+        }
+    } else if action.chars().count() == 1
+        || ["left", "right", "up", "down", "esc"].contains(&action)
+    {
+        ScriptAction::Key(action.to_string())
+    } else {
+        return Err(bad("unknown action"));
+    };
+    Ok((n, action))
 }
 
 /// Runs `diffract view` until the window closes (or `--frames` are done).
@@ -90,6 +142,13 @@ pub fn run(args: &ViewArgs) -> Result<()> {
             ));
         }
         scene.output.exposure = e;
+    }
+    let map_exposure = args.map_exposure.unwrap_or(input::DEFAULT_MAP_EXPOSURE);
+    if !(map_exposure.is_finite() && map_exposure > 0.0) {
+        return Err(Error::invalid(
+            "map exposure",
+            format!("{map_exposure}; must be finite and > 0"),
+        ));
     }
     if let Some(w) = args.width {
         scene.output.width = w;
@@ -119,6 +178,11 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     if args.frames == Some(0) {
         return Err(Error::invalid("frames", "0; expected at least 1"));
     }
+    let script = args
+        .at
+        .iter()
+        .map(|a| parse_at(a))
+        .collect::<Result<Vec<_>>>()?;
     scene.material = args.material.apply(scene.material.clone());
     let settings = app::Settings {
         variant: args.variant.resolve(),
@@ -143,6 +207,9 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         frames: args.frames,
         screenshot: args.screenshot.clone(),
         validation: crate::render::validation_requested(),
+        script,
+        map: args.map,
+        map_exposure,
     };
     app::run(scene, settings)
 }
