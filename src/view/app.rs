@@ -258,6 +258,7 @@ impl Viewer {
         renderer.set_table_options(settings.table);
         renderer.set_cache_dir(settings.cache_dir.clone());
         renderer.set_region_margin(REGION_MARGIN);
+        renderer.set_leave_out(true);
 
         let pool_info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(dev.queue_family())
@@ -490,8 +491,9 @@ impl Viewer {
             return Ok(false);
         };
         let aspect = sc.extent.width as f32 / sc.extent.height as f32;
-        if self.view_changed && !self.rebuild && self.renderer.variant() != VariantKind::Flss {
-            // Table variants: rebuild only when the view left the table's region.
+        if self.view_changed && !self.rebuild {
+            // Rebuild only when the view left the region the tables (or flss's uploaded
+            // texels) cover; flss keeping every texel always covers it.
             if !self.renderer.covers_view(&self.state.apply(scene))? {
                 self.rebuild = true;
             }
