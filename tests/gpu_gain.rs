@@ -5,8 +5,9 @@
 //! the pixel whose view is the mirror of the light holds `C(ωi, ωr)` itself; with Fresnel
 //! and shadowing off that is Stam's geometric term, exactly 1 at specular at every angle.
 //! The pixel chosen is the one of a 51² map nearest the rim (θr = 88.9°), where
-//! `1 + ωi·ωr ≈ 7.7e-4`: in float32, `1 + dot(ωi, ωr)` loses about 5e-5 of it (1e-4 of `C`);
-//! `|ωi + ωr|²/2` keeps it to float32 rounding.
+//! `1 + ωi·ωr ≈ 7.7e-4`: in float32, `1 + dot(ωi, ωr)` loses about 5e-5 of it. Measured on
+//! lavapipe at the four pixels below: the old form gave `|ρ − 1|` = 1.0e-4, 1.0e-4, 7.9e-5,
+//! 4.6e-5 (this test failed), `|ωi + ωr|²/2` gives at most 1.2e-7.
 
 mod gpu_util;
 
