@@ -212,12 +212,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         gpu_bytes: frame.variant.gpu_bytes,
         keep_all: args.keep_all,
     };
-    eprintln!("{}", report.line());
-    if args.verbose {
-        for line in report.details() {
-            eprintln!("{line}");
-        }
-    }
     let gpu = frame
         .gpu_ms
         .map_or("n/a".to_string(), |ms| format!("{ms:.2}"));
@@ -240,6 +234,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let n = renderer.validation_messages();
     if n > 0 {
         return Err(Error::Validation(n));
+    }
+    // After the checks: a failed render ends on its one error line.
+    eprintln!("{}", report.line());
+    if args.verbose {
+        for line in report.details() {
+            eprintln!("{line}");
+        }
     }
     Ok(())
 }
