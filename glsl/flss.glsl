@@ -79,10 +79,12 @@ float spectralPower(vec3 uvw, float lambdaUm) {
     return dot(p, p);
 }
 
-// Lines 4–26: Σ_λ |P̂|² · weights(λ) over the colour table's wavelengths.
+// Lines 4–26: Σ_λ |P̂|² · weights(λ) over the wavelengths of binding 2: the colour table's,
+// or only those whose weight matters when the renderer leaves the others out.
 vec3 fullSpectrumXyz(vec3 uvw) {
     vec3 xyzPixelColor = vec3(0.0);
-    for (int j = 0; j < LAMBDA_COUNT; ++j) {                         // line 4
+    int lambdaCount = colourWeights.length();
+    for (int j = 0; j < lambdaCount; ++j) {                          // line 4
         vec4 xyzWeights = getColorWeights(j);                        // line 5
         xyzPixelColor += spectralPower(uvw, xyzWeights.w * 1e-3) * xyzWeights.xyz; // line 25
     }

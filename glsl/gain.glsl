@@ -29,10 +29,12 @@ float gainFactor(vec3 wi, vec3 wr) {
         return 0.0;
     }
     float w = cosI + cosR;
-    float onePlus = 1.0 + dot(wi, wr);
+    // 1 + ωi·ωr as |ωi + ωr|²/2 (MODEL §2, brdf::gain): no cancellation where ωi·ωr → −1
+    // (grazing specular), and exact in the relative sense near backscatter.
+    vec3 h = wi + wr;
+    float onePlus = 0.5 * dot(h, h);
     float c = onePlus * onePlus / (w * w * cosI * cosR);
     if (FRESNEL || SHADOWING) {
-        vec3 h = wi + wr;
         h /= length(h); // |h| ≥ w > 0 above both horizons
         float cosRH = clamp(dot(wr, h), 0.0, 1.0);
         if (FRESNEL) {

@@ -31,7 +31,8 @@ const int MODE_MAP_DISPLAY = 3;
 
 const int LAMBDA_MIN_NM = 380;
 const int LAMBDA_MAX_NM = 780;
-// Samples of the trapezoid rule over [380, 780] nm (MODEL §5).
+// Samples of the trapezoid rule over [380, 780] nm (MODEL §5). Binding 2 may hold fewer:
+// the renderer leaves out wavelengths whose weight cannot matter (loop over its length).
 const int LAMBDA_COUNT = (LAMBDA_MAX_NM - LAMBDA_MIN_NM) / LAMBDA_STEP_NM + 1;
 // Capacity of the per-term decode table; Material::validate caps T at 64.
 const int MAX_TERMS = 65;
@@ -58,7 +59,8 @@ layout(set = 0, binding = 0, std140) uniform Params {
     vec4 lightDisk[MAX_DISK_SAMPLES];
 } params;
 
-// Per spectral sample j: xyz = CIE weight of ColourTable::weights[j], w = λ_j in nm.
+// Per spectral sample j: xyz = CIE weight of ColourTable::weights[j], w = λ_j in nm; only
+// the kept samples when the renderer leaves some out (src/leave_out.rs).
 layout(set = 0, binding = 2, std430) readonly buffer ColourWeights {
     vec4 colourWeights[];
 };

@@ -13,6 +13,7 @@ layout(set = 0, binding = 4, std140) uniform NmmInfo {
     vec4 period; // x: d along x, y: d along y (µm; 0: no period along that axis)
     vec4 extent; // x, y: patch size N·dH (µm)
     vec4 sigma;  // x, y: Gaussian window std σt (texels)
+    vec4 lambdaRange; // x, y: shortest and longest wavelength sampled (nm; the kept ones)
 } nmm;
 
 // CIE·D65 density per nm, 1 nm apart from 380 nm (xyz).
@@ -57,12 +58,14 @@ vec3 nmmXyz(vec3 uvw) {
         }
         float delta = halfWidth(a);
         float dnu = delta / float(HALF_SAMPLES);
-        int first = max(1, int(ceil(d * t * 1e3 / LAMBDA_MAX - delta)));
-        int last = int(floor(d * t * 1e3 / LAMBDA_MIN + delta));
+        float lambdaLo = nmm.lambdaRange.x;
+        float lambdaHi = nmm.lambdaRange.y;
+        int first = max(1, int(ceil(d * t * 1e3 / lambdaHi - delta)));
+        int last = int(floor(d * t * 1e3 / lambdaLo + delta));
         for (int n = first; n <= last; ++n) {
             for (int j = -HALF_SAMPLES; j <= HALF_SAMPLES; ++j) {
                 float lambda = d * t * 1e3 / (float(n) + float(j) * dnu);
-                if (lambda < LAMBDA_MIN || lambda > LAMBDA_MAX) {
+                if (lambda < lambdaLo || lambda > lambdaHi) {
                     continue;
                 }
                 if (a == 1 && countedAlongU(uvw.x, lambda)) {

@@ -1,13 +1,18 @@
-//! Leaving out what a scene does not need (issue #8, item 4), CPU side only: which
-//! wavelengths' D65·CMF weight cannot matter at a tolerance, and which `(u, v)` band of the
-//! DFT terms a scene's directions can reach. The renderer decides what to do with them
-//! (upload fewer wavelengths and texels, report what it left out); nothing here knows GPUs.
+//! Leaving out what a scene does not need (issue #8, item 4), CPU side: which
+//! wavelengths' D65·CMF weight cannot matter at a tolerance, which `(u, v)` band of the
+//! DFT terms a scene's directions can reach, and the record of what was left out
+//! ([`LeftOut`]). The variants use them (`flss`/`nmm` loop over fewer wavelengths and
+//! upload fewer texels, the tables skip wavelengths in their build) and `render` reports
+//! them; nothing here knows GPUs.
 //!
 //! Both bounds use `|P̂| ≤ 1`: a wavelength contributes at most `C·w_λ` to a channel
 //! (`w_λ` its colour weight, normalised so a mirror has `Y = 1`), and a texel outside the
 //! reachable band is never read.
 
+use crate::brdf::table::Region;
+use crate::brdf::truncation::TermPlan;
 use crate::colour::ColourTable;
+use crate::spectrum::num_complex::Complex64;
 use crate::spectrum::Band;
 
 /// Wavelengths of a colour table that are kept, and the weight left out.
@@ -129,9 +134,15 @@ impl UvBox {
             let m_hi = ends.iter().copied().fold(f64::NEG_INFINITY, f64::max) * scale;
             let b = (n / 2) as f64;
             let pad = radius as f64 + 1.0;
-            let first = (b + m_lo.floor() - pad).max(0.0);
-            let last = (b + m_hi.ceil() + pad).min(n as f64 - 1.0);
-            if last - first + 1.0 >= n as f64 || first > last {
+            let first = b + m_lo.floor() - pad;
+            let last = b + m_hi.ceil() + pad;
+            // Lookups past either end wrap around the periodic spectrum: only the whole
+            // axis holds them then (a clamped band would read zeros where they land).
+            if !(first.is_finite() && last.is_finite())
+                || first < 0.0
+                || last > n as f64 - 1.0
+                || first > last
+            {
                 (0, n)
             } else {
                 (first as usize, (last - first) as usize + 1)
@@ -145,6 +156,334 @@ impl UvBox {
             width,
             height,
         }
+    }
+}
+
+impl UvBox {
+    /// The `(u, v)` of a `(u, v, w)` region (a BRDF map's, or a mesh's under its light and
+    /// camera, as the table variants use it).
+    pub fn of_region(region: &Region) -> UvBox {
+        UvBox {
+            u: (region.lo[0], region.hi[0]),
+            v: (region.lo[1], region.hi[1]),
+        }
+    }
+}
+
+/// The texels both bands hold (`a` when they do not overlap, which cannot happen for a
+/// band computed from lookups that the stored band holds).
+pub fn intersect(a: &Band, b: &Band) -> Band {
+    let axis = |a0: usize, aw: usize, b0: usize, bw: usize| {
+        let lo = a0.max(b0);
+        let hi = (a0 + aw).min(b0 + bw);
+        (lo < hi).then_some((lo, hi - lo))
+    };
+    match (
+        axis(a.x0, a.width, b.x0, b.width),
+        axis(a.y0, a.height, b.y0, b.height),
+    ) {
+        (Some((x0, width)), Some((y0, height))) => Band {
+            x0,
+            y0,
+            width,
+            height,
+        },
+        _ => *a,
+    }
+}
+
+/// Term `terms` (stored over `stored`, row-major) cropped to `kept` ⊆ `stored`.
+pub fn crop(terms: &[Complex64], stored: &Band, kept: &Band) -> Vec<Complex64> {
+    let (dx, dy) = (kept.x0 - stored.x0, kept.y0 - stored.y0);
+    (0..kept.height)
+        .flat_map(|y| {
+            let row = (dy + y) * stored.width + dx;
+            terms[row..row + kept.width].iter().copied()
+        })
+        .collect()
+}
+
+/// What a prepared variant left out (the renderer reports it; see `render`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct LeftOut {
+    /// The wavelengths of the per-pixel loop (`flss`, `nmm`) or of the offline table build.
+    pub wavelengths: Option<WavelengthsLeft>,
+    /// The DFT texels uploaded (`flss`, `nmm`).
+    pub texels: Option<TexelsLeft>,
+    /// GPU memory of the variant's resources as built, and keeping everything (bytes).
+    pub gpu_bytes: usize,
+    pub gpu_bytes_keep_all: usize,
+}
+
+/// Wavelengths kept and left out.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WavelengthsLeft {
+    /// Where they are left out: `"per pixel"` or `"in the table build"`.
+    pub place: &'static str,
+    pub step_nm: u32,
+    pub kept_nm: Vec<f64>,
+    pub dropped_nm: Vec<f64>,
+    /// Left-out weight per channel (bound on the error of `XYZ/C`, relative to a mirror's
+    /// `Y = 1`), and the tolerance it was chosen for.
+    pub dropped_weight: [f64; 3],
+    pub tolerance: f64,
+}
+
+impl WavelengthsLeft {
+    /// The selection of `table` at `tolerance` (or everything, `None`), described.
+    pub fn of(
+        table: &ColourTable,
+        tolerance: Option<f64>,
+        place: &'static str,
+    ) -> (WavelengthSelection, WavelengthsLeft) {
+        let sel = match tolerance {
+            Some(t) => wavelengths_needed(table, t),
+            None => WavelengthSelection {
+                keep: (0..table.len()).collect(),
+                dropped_weight: [0.0; 3],
+            },
+        };
+        let kept_nm: Vec<f64> = sel.keep.iter().map(|&i| table.lambdas_nm[i]).collect();
+        let dropped_nm = table
+            .lambdas_nm
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| sel.keep.binary_search(i).is_err())
+            .map(|(_, l)| *l)
+            .collect();
+        let left = WavelengthsLeft {
+            place,
+            step_nm: table.step_nm,
+            kept_nm,
+            dropped_nm,
+            dropped_weight: sel.dropped_weight,
+            tolerance: tolerance.unwrap_or(0.0),
+        };
+        (sel, left)
+    }
+
+    /// Largest left-out weight over the channels.
+    pub fn max_dropped_weight(&self) -> f64 {
+        self.dropped_weight.iter().fold(0.0f64, |m, v| m.max(*v))
+    }
+
+    /// Shortest and longest kept wavelength (nm).
+    pub fn kept_range_nm(&self) -> (f64, f64) {
+        (
+            self.kept_nm.first().copied().unwrap_or(f64::NAN),
+            self.kept_nm.last().copied().unwrap_or(f64::NAN),
+        )
+    }
+}
+
+/// DFT texels kept and stored.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TexelsLeft {
+    /// The `(u, v)` box the band was computed for, and its wavelength range (nm).
+    pub uv: UvBox,
+    pub lambda_nm: (f64, f64),
+    /// Uploaded texels, and the band the precomputed terms hold (all directions).
+    pub kept: Band,
+    pub stored: Band,
+}
+
+/// `[a, b, c, e, f]` → `"a–c, e–f"` for wavelengths `step` apart.
+pub fn ranges_nm(lambdas: &[f64], step: f64) -> String {
+    let mut out: Vec<String> = Vec::new();
+    let mut i = 0;
+    while i < lambdas.len() {
+        let mut j = i;
+        while j + 1 < lambdas.len() && (lambdas[j + 1] - lambdas[j] - step).abs() < 1e-9 {
+            j += 1;
+        }
+        out.push(if i == j {
+            format!("{}", lambdas[i])
+        } else {
+            format!("{}–{}", lambdas[i], lambdas[j])
+        });
+        i = j + 1;
+    }
+    if out.is_empty() {
+        "none".into()
+    } else {
+        out.join(", ")
+    }
+}
+
+/// What `render` reports about a frame: the one line and, with `--verbose`, the details.
+#[derive(Debug, Clone)]
+pub struct Report<'a> {
+    /// What the variant recorded (`None`: a variant that records nothing).
+    pub left: Option<&'a LeftOut>,
+    /// The variant's name.
+    pub variant: &'a str,
+    /// The material's term plan (the series variants use `T + 1` terms of it).
+    pub plan: &'a TermPlan,
+    /// The optional shader features (specialisation constants), and whether the frame uses
+    /// each.
+    pub features: Vec<(&'static str, bool)>,
+    /// GPU memory of the variant's resources as drawn (bytes).
+    pub gpu_bytes: usize,
+    /// `--keep-all` was given.
+    pub keep_all: bool,
+}
+
+impl Report<'_> {
+    /// Whether the variant evaluates the series of DFT terms per pixel (it uploaded texels).
+    fn uses_terms(&self) -> bool {
+        self.left.is_some_and(|l| l.texels.is_some())
+    }
+
+    /// One line: terms, wavelengths, texel fraction, features, GPU memory.
+    pub fn line(&self) -> String {
+        let mut parts = Vec::new();
+        if self.uses_terms() {
+            parts.push(format!(
+                "terms above T = {} ({})",
+                self.plan.terms,
+                if self.plan.auto { "auto" } else { "--terms" }
+            ));
+        } else if self.left.is_some() {
+            parts.push("no series terms (exact table)".to_string());
+        }
+        match self.left {
+            Some(l) => {
+                if let Some(w) = &l.wavelengths {
+                    let (lo, hi) = w.kept_range_nm();
+                    let weight = if w.dropped_nm.is_empty() {
+                        String::new()
+                    } else {
+                        format!(
+                            "weight {:.1e} ≤ {:.0e}; ",
+                            w.max_dropped_weight(),
+                            w.tolerance
+                        )
+                    };
+                    parts.push(format!(
+                        "{} of {} wavelengths {} ({weight}{lo}–{hi} nm kept)",
+                        w.dropped_nm.len(),
+                        w.dropped_nm.len() + w.kept_nm.len(),
+                        w.place,
+                    ));
+                }
+                if let Some(t) = &l.texels {
+                    parts.push(format!(
+                        "{:.1}% of the DFT texels ({}×{} of {}×{} kept)",
+                        100.0 * (1.0 - texel_fraction(&t.kept, &t.stored)),
+                        t.kept.width,
+                        t.kept.height,
+                        t.stored.width,
+                        t.stored.height
+                    ));
+                }
+            }
+            None => parts.push(format!("nothing recorded by {}", self.variant)),
+        }
+        let off: Vec<&str> = self
+            .features
+            .iter()
+            .filter(|(_, on)| !on)
+            .map(|(f, _)| *f)
+            .collect();
+        parts.push(format!(
+            "features: {}",
+            if off.is_empty() {
+                "none".to_string()
+            } else {
+                off.join(", ")
+            }
+        ));
+        let all = self
+            .left
+            .map_or(self.gpu_bytes, |l| l.gpu_bytes_keep_all.max(self.gpu_bytes));
+        let memory = if self.keep_all {
+            format!(
+                "GPU memory {:.1} MB (--keep-all)",
+                self.gpu_bytes as f64 / 1e6
+            )
+        } else if all == self.gpu_bytes {
+            format!(
+                "GPU memory {:.1} MB (the same keeping all)",
+                self.gpu_bytes as f64 / 1e6
+            )
+        } else {
+            format!(
+                "GPU memory {:.1} MB ({:.1} MB keeping all)",
+                self.gpu_bytes as f64 / 1e6,
+                all as f64 / 1e6
+            )
+        };
+        format!("left out: {}; {memory}", parts.join("; "))
+    }
+
+    /// `--verbose`: which terms, wavelengths, band and features, one line each.
+    pub fn details(&self) -> Vec<String> {
+        let mut out = Vec::new();
+        let p = self.plan;
+        if self.uses_terms() {
+            out.push(format!(
+                "terms: 0..={} of {}, {} (highest allowed T = {}), tolerance {:.0e} on |P̂|²: truncation {:.1e}, float32 rounding {:.1e}",
+                p.terms,
+                if p.auto { "auto" } else { "fixed by --terms" },
+                p.expansion,
+                crate::brdf::truncation::MAX_TERMS,
+                p.tolerance,
+                p.truncation,
+                p.rounding
+            ));
+        }
+        if let Some(l) = self.left {
+            if let Some(w) = &l.wavelengths {
+                let step = w.step_nm as f64;
+                out.push(format!(
+                    "wavelengths ({} nm, {}): kept {} ({}); left out {} ({}); left-out weight X {:.1e}, Y {:.1e}, Z {:.1e} (tolerance {:.0e}, relative to a mirror's Y = 1)",
+                    w.step_nm,
+                    w.place,
+                    ranges_nm(&w.kept_nm, step),
+                    w.kept_nm.len(),
+                    ranges_nm(&w.dropped_nm, step),
+                    w.dropped_nm.len(),
+                    w.dropped_weight[0],
+                    w.dropped_weight[1],
+                    w.dropped_weight[2],
+                    w.tolerance
+                ));
+            }
+            if let Some(t) = &l.texels {
+                out.push(format!(
+                    "DFT texels: columns {}..{}, rows {}..{} ({}×{}) of the stored {}..{}, {}..{} ({}×{}): lookups from u ∈ [{:.3}, {:.3}], v ∈ [{:.3}, {:.3}] at {}–{} nm",
+                    t.kept.x0,
+                    t.kept.x0 + t.kept.width,
+                    t.kept.y0,
+                    t.kept.y0 + t.kept.height,
+                    t.kept.width,
+                    t.kept.height,
+                    t.stored.x0,
+                    t.stored.x0 + t.stored.width,
+                    t.stored.y0,
+                    t.stored.y0 + t.stored.height,
+                    t.stored.width,
+                    t.stored.height,
+                    t.uv.u.0,
+                    t.uv.u.1,
+                    t.uv.v.0,
+                    t.uv.v.1,
+                    t.lambda_nm.0,
+                    t.lambda_nm.1
+                ));
+            }
+        }
+        out.push(format!(
+            "features (specialisation constants): {}",
+            self.features
+                .iter()
+                .map(|(f, on)| format!("{f} {}", if *on { "on" } else { "left out" }))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ));
+        out.into_iter()
+            .map(|l| format!("left out:   {l}"))
+            .collect()
     }
 }
 
@@ -226,6 +565,49 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn crop_intersect_and_ranges() {
+        let stored = Band {
+            x0: 2,
+            y0: 1,
+            width: 4,
+            height: 3,
+        };
+        let terms: Vec<Complex64> = (0..12).map(|i| Complex64::new(i as f64, 0.0)).collect();
+        let kept = intersect(
+            &Band {
+                x0: 3,
+                y0: 2,
+                width: 10,
+                height: 1,
+            },
+            &stored,
+        );
+        assert_eq!(
+            kept,
+            Band {
+                x0: 3,
+                y0: 2,
+                width: 3,
+                height: 1
+            }
+        );
+        let c: Vec<f64> = crop(&terms, &stored, &kept).iter().map(|z| z.re).collect();
+        assert_eq!(c, [5.0, 6.0, 7.0]);
+        assert_eq!(
+            ranges_nm(&[380.0, 385.0, 390.0, 700.0, 780.0], 5.0),
+            "380–390, 700, 780"
+        );
+        assert_eq!(ranges_nm(&[], 5.0), "none");
+    }
+
+    #[test]
+    fn a_band_that_would_wrap_keeps_the_whole_axis() {
+        // dH above λ/4: lookups pass the spectrum's ends and wrap around.
+        let b = UvBox::brdf_map([0.0, 0.0, 1.0]).band(64, 64, 0.2, 0.38, 0.78, 2);
+        assert_eq!((b.x0, b.width), (0, 64));
     }
 
     #[test]

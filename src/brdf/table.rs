@@ -212,6 +212,20 @@ pub fn sample_g(
     w_nodes: &[f64],
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
+    sample_g_kept(hf, coherence_um, spec, w_nodes, None, progress)
+}
+
+/// [`sample_g`] over only the wavelengths `keep` (indices into the colour table of
+/// `spec.step_nm`; `None`: all): the others' weight is left out of `G`
+/// ([`crate::leave_out::wavelengths_needed`] bounds it), and their FFTs are not computed.
+pub fn sample_g_kept(
+    hf: &HeightField,
+    coherence_um: f64,
+    spec: &TableSpec,
+    w_nodes: &[f64],
+    keep: Option<&[usize]>,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Slices> {
     let (nu, nv) = spec.validate()?;
     if !(coherence_um.is_finite() && coherence_um > 0.0) {
         return Err(Error::invalid(
@@ -220,6 +234,18 @@ pub fn sample_g(
         ));
     }
     let colour = ColourTable::new(spec.step_nm)?;
+    let samples: Vec<(f64, [f64; 3])> = match keep {
+        Some(k) => k
+            .iter()
+            .filter_map(|&i| Some((*colour.lambdas_nm.get(i)?, colour.weights[i])))
+            .collect(),
+        None => colour
+            .lambdas_nm
+            .iter()
+            .copied()
+            .zip(colour.weights.iter().copied())
+            .collect(),
+    };
     let r = &spec.region;
     let u: Vec<f64> = (0..nu)
         .map(|i| r.lo[0] + r.extent()[0] * i as f64 / (nu - 1) as f64)
@@ -231,14 +257,12 @@ pub fn sample_g(
     let data = w_nodes
         .iter()
         .map(|&w| {
-            colour
-                .lambdas_nm
+            samples
                 .par_iter()
-                .zip(&colour.weights)
                 .fold(
                     || vec![[0.0f64; 3]; nu * nv],
-                    |mut acc, (&l, wt)| {
-                        spectrum.accumulate(&u, &v, w, l * 1e-3, *wt, &mut acc);
+                    |mut acc, &(l, wt)| {
+                        spectrum.accumulate(&u, &v, w, l * 1e-3, wt, &mut acc);
                         progress();
                         acc
                     },

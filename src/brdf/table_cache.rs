@@ -11,7 +11,7 @@
 
 use std::path::Path;
 
-use super::table::{sample_g, Slices, TableSpec};
+use super::table::{sample_g_kept, Slices, TableSpec};
 use crate::fsutil::write_atomic;
 use crate::heightfield::HeightField;
 use crate::spectrum::cache::{self, Fnv1a};
@@ -126,7 +126,7 @@ fn decode(data: &[u8], key: u64, w_nodes: &[f64]) -> std::result::Result<Slices,
     Ok(Slices { nu, nv, w, data })
 }
 
-/// [`sample_g`] through the cache in `dir` (none: always build). A valid file
+/// [`sample_g`](super::table::sample_g) through the cache in `dir` (none: always build). A valid file
 /// `gtable-{key:016x}.bin` is loaded (`progress` is not called); a missing one is built
 /// and written; a corrupt or stale one is reported on stderr, rebuilt and overwritten.
 /// Failing to write only warns.
@@ -138,13 +138,38 @@ pub fn sample_g_cached(
     dir: Option<&Path>,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
+    sample_g_cached_kept(hf, coherence_um, spec, w_nodes, None, dir, progress)
+}
+
+/// [`sample_g_cached`] over only the wavelengths `keep` ([`sample_g_kept`]); the kept
+/// list is part of the key (a table of every wavelength keeps its old key).
+pub fn sample_g_cached_kept(
+    hf: &HeightField,
+    coherence_um: f64,
+    spec: &TableSpec,
+    w_nodes: &[f64],
+    keep: Option<&[usize]>,
+    dir: Option<&Path>,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Slices> {
     let Some(dir) = dir else {
-        return sample_g(hf, coherence_um, spec, w_nodes, progress);
+        return sample_g_kept(hf, coherence_um, spec, w_nodes, keep, progress);
     };
     let (nu, nv) = spec.validate()?;
     let max = cache::cache_max_bytes()?;
     cache::clean_stale_temps(dir);
-    let key = key(hf, coherence_um, spec, w_nodes);
+    let key = match keep {
+        None => key(hf, coherence_um, spec, w_nodes),
+        Some(k) => {
+            let mut h = Fnv1a::new();
+            h.u64(key(hf, coherence_um, spec, w_nodes));
+            h.bytes(b"kept wavelengths");
+            for &i in k {
+                h.u64(i as u64);
+            }
+            h.finish()
+        }
+    };
     let path = dir.join(format!("gtable-{key:016x}.bin"));
     // A valid file has exactly this many bytes: read no more than that.
     let expected = (44 + w_nodes.len() * 8 + nu * nv * w_nodes.len() * 12 + 8) as u64;
@@ -167,7 +192,7 @@ pub fn sample_g_cached(
         Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {}
         Err(e) => eprintln!("warning: {e}; rebuilding"),
     }
-    let s = sample_g(hf, coherence_um, spec, w_nodes, progress)?;
+    let s = sample_g_kept(hf, coherence_um, spec, w_nodes, keep, progress)?;
     let bytes = encode(&s, key);
     if bytes.len() as u64 > max {
         eprintln!(

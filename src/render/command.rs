@@ -1,5 +1,5 @@
-//! The `diffract render` command: arguments, the choice of variant, output files and the
-//! one-line report.
+//! The `diffract render` command: arguments, the choice of variant, output files, the
+//! one-line report and the one line of what was left out (stderr).
 
 use std::path::PathBuf;
 
@@ -95,6 +95,14 @@ pub struct RenderArgs {
     /// Do not read or write the term cache.
     #[arg(long)]
     pub no_cache: bool,
+    /// Leave nothing out: every wavelength, every DFT texel of the band (to measure what
+    /// leaving out saves). By default what the scene cannot need at the tolerance is left
+    /// out and reported on one line.
+    #[arg(long)]
+    pub keep_all: bool,
+    /// Say what was left out in detail (which wavelengths, the texel band, the terms).
+    #[arg(long)]
+    pub verbose: bool,
 }
 
 /// Whether to enable Vulkan validation: always in debug builds, or with
@@ -126,6 +134,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     renderer.set_storage_format(args.storage);
     renderer.set_variant(args.variant);
     renderer.set_table_options(args.table.options());
+    renderer.set_leave_out(!args.keep_all);
     if args.lambda_nm.is_some() && !args.variant.is_spectral() {
         return Err(Error::invalid(
             "variant",
@@ -187,6 +196,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         (frame, "scene".to_string())
     };
     drop(spin);
+    let left = renderer.left_out();
+    let report = crate::leave_out::Report {
+        left: left.as_ref(),
+        variant: &frame.variant.name,
+        plan: &prepared.plan,
+        features: vec![
+            ("Fresnel", prepared.shading.fresnel),
+            ("shadowing", prepared.shading.shadowing),
+            (
+                "texture blending",
+                !args.brdf_map && scene.texture.is_some(),
+            ),
+        ],
+        gpu_bytes: frame.variant.gpu_bytes,
+        keep_all: args.keep_all,
+    };
     let gpu = frame
         .gpu_ms
         .map_or("n/a".to_string(), |ms| format!("{ms:.2}"));
@@ -209,6 +234,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let n = renderer.validation_messages();
     if n > 0 {
         return Err(Error::Validation(n));
+    }
+    // After the checks: a failed render ends on its one error line.
+    eprintln!("{}", report.line());
+    if args.verbose {
+        for line in report.details() {
+            eprintln!("{line}");
+        }
     }
     Ok(())
 }

@@ -136,6 +136,7 @@ struct PreparedKey {
     storage: StorageFormat,
     table: TableOptions,
     keep_model: bool,
+    leave_out: bool,
 }
 
 /// Owns the GPU device, what every frame shares (vertex shaders, the texture sampler) and
@@ -145,6 +146,9 @@ pub struct Renderer {
     variant: VariantKind,
     table: TableOptions,
     keep_models: bool,
+    /// Leave out what a draw cannot need (issue #8; off by default, `render` and `view`
+    /// switch it on).
+    leave_out: bool,
     cache_dir: Option<std::path::PathBuf>,
     prepared: Option<(PreparedKey, Arc<dyn PreparedVariant>)>,
     /// Table variants: when positive, built for the needed region widened by this much and
@@ -175,6 +179,7 @@ impl Renderer {
             variant: VariantKind::Flss,
             table: TableOptions::default(),
             keep_models: false,
+            leave_out: false,
             cache_dir: None,
             prepared: None,
             region_margin: 0.0,
@@ -264,6 +269,19 @@ impl Renderer {
     /// off by default, since they take as much memory again as the GPU copy in f64.
     pub fn set_keep_models(&mut self, keep: bool) {
         self.keep_models = keep;
+    }
+
+    /// Leave out, from the next prepared variant on, what its draws cannot need at the
+    /// material's tolerance: wavelengths whose colour weight cannot matter (per pixel for
+    /// `flss`/`nmm`, in the build of the tables) and DFT texels outside the `(u, v)` band
+    /// the draw's directions reach (`flss`/`nmm`). Off (the default): keep everything.
+    pub fn set_leave_out(&mut self, leave_out: bool) {
+        self.leave_out = leave_out;
+    }
+
+    /// What the last prepared variant left out (`None` before the first frame).
+    pub fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
+        self.prepared.as_ref().and_then(|(_, v)| v.left_out())
     }
 
     /// The grating period `nmm` estimated for the last frame (when it drew).
@@ -567,7 +585,9 @@ impl Renderer {
         output: OutputMode,
     ) -> Result<()> {
         variant::require_spectral(self.variant, output)?;
-        let covering = self.region_margin > 0.0 && self.variant != VariantKind::Flss;
+        // flss reads the whole band unless it leaves out texels outside the region.
+        let per_region = self.variant != VariantKind::Flss || self.leave_out;
+        let covering = self.region_margin > 0.0 && per_region;
         let needed = region;
         let region = if covering {
             widen(&region, self.region_margin)
@@ -580,8 +600,7 @@ impl Renderer {
             kind: self.variant,
             material: prepared.material.clone(),
             heightfield: (hf.nx(), hf.ny(), lo.to_bits(), hi.to_bits()),
-            // flss reads the whole band whatever the region.
-            region: (self.variant != VariantKind::Flss).then(|| {
+            region: per_region.then(|| {
                 [
                     region.lo[0],
                     region.lo[1],
@@ -595,6 +614,7 @@ impl Renderer {
             storage: self.storage,
             table: self.table,
             keep_model: self.keep_models,
+            leave_out: self.leave_out,
         };
         if self.prepared.as_ref().is_some_and(|(k, _)| *k == key) {
             return Ok(());
@@ -623,6 +643,7 @@ impl Renderer {
             table: &self.table,
             keep_model: self.keep_models,
             cache_dir: self.cache_dir.as_deref(),
+            leave_out: self.leave_out,
         };
         let built = self.variant.implementation().prepare(&self.dev, &setup)?;
         self.prepared = Some((key, Arc::from(built)));
@@ -746,11 +767,25 @@ impl Renderer {
             std::slice::from_ref(&params),
         )?;
         let table = &prepared.colour;
-        let weights: Vec<[f32; 4]> = table
-            .weights
+        let all: Vec<usize>;
+        let kept = match variant.kept_wavelengths() {
+            Some(k) => k,
+            None => {
+                all = (0..table.len()).collect();
+                &all
+            }
+        };
+        let weights: Vec<[f32; 4]> = kept
             .iter()
-            .zip(&table.lambdas_nm)
-            .map(|(w, l)| [w[0] as f32, w[1] as f32, w[2] as f32, *l as f32])
+            .map(|&i| {
+                let w = table.weights[i];
+                [
+                    w[0] as f32,
+                    w[1] as f32,
+                    w[2] as f32,
+                    table.lambdas_nm[i] as f32,
+                ]
+            })
             .collect();
         let colour = Buffer::with_data(
             dev,

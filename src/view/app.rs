@@ -273,6 +273,7 @@ impl Viewer {
         renderer.set_table_options(settings.table);
         renderer.set_cache_dir(settings.cache_dir.clone());
         renderer.set_region_margin(REGION_MARGIN);
+        renderer.set_leave_out(true);
 
         let pool_info = vk::CommandPoolCreateInfo::default()
             .queue_family_index(dev.queue_family())
@@ -528,9 +529,9 @@ impl Viewer {
         let (mesh_rect, map_rect) = layout(sc.extent, self.controls.map);
         let aspect = mesh_rect.extent.width as f32 / mesh_rect.extent.height as f32;
         let map_wi = self.controls.map.then(|| self.map_wi());
-        if self.view_changed && !self.rebuild && self.renderer.variant() != VariantKind::Flss {
-            // Table variants: rebuild only when the view (or the map's light) left the
-            // table's region.
+        if self.view_changed && !self.rebuild {
+            // Rebuild only when the view (or the map's light) left the region the tables
+            // (or flss's uploaded texels) cover; flss keeping every texel always covers it.
             let covered = self
                 .renderer
                 .covers_view(&self.controls.state.apply(scene))?

@@ -1,7 +1,8 @@
 //! Variant `flss` (thesis Algorithm 3, glsl/flss.frag): the DFT terms of the material as an
 //! image array (one layer per term, the cropped band, in the chosen storage format), the
 //! per-term decode table in the uniform block, and the constants `T`, `R`, `Δλ`, expansion
-//! and storage.
+//! and storage. When leaving out, only the texels the draw's region can reach are uploaded
+//! and the shader loops over the wavelengths that matter (binding 2 holds only those).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -9,13 +10,15 @@ use std::time::Instant;
 use ash::vk;
 
 use super::{DrawSetup, PreparedVariant, Variant, VariantKind, VariantStats, SPEC_COUNT};
+use crate::colour::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 use crate::gpu::formats::{pack_layers, Layer};
 use crate::gpu::memory::{Image, ImageDesc, Sampler};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::{shaders, Device, StorageFormat};
+use crate::leave_out::{crop, intersect, LeftOut, TexelsLeft, UvBox, WavelengthsLeft};
 use crate::material::PreparedMaterial;
-use crate::render::{ParamsUbo, MAX_TERMS};
-use crate::spectrum::Expansion;
+use crate::render::{OutputMode, ParamsUbo, MAX_TERMS};
+use crate::spectrum::{Band, Expansion};
 use crate::{Error, Result};
 
 pub(crate) struct Flss;
@@ -39,40 +42,72 @@ impl Variant for Flss {
 }
 
 /// The DFT terms and lookup constants of a material on the GPU: FLSS's resources, which
-/// `nmm` reuses.
+/// `nmm` reuses. Leaving out (`setup.leave_out`): only the wavelengths whose weight matters
+/// at the material's tolerance, and only the texels lookups from `setup.region` at those
+/// wavelengths can read.
 pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<FlssGpu> {
     let start = Instant::now();
     let prepared = setup.prepared;
-    let (terms, decode) = upload_terms(dev, prepared, setup.storage)?;
-    let t = prepared
-        .terms()
-        .min(prepared.stack.term_count().saturating_sub(1));
+    let stack = &prepared.stack;
+    let (selection, wavelengths) =
+        WavelengthsLeft::of(&prepared.colour, setup.lambda_tolerance(), "per pixel");
+    // A single-wavelength map may ask for any λ; the scene's colour only for the kept ones.
+    let lambda_nm = if setup.output == OutputMode::MapSpectral {
+        (LAMBDA_MIN_NM as f64, LAMBDA_MAX_NM as f64)
+    } else {
+        wavelengths.kept_range_nm()
+    };
+    let uv = UvBox::of_region(&setup.region);
+    let band = if setup.leave_out {
+        let reach = uv.band(
+            stack.nx,
+            stack.ny,
+            stack.dh_um,
+            lambda_nm.0 * 1e-3,
+            lambda_nm.1 * 1e-3,
+            prepared.window.radius,
+        );
+        intersect(&reach, &stack.band)
+    } else {
+        stack.band
+    };
+    let (terms, decode) = upload_terms(dev, prepared, setup.storage, &band)?;
+    let t = prepared.terms().min(stack.term_count().saturating_sub(1));
     let name = format!(
         "flss T={t} R={} dλ={} {} {}",
-        prepared.window.radius, prepared.colour.step_nm, prepared.stack.expansion, setup.storage
+        prepared.window.radius, prepared.colour.step_nm, stack.expansion, setup.storage
     );
     let taps = (2 * prepared.window.radius + 1).pow(2);
+    let bytes = |b: &Band| stack.term_count() * b.width * b.height * setup.storage.texel_bytes();
+    let left_out = LeftOut {
+        texels: Some(TexelsLeft {
+            uv,
+            lambda_nm,
+            kept: band,
+            stored: stack.band,
+        }),
+        wavelengths: Some(wavelengths),
+        gpu_bytes: bytes(&band),
+        gpu_bytes_keep_all: bytes(&stack.band),
+    };
     Ok(FlssGpu {
         stats: VariantStats {
             name,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
-            gpu_bytes: prepared.stack.term_count()
-                * prepared.stack.band.width
-                * prepared.stack.band.height
-                * setup.storage.texel_bytes(),
-            fetches: prepared.colour.len() * (t + 1) * taps,
+            gpu_bytes: bytes(&band),
+            fetches: selection.keep.len() * (t + 1) * taps,
         },
         spec: [
             t as u32,
             prepared.window.radius as u32,
             prepared.colour.step_nm,
-            match prepared.stack.expansion {
+            match stack.expansion {
                 Expansion::Taylor => 0,
                 Expansion::Chebyshev => 1,
             },
             setup.storage.spec_value(),
         ],
-        params: lookup_params(prepared, &decode),
+        params: lookup_params(prepared, &band, &decode),
         sampler: Sampler::new(
             dev,
             "dft terms (nearest)",
@@ -80,6 +115,8 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
             vk::SamplerAddressMode::CLAMP_TO_EDGE,
         )?,
         terms,
+        keep: selection.keep,
+        left_out,
     })
 }
 
@@ -91,6 +128,9 @@ pub(super) struct FlssGpu {
     params: ([i32; 4], [i32; 4], [f32; 4], Vec<[f32; 4]>),
     sampler: Sampler,
     terms: Image,
+    /// Colour-table indices of the wavelengths the shader loops over.
+    pub(super) keep: Vec<usize>,
+    pub(super) left_out: LeftOut,
 }
 
 impl PreparedVariant for FlssGpu {
@@ -127,11 +167,20 @@ impl PreparedVariant for FlssGpu {
     fn stats(&self) -> VariantStats {
         self.stats.clone()
     }
+
+    fn kept_wavelengths(&self) -> Option<&[usize]> {
+        Some(&self.keep)
+    }
+
+    fn left_out(&self) -> Option<LeftOut> {
+        Some(self.left_out.clone())
+    }
 }
 
 /// The spectrum geometry, window and Chebyshev range of the uniform block.
 fn lookup_params(
     prepared: &PreparedMaterial,
+    band: &Band,
     decode: &[[f32; 4]],
 ) -> ([i32; 4], [i32; 4], [f32; 4], Vec<[f32; 4]>) {
     let s = &prepared.stack;
@@ -145,10 +194,10 @@ fn lookup_params(
             s.centre_y() as i32,
         ],
         [
-            s.band.x0 as i32,
-            s.band.y0 as i32,
-            s.band.width as i32,
-            s.band.height as i32,
+            band.x0 as i32,
+            band.y0 as i32,
+            band.width as i32,
+            band.height as i32,
         ],
         [
             s.dh_um as f32,
@@ -160,12 +209,13 @@ fn lookup_params(
     )
 }
 
-/// Uploads the term stack (cropped band, one layer per term, in the storage format); also
-/// returns the per-term decode rows of thesis eq. 1.1.
+/// Uploads the term stack over `band` (within the stored band; one layer per term, in the
+/// storage format); also returns the per-term decode rows of thesis eq. 1.1.
 fn upload_terms(
     dev: &Arc<Device>,
     prepared: &PreparedMaterial,
     storage: StorageFormat,
+    band: &Band,
 ) -> Result<(Image, Vec<[f32; 4]>)> {
     let stack = &prepared.stack;
     let layers = stack.term_count();
@@ -175,7 +225,7 @@ fn upload_terms(
             format!("{layers} term layers; the shader holds 1..={MAX_TERMS}"),
         ));
     }
-    let (w, h) = (stack.band.width as u32, stack.band.height as u32);
+    let (w, h) = (band.width as u32, band.height as u32);
     let info = &dev.info;
     if w > info.max_image_dimension_2d
         || h > info.max_image_dimension_2d
@@ -196,10 +246,16 @@ fn upload_terms(
             format!("{} cannot sample {format:?}", info.name),
         ));
     }
+    // The stack's extrema still bound a cropped layer (eq. 1.1 only needs bounds).
     let texels: Vec<Vec<[f64; 2]>> = stack
         .terms
         .iter()
-        .map(|t| t.iter().map(|c| [c.re, c.im]).collect())
+        .map(|t| {
+            crop(t, &stack.band, band)
+                .iter()
+                .map(|c| [c.re, c.im])
+                .collect()
+        })
         .collect();
     let packed: Vec<Layer<'_>> = texels
         .iter()

@@ -289,6 +289,16 @@ pub(crate) struct DrawSetup<'a> {
     pub keep_model: bool,
     /// Where sampled tables are cached (none: always build).
     pub cache_dir: Option<&'a std::path::Path>,
+    /// Leave out what the draw cannot need at the material's tolerance (wavelengths,
+    /// DFT texels outside `region`); false keeps everything.
+    pub leave_out: bool,
+}
+
+impl DrawSetup<'_> {
+    /// The tolerance wavelengths are left out at, `None` when everything is kept.
+    pub fn lambda_tolerance(&self) -> Option<f64> {
+        self.leave_out.then_some(self.prepared.material.tolerance)
+    }
 }
 
 /// A variant: its fragment shader and how to build its resources.
@@ -323,6 +333,15 @@ pub(crate) trait PreparedVariant {
     /// The pipeline's name (validation messages and captures show it).
     fn pipeline_name(&self) -> String {
         self.stats().name
+    }
+    /// Indices into the material's colour table of the wavelengths the shader loops over
+    /// (binding 2 holds only these); `None`: all of them.
+    fn kept_wavelengths(&self) -> Option<&[usize]> {
+        None
+    }
+    /// What it left out of what the scene does not need (`None`: nothing recorded).
+    fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
+        None
     }
 }
 

@@ -27,6 +27,8 @@ struct NmmInfoUbo {
     period: [f32; 4],
     extent: [f32; 4],
     sigma: [f32; 4],
+    /// x, y: shortest and longest wavelength sampled (nm): the kept ones when leaving out.
+    lambda_range: [f32; 4],
 }
 
 // SAFETY: repr(C) of f32 arrays: no padding.
@@ -65,6 +67,18 @@ impl Variant for Nmm {
                 0.0,
                 0.0,
             ],
+            lambda_range: match &flss.left_out.wavelengths {
+                Some(w) => {
+                    let (lo, hi) = w.kept_range_nm();
+                    [lo as f32, hi as f32, 0.0, 0.0]
+                }
+                None => [
+                    crate::colour::LAMBDA_MIN_NM as f32,
+                    crate::colour::LAMBDA_MAX_NM as f32,
+                    0.0,
+                    0.0,
+                ],
+            },
         };
         let info = Buffer::with_data(
             dev,
@@ -91,7 +105,7 @@ impl Variant for Nmm {
             flss.stats.name.trim_start_matches("flss ")
         );
         // Per order: 2·HALF_SAMPLES + 1 wavelengths instead of the whole table.
-        let per_lambda = flss.stats.fetches / p.colour.len().max(1);
+        let per_lambda = flss.stats.fetches / flss.keep.len().max(1);
         flss.stats.fetches = per_lambda * (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1);
         Ok(Box::new(NmmGpu {
             flss,
@@ -146,5 +160,13 @@ impl PreparedVariant for NmmGpu {
 
     fn grating(&self) -> Option<Grating> {
         Some(self.grating)
+    }
+
+    fn kept_wavelengths(&self) -> Option<&[usize]> {
+        self.flss.kept_wavelengths()
+    }
+
+    fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
+        self.flss.left_out()
     }
 }

@@ -14,11 +14,13 @@ use super::{
     SPEC_COUNT,
 };
 use crate::brdf::table::{GTable, Region, Slices, TableSpec};
-use crate::brdf::table_cache::sample_g_cached;
+use crate::brdf::table_cache::sample_g_cached_kept;
+use crate::colour::ColourTable;
 use crate::gpu::formats::f32_to_f16;
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::Device;
+use crate::leave_out::{LeftOut, WavelengthsLeft};
 use crate::{Error, Result};
 
 /// How a table's planes are stored on the GPU.
@@ -69,24 +71,39 @@ pub(crate) fn prepare<T: GTable + 'static>(
             setup.table.budget_bytes >> 20
         );
     }
-    let lambdas = (400 / spec.step_nm + 1) as u64;
+    // Leaving out: the build integrates only the wavelengths whose weight matters.
+    let (selection, wavelengths) = WavelengthsLeft::of(
+        &ColourTable::new(spec.step_nm)?,
+        setup.lambda_tolerance(),
+        "in the table build",
+    );
+    let keep = setup.leave_out.then_some(selection.keep.as_slice());
+    let lambdas = selection.keep.len() as u64;
     let bar = ProgressBar::new(spec.w_nodes as u64 * lambdas).with_message(format!("{kind} table"));
     bar.set_style(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} (w, λ) planes, {eta} left")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let p = setup.prepared;
-    let samples = sample_g_cached(
+    let samples = sample_g_cached_kept(
         &p.heightfield,
         p.material.coherence_um,
         &spec,
         &nodes(&spec),
+        keep,
         setup.cache_dir,
         &|| bar.inc(1),
     )?;
     let table = assemble(spec.region, samples);
     bar.finish_and_clear();
     let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
+    // The table's size does not depend on the wavelengths: the saving is build time.
+    gpu.left_out = Some(LeftOut {
+        wavelengths: Some(wavelengths),
+        texels: None,
+        gpu_bytes: gpu.stats.gpu_bytes,
+        gpu_bytes_keep_all: gpu.stats.gpu_bytes,
+    });
     if setup.keep_model {
         gpu.model = Some(Box::new(table));
     }
@@ -96,6 +113,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
 struct TableGpu {
     stats: VariantStats,
     model: Option<Box<dyn GTable>>,
+    left_out: Option<LeftOut>,
     terms: u32,
     info: Buffer,
     sampler: Sampler,
@@ -212,6 +230,7 @@ impl TableGpu {
         };
         Ok(Self {
             model: None,
+            left_out: None,
             stats: VariantStats {
                 name: format!(
                     "{kind} K={} {nu}×{nv} texel {:.4} dλ={} {format:?}",
@@ -269,5 +288,9 @@ impl PreparedVariant for TableGpu {
 
     fn table_model(&self) -> Option<&dyn GTable> {
         self.model.as_deref()
+    }
+
+    fn left_out(&self) -> Option<LeftOut> {
+        self.left_out.clone()
     }
 }
