@@ -35,6 +35,7 @@ const REGION_MARGIN: f64 = 0.25;
 /// What `diffract view` was asked for (parsed arguments).
 pub(super) struct Settings {
     pub variant: VariantKind,
+    pub per_vertex: bool,
     pub storage: StorageFormat,
     pub table: TableOptions,
     pub cache_dir: Option<PathBuf>,
@@ -254,6 +255,7 @@ impl Viewer {
         let dev = Device::on_surface(instance, &surface)?;
         let mut renderer = Renderer::on(dev.clone())?;
         renderer.set_variant(settings.variant);
+        renderer.set_per_vertex(settings.per_vertex);
         renderer.set_storage_format(settings.storage);
         renderer.set_table_options(settings.table);
         renderer.set_cache_dir(settings.cache_dir.clone());
@@ -702,7 +704,13 @@ impl Viewer {
                 "-" => self.state.exposure /= 1.25,
                 "h" => println!("{HELP}"),
                 "v" => {
-                    let all = VariantKind::ALL;
+                    let per_vertex = self.renderer.per_vertex();
+                    let all: Vec<VariantKind> = VariantKind::ALL
+                        .into_iter()
+                        .filter(|k| {
+                            !per_vertex || crate::render::variant::per_vertex_file(*k).is_some()
+                        })
+                        .collect();
                     let i = all.iter().position(|k| *k == self.variant).unwrap_or(0);
                     self.variant = all[(i + 1) % all.len()];
                     self.renderer.set_variant(self.variant);
