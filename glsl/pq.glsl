@@ -16,7 +16,8 @@
 layout(set = 0, binding = 4, std140) uniform PqInfo {
     ivec4 copies;  // x, y: copies M of the period in the patch; z, w: taps per axis (1 or 3)
     vec4 period;   // x, y: period L (µm); z, w: samples per period n₁
-    vec4 factor;   // x, y: copies N summed by the periodic factor
+    vec4 factor;   // x, y: copies N of the periodic factor (0: constant axis, Gaussian window);
+                   // z, w: 2πσs (µm) of the coherence window
 } pq;
 
 const int PQ_TAPS = 3;
@@ -34,14 +35,19 @@ vec2 sincWeightOf(float x, float n1) {
     return mag * vec2(cos(phase), sin(phase));
 }
 
-// |F/N|² of the periodic factor F = Σ_{n<N} e^{i n 2π s}: (sin(Nπt)/(N sin πt))², t = s − round(s).
-float periodicIntensityOf(float s, float copies) {
-    float t = s - floor(s + 0.5);
-    float den = copies * sin(PI * t);
+// |F/N|² of the periodic factor F = Σ_{n<N} e^{i n 2π s}: (sin(Nπf)/(N sin πf))², f = s − round(s).
+// On a constant axis (N = 0) the coherence window's Gaussian, exp(−(2πσs·t/λ)²) (as FLSS).
+float periodicIntensityOf(float s, float copies, float t, float twoPiSigma, float lambdaUm) {
+    if (copies == 0.0) {
+        float a = twoPiSigma * t / lambdaUm;
+        return exp(-a * a);
+    }
+    float f = s - floor(s + 0.5);
+    float den = copies * sin(PI * f);
     if (abs(den) < 1e-6) {
         return 1.0;
     }
-    float r = sin(copies * PI * t) / den;
+    float r = sin(copies * PI * f) / den;
     return r * r;
 }
 
@@ -109,7 +115,9 @@ float pqPower(vec3 uvw, float lambdaUm) {
         }
     }
     // Algorithm 5 line 3, corrected: the intensity scales with |p + iq|².
-    return dot(P, P) * periodicIntensityOf(s.x, pq.factor.x) * periodicIntensityOf(s.y, pq.factor.y);
+    return dot(P, P)
+         * periodicIntensityOf(s.x, pq.factor.x, uvw.x, pq.factor.z, lambdaUm)
+         * periodicIntensityOf(s.y, pq.factor.y, uvw.y, pq.factor.w, lambdaUm);
 }
 
 vec3 diffractionXyz(vec3 wi, vec3 wr) {

@@ -1144,6 +1144,25 @@ mod tests {
     }
 
     #[test]
+    fn scaly_snake_resolution_follows_the_quads_per_scale() {
+        let counts: Vec<(usize, usize)> = [1, 2, 6, 12]
+            .iter()
+            .map(|&q| {
+                let m = Mesh::scaly_snake_with(2.0, 0.08, 64, 18, q);
+                (m.vertices.len(), m.indices.len() / 3)
+            })
+            .collect();
+        println!("scaly-snake vertices, triangles at 1, 2, 6, 12 quads a scale side: {counts:?}");
+        assert_eq!(
+            Mesh::scaly_snake_with(2.0, 0.08, 64, 18, 6).vertices.len(),
+            Mesh::builtin("scaly-snake").unwrap().vertices.len()
+        );
+        assert!(counts
+            .windows(2)
+            .all(|w| w[0].0 < w[1].0 && w[0].1 < w[1].1));
+    }
+
+    #[test]
     fn scaly_snake_has_domed_scales_with_tangents_along_the_body() {
         let m = Mesh::builtin("scaly-snake").unwrap();
         check_frames(&m);

@@ -25,6 +25,11 @@
 //! `N` is rounded to the nearest whole number, which leaves an area (and colour) ratio
 //! `2√πσs/(N L)` of at most `1 + L/(2·57.6 µm)` ([`Axis::area_ratio`]). Off the orders'
 //! centre lines the shapes differ (the box has sinc² side lobes, the Gaussian none).
+//! An axis along which the field is constant has no period to repeat: there the lobe is
+//! the coherence window's own Gaussian (as FLSS). A box of copies along it would spread
+//! every line's sinc² side lobes, `~1/(π·57.6 µm·v/λ)²` of its peak, over the whole
+//! hemisphere: on a BRDF map of the blazed grating they made PQ's rel L2 against the
+//! reference 29.5 (measured before this rule).
 //!
 //! **What PQ refuses.** A field that is not a whole number of copies of a shorter period
 //! along an axis that has structure: more than [`MAX_OFF_LATTICE`] of the non-DC power off
@@ -68,7 +73,9 @@ pub struct Axis {
     pub samples_per_period: f64,
     /// The period `L = n₁·dH` (µm).
     pub period_um: f64,
-    /// Copies the periodic factor sums, `N = round(2√π σs / L)` (at least 1).
+    /// Copies the periodic factor sums, `N = round(2√π σs / L)` (at least 1); 0 on a
+    /// constant axis, which has no period to repeat: there the coherence window itself
+    /// (the Gaussian, as FLSS) gives the lobe, `exp(−(2πσs·t/λ)²)` in intensity.
     pub copies: usize,
     /// Interpolation taps: [`TAPS`], or 1 for a constant axis.
     pub taps: usize,
@@ -81,8 +88,11 @@ impl Axis {
         let n1 = n as f64 / m as f64;
         let period = n1 * dh_um;
         let sigma_s = coherence_um / 4.0;
-        let copies =
-            ((2.0 * std::f64::consts::PI.sqrt() * sigma_s / period).round() as usize).max(1);
+        let copies = if m == n {
+            0
+        } else {
+            ((2.0 * std::f64::consts::PI.sqrt() * sigma_s / period).round() as usize).max(1)
+        };
         Self {
             copies_in_patch: m,
             samples_per_period: n1,
@@ -96,6 +106,9 @@ impl Axis {
     /// The lobe area of the Gaussian window over that of `N` copies, `2√π σs/(N L)`: the
     /// ratio of PQ's colour on an order to FLSS's that comes from rounding `N`.
     pub fn area_ratio(&self) -> f64 {
+        if self.copies == 0 {
+            return 1.0;
+        }
         2.0 * std::f64::consts::PI.sqrt() * self.sigma_s_um / (self.copies as f64 * self.period_um)
     }
 }
@@ -277,6 +290,16 @@ pub enum Form {
     Thesis,
 }
 
+/// The factor of one axis at `t` (u or v): the periodic factor of `N` copies, or on a
+/// constant axis the Gaussian window's amplitude `exp(−(2πσs·t/λ)²/2)`.
+fn axis_factor(axis: &Axis, t: f64, lambda_um: f64) -> Complex64 {
+    if axis.copies == 0 {
+        let a = 2.0 * std::f64::consts::PI * axis.sigma_s_um * t / lambda_um;
+        return Complex64::new((-0.5 * a * a).exp(), 0.0);
+    }
+    periodic_factor(axis.copies, bins(axis, t, lambda_um))
+}
+
 /// Lookup position `s = t·L/λ` in bins of the period's spectrum along `axis`.
 fn bins(axis: &Axis, t: f64, lambda_um: f64) -> f64 {
     t * axis.period_um / lambda_um
@@ -357,8 +380,7 @@ pub fn power(
     form: Form,
 ) -> f64 {
     let [ax, ay] = &pq.axes;
-    let f = periodic_factor(ax.copies, bins(ax, uvw[0], lambda_um))
-        * periodic_factor(ay.copies, bins(ay, uvw[1], lambda_um));
+    let f = axis_factor(ax, uvw[0], lambda_um) * axis_factor(ay, uvw[1], lambda_um);
     let scale = match form {
         Form::Intensity => f.norm_sqr(),
         Form::Thesis => (f.re * f.re + f.im * f.im).sqrt(),
@@ -462,7 +484,14 @@ mod tests {
         .unwrap();
         assert_eq!(g.axes[0].copies_in_patch, 20);
         assert!((g.axes[0].period_um - 1.5).abs() < 1e-12);
-        assert_eq!((g.axes[1].taps, g.axes[1].samples_per_period), (1, 1.0));
+        assert_eq!(
+            (
+                g.axes[1].taps,
+                g.axes[1].samples_per_period,
+                g.axes[1].copies
+            ),
+            (1, 1.0, 0)
+        );
         // N·L ≈ 2√π σs = 57.6 µm.
         assert_eq!(g.axes[0].copies, 38);
         assert!((g.axes[0].area_ratio() - 1.0).abs() < 0.011);

@@ -393,7 +393,7 @@ pub fn list() -> String {
     );
     for kind in VariantKind::ALL {
         let memory = match kind {
-            VariantKind::Flss => {
+            VariantKind::Flss | VariantKind::Nmm | VariantKind::Pq => {
                 "term band × (T+1) layers, RG32F (≈ 120 MB for the 704² gratings)".to_string()
             }
             k => match table.spec(k, &material, 0.375, region) {
@@ -421,6 +421,7 @@ pub fn list() -> String {
             kind.summary()
         ));
     }
+    s.push_str("per-vertex (--per-vertex on render, view, profile; thesis §1.5.1): flss, nmm and pq evaluated once per mesh vertex, the colour interpolated; cost per vertex, not per pixel\n");
     s
 }
 

@@ -62,11 +62,20 @@ impl Variant for Pq {
             );
         }
         if pq.area_error() > 0.02 {
+            let worst = pq
+                .axes
+                .iter()
+                .max_by(|a, b| {
+                    (a.area_ratio() - 1.0)
+                        .abs()
+                        .total_cmp(&(b.area_ratio() - 1.0).abs())
+                })
+                .unwrap_or(&pq.axes[0]);
             eprintln!(
                 "warning: pq: {} copies of the {:.3} µm period make a lobe {:.1}% off the coherence window's area (N·L should be 2√π·σs = {:.1} µm)",
-                pq.axes.iter().map(|a| a.copies).max().unwrap_or(1),
-                pq.axes[0].period_um.max(pq.axes[1].period_um),
-                100.0 * pq.area_error(),
+                worst.copies,
+                worst.period_um,
+                100.0 * (worst.area_ratio() - 1.0).abs(),
                 2.0 * std::f64::consts::PI.sqrt() * p.material.coherence_um / 4.0
             );
         }
@@ -85,7 +94,12 @@ impl Variant for Pq {
                 ax.samples_per_period as f32,
                 ay.samples_per_period as f32,
             ],
-            factor: [ax.copies as f32, ay.copies as f32, 0.0, 0.0],
+            factor: [
+                ax.copies as f32,
+                ay.copies as f32,
+                (2.0 * std::f64::consts::PI * ax.sigma_s_um) as f32,
+                (2.0 * std::f64::consts::PI * ay.sigma_s_um) as f32,
+            ],
         };
         let info = Buffer::with_data(
             dev,
