@@ -232,6 +232,12 @@ pub fn estimate_periodicity(hf: &HeightField, coherence_um: f64) -> Result<Perio
     let [Some(x), Some(y)] = axes else {
         unreachable!("both axes are set or returned above")
     };
+    if x.taps == 1 && y.taps == 1 {
+        return Err(Error::invalid(
+            "pq",
+            "the height field is flat: no period to find",
+        ));
+    }
     Ok(Periodicity {
         axes: [x, y],
         off_lattice: worst_off,
