@@ -208,12 +208,16 @@ pub fn estimate_periodicity(hf: &HeightField, coherence_um: f64) -> Result<Perio
         let off = |m: usize| off_lattice(&p, m);
         let best = (2..=n / 2).rev().find(|&m| off(m) <= MAX_OFF_LATTICE);
         let Some(m) = best else {
+            let best_m = (2..=(n / 2).max(2))
+                .min_by(|&a, &b| off(a).total_cmp(&off(b)))
+                .unwrap_or(2);
             return Err(Error::invalid(
                 "pq",
                 format!(
-                    "the height field is not periodic along {name}: every lattice of every M-th frequency (M ≥ 2) misses more than {:.1}% of the non-DC power (the best, M = 2, misses {:.1}%); PQ needs whole copies of one period, use another variant",
+                    "the height field is not periodic along {name}: every lattice of every M-th frequency (M ≥ 2) misses more than {:.1}% of the non-DC power (the best, M = {}, misses {:.1}%); PQ needs whole copies of one period, use another variant",
                     100.0 * MAX_OFF_LATTICE,
-                    100.0 * off(2)
+                    best_m,
+                    100.0 * off(best_m)
                 ),
             ));
         };
