@@ -107,12 +107,20 @@ impl Variant for Pq {
             vk::BufferUsageFlags::UNIFORM_BUFFER,
             std::slice::from_ref(&ubo),
         )?;
+        // N = 0: a constant axis, where the coherence window's Gaussian gives the lobe.
+        let copies = |n: usize| {
+            if n == 0 {
+                "gauss".to_string()
+            } else {
+                n.to_string()
+            }
+        };
         flss.stats.name = format!(
             "pq L=({:.4}, {:.4}) µm N=({}, {}) {}",
             ax.period_um,
             ay.period_um,
-            ax.copies,
-            ay.copies,
+            copies(ax.copies),
+            copies(ay.copies),
             flss.stats.name.trim_start_matches("flss ")
         );
         // Per wavelength and term: taps_x · taps_y fetches instead of the window's (2R+1)².
