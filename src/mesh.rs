@@ -384,6 +384,18 @@ impl Mesh {
     /// Counts are clamped to `scales_along ∈ [4, 1024]`, `scales_around ∈ [3, 256]`; sizes
     /// that are not positive and finite are replaced by 2 and 0.08.
     pub fn scaly_snake(length: f32, radius: f32, scales_along: u32, scales_around: u32) -> Mesh {
+        Self::scaly_snake_with(length, radius, scales_along, scales_around, 6)
+    }
+
+    /// [`Mesh::scaly_snake`] with `quads` (clamped to 1..=32) quads along each side of a
+    /// scale instead of 6: the resolution per-vertex evaluation depends on.
+    pub fn scaly_snake_with(
+        length: f32,
+        radius: f32,
+        scales_along: u32,
+        scales_around: u32,
+        quads: u32,
+    ) -> Mesh {
         let len = if length.is_finite() && length > 0.0 {
             length
         } else {
@@ -403,7 +415,7 @@ impl Mesh {
         let mut raw = grid(4 * na as u32, 3 * nr as u32, |u, v| {
             (body.point(u, v, 0.985), None)
         });
-        const Q: usize = 6; // quads per scale side
+        let q_side = quads.clamp(1, 32) as usize; // quads per scale side
         let (ds, da) = (1.0 / na as f64, 1.0 / nr as f64);
         let (over_s, over_a) = (1.35, 1.25);
         let (dome, lift) = (0.05, 0.03);
@@ -425,11 +437,11 @@ impl Mesh {
                     (body.point(s, a, 1.0 + h), [s as f32, a as f32])
                 };
                 let base = raw.positions.len() as u32;
-                for qi in 0..=Q {
-                    for pi in 0..=Q {
+                for qi in 0..=q_side {
+                    for pi in 0..=q_side {
                         let (p, q) = (
-                            2.0 * pi as f64 / Q as f64 - 1.0,
-                            2.0 * qi as f64 / Q as f64 - 1.0,
+                            2.0 * pi as f64 / q_side as f64 - 1.0,
+                            2.0 * qi as f64 / q_side as f64 - 1.0,
                         );
                         let (pos, uv) = at(p, q);
                         // Analytic (central-difference) normal of the dome: smooth in a scale.
@@ -442,9 +454,9 @@ impl Mesh {
                         raw.uvs.push(Some(uv));
                     }
                 }
-                let k = |pi: usize, qi: usize| base + (qi * (Q + 1) + pi) as u32;
-                for qi in 0..Q {
-                    for pi in 0..Q {
+                let k = |pi: usize, qi: usize| base + (qi * (q_side + 1) + pi) as u32;
+                for qi in 0..q_side {
+                    for pi in 0..q_side {
                         // Counter-clockwise seen from outside: ∂P/∂q × ∂P/∂p points out.
                         let (a, b, c, d) =
                             (k(pi, qi), k(pi, qi + 1), k(pi + 1, qi + 1), k(pi + 1, qi));
@@ -1129,6 +1141,25 @@ mod tests {
             }
         }
         assert!(checked > 1000);
+    }
+
+    #[test]
+    fn scaly_snake_resolution_follows_the_quads_per_scale() {
+        let counts: Vec<(usize, usize)> = [1, 2, 6, 12]
+            .iter()
+            .map(|&q| {
+                let m = Mesh::scaly_snake_with(2.0, 0.08, 64, 18, q);
+                (m.vertices.len(), m.indices.len() / 3)
+            })
+            .collect();
+        println!("scaly-snake vertices, triangles at 1, 2, 6, 12 quads a scale side: {counts:?}");
+        assert_eq!(
+            Mesh::scaly_snake_with(2.0, 0.08, 64, 18, 6).vertices.len(),
+            Mesh::builtin("scaly-snake").unwrap().vertices.len()
+        );
+        assert!(counts
+            .windows(2)
+            .all(|w| w[0].0 < w[1].0 && w[0].1 < w[1].1));
     }
 
     #[test]

@@ -41,7 +41,7 @@ impl Variant {
     /// read only the height field and coherence length).
     pub fn material(&self, base: &Material) -> Material {
         match self.kind {
-            VariantKind::Flss | VariantKind::Nmm => Material {
+            VariantKind::Flss | VariantKind::Nmm | VariantKind::Pq => Material {
                 expansion: self.expansion,
                 terms: crate::material::Terms::Fixed(self.terms),
                 window_radius: self.window_radius,
@@ -82,6 +82,14 @@ pub fn flss_variants(terms: usize) -> Vec<Variant> {
         Variant {
             kind: VariantKind::Nmm,
             ..v("nmm taylor R=2", Taylor, terms, 2, 5, Rg32f)
+        },
+        Variant {
+            kind: VariantKind::Pq,
+            ..v("pq taylor", Taylor, terms, 2, 5, Rg32f)
+        },
+        Variant {
+            kind: VariantKind::Pq,
+            ..v("pq taylor 1nm", Taylor, terms, 2, 1, Rg32f)
         },
     ]
 }
@@ -137,6 +145,15 @@ pub struct ErrorStats {
     /// Median and 99th percentile of the same CIEDE2000 values.
     pub p50_de: f64,
     pub p99_de: f64,
+}
+
+/// Linear sRGB → CIE XYZ (the inverse of MODEL §5's matrix, IEC 61966-2-1).
+fn linear_srgb_to_xyz(c: [f64; 3]) -> [f64; 3] {
+    [
+        0.4124 * c[0] + 0.3576 * c[1] + 0.1805 * c[2],
+        0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2],
+        0.0193 * c[0] + 0.1192 * c[1] + 0.9505 * c[2],
+    ]
 }
 
 /// Compares `xyz` with `reference` sample by sample.
@@ -204,6 +221,11 @@ pub struct VariantReport {
     pub vs_reference: ErrorStats,
     /// GPU against the f64 model of the same variant (float32 and driver error only).
     pub vs_model: ErrorStats,
+    /// With `--per-vertex`: the mesh view against the per-pixel FLSS 1 nm mesh reference.
+    pub mesh_vs_reference: Option<ErrorStats>,
+    /// A per-vertex row (thesis §1.5.1): only its mesh columns are measured (a BRDF map has
+    /// no vertices; its map columns repeat the per-pixel variant's).
+    pub per_vertex: bool,
 }
 
 /// What to profile.
@@ -223,6 +245,9 @@ pub struct ProfileSetup {
     pub frames: usize,
     /// A mesh view timed per variant (not scored), when given.
     pub mesh: Option<Scene>,
+    /// Also evaluate the variants that have a per-vertex stage per vertex on the mesh view,
+    /// and score every mesh view against a per-pixel FLSS 1 nm render of it.
+    pub per_vertex: bool,
     pub cache_dir: Option<PathBuf>,
 }
 
@@ -295,6 +320,47 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
     renderer.set_keep_models(true);
     renderer.set_cache_dir(setup.cache_dir.clone());
     let progress = bar(setup.variants.len(), "profile");
+    // The mesh view's reference for per-vertex: per-pixel FLSS at 1 nm (on the map it
+    // matches the f64 direct sum to 9e-5 rel L2, README), rendered once.
+    let mesh_reference: Option<Vec<[f64; 3]>> = match (&setup.mesh, setup.per_vertex) {
+        (Some(scene), true) => {
+            progress.set_message("profile: mesh reference (flss 1 nm, per pixel)");
+            let reference = Variant {
+                name: "mesh reference".into(),
+                kind: VariantKind::Flss,
+                expansion: Expansion::Taylor,
+                terms: setup
+                    .variants
+                    .iter()
+                    .map(|v| v.terms)
+                    .max()
+                    .unwrap_or(30)
+                    .max(1),
+                window_radius: 2,
+                lambda_step_nm: 1,
+                storage: StorageFormat::Rg32f,
+                table: TableOptions::default(),
+            };
+            let prepared = reference
+                .material(&setup.base)
+                .prepare(setup.cache_dir.as_deref())?;
+            renderer.set_variant(VariantKind::Flss);
+            renderer.set_storage_format(StorageFormat::Rg32f);
+            renderer.set_per_vertex(false);
+            let f = renderer.render_scene(scene, &prepared)?;
+            Some(f.rgb.iter().map(|c| c.map(f64::from)).collect())
+        }
+        _ => None,
+    };
+    let mesh_error = |rgb: &[[f32; 3]]| -> Option<ErrorStats> {
+        let reference = mesh_reference.as_ref()?;
+        let xyz: Vec<[f64; 3]> = rgb
+            .iter()
+            .map(|c| linear_srgb_to_xyz(c.map(f64::from)))
+            .collect();
+        let refs: Vec<[f64; 3]> = reference.iter().map(|c| linear_srgb_to_xyz(*c)).collect();
+        Some(error_stats(&xyz, &refs))
+    };
     for variant in &setup.variants {
         progress.set_message(format!("profile: {}", variant.name));
         let material = variant.material(&setup.base);
@@ -359,55 +425,106 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             |&(i, j): &(u32, u32)| map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
         let conditioning = renderer.table_model().and_then(|t| t.conditioning());
         let density = crate::brdf::nmm::Density::new();
-        let modelled: Vec<[f64; 3]> = match (renderer.table_model(), renderer.nmm_grating()) {
-            (Some(t), _) => pixels
-                .iter()
-                .map(|p| t.xyz(&prepared.shading, wi32, wr_of(p)))
-                .collect(),
-            (None, Some(g)) => pixels
-                .iter()
-                .map(|p| {
-                    crate::brdf::nmm::xyz(
-                        &prepared.stack,
-                        prepared.terms(),
-                        &prepared.window,
-                        &prepared.shading,
-                        &prepared.colour,
-                        &g,
-                        &density,
-                        wi32,
-                        wr_of(p),
-                        true,
-                    )
-                })
-                .collect(),
-            (None, None) => pixels
-                .iter()
-                .map(|p| {
-                    model::xyz(
-                        &prepared.stack,
-                        prepared.terms(),
-                        &prepared.window,
-                        &prepared.shading,
-                        &prepared.colour,
-                        wi32,
-                        wr_of(p),
-                    )
-                })
-                .collect(),
-        };
-        let mesh_gpu_ms = match &setup.mesh {
-            Some(scene) => {
-                renderer.render_scene(scene, &prepared)?;
+        let periodicity = renderer.pq_periodicity();
+        let modelled: Vec<[f64; 3]> =
+            match (renderer.table_model(), renderer.nmm_grating(), periodicity) {
+                (_, _, Some(g)) => pixels
+                    .iter()
+                    .map(|p| {
+                        crate::brdf::pq::xyz(
+                            &prepared.stack,
+                            prepared.terms(),
+                            &g,
+                            &prepared.shading,
+                            &prepared.colour,
+                            wi32,
+                            wr_of(p),
+                            crate::brdf::pq::Form::Intensity,
+                        )
+                    })
+                    .collect(),
+                (Some(t), _, _) => pixels
+                    .iter()
+                    .map(|p| t.xyz(&prepared.shading, wi32, wr_of(p)))
+                    .collect(),
+                (None, Some(g), None) => pixels
+                    .iter()
+                    .map(|p| {
+                        crate::brdf::nmm::xyz(
+                            &prepared.stack,
+                            prepared.terms(),
+                            &prepared.window,
+                            &prepared.shading,
+                            &prepared.colour,
+                            &g,
+                            &density,
+                            wi32,
+                            wr_of(p),
+                            true,
+                        )
+                    })
+                    .collect(),
+                (None, None, None) => pixels
+                    .iter()
+                    .map(|p| {
+                        model::xyz(
+                            &prepared.stack,
+                            prepared.terms(),
+                            &prepared.window,
+                            &prepared.shading,
+                            &prepared.colour,
+                            wi32,
+                            wr_of(p),
+                        )
+                    })
+                    .collect(),
+            };
+        // The mesh view: timed per pixel, and per vertex where the variant has that stage.
+        let mesh_view =
+            |r: &mut Renderer, per_vertex: bool| -> Result<Option<(f64, Vec<[f32; 3]>)>> {
+                let Some(scene) = &setup.mesh else {
+                    return Ok(None);
+                };
+                r.set_per_vertex(per_vertex);
+                let mut last = r.render_scene(scene, &prepared)?;
                 let mut t = Vec::new();
                 for _ in 0..setup.frames {
-                    t.extend(renderer.render_scene(scene, &prepared)?.gpu_ms);
+                    last = r.render_scene(scene, &prepared)?;
+                    t.extend(last.gpu_ms);
                 }
-                median(t)
-            }
-            None => None,
+                r.set_per_vertex(false);
+                Ok(median(t).map(|ms| (ms, last.rgb)))
+            };
+        let mesh = mesh_view(renderer, false)?;
+        let mesh_gpu_ms = mesh.as_ref().map(|m| m.0);
+        let per_vertex_mesh = if setup.per_vertex
+            && crate::render::variant::per_vertex_file(variant.kind).is_some()
+        {
+            mesh_view(renderer, true)?
+        } else {
+            None
         };
         let v = &frame.variant;
+        if let Some((ms, rgb)) = &per_vertex_mesh {
+            reports.push(VariantReport {
+                variant: Variant {
+                    name: format!("{} per-vertex", variant.name),
+                    ..variant.clone()
+                },
+                gpu_ms: None,
+                wall_ms: 0.0,
+                build_ms: v.build_ms,
+                gpu_bytes: v.gpu_bytes,
+                fetches: v.fetches,
+                detail: format!("{} per-vertex", v.name),
+                mesh_gpu_ms: Some(*ms),
+                conditioning: None,
+                vs_reference: error_stats(&gpu_xyz, &refs),
+                vs_model: error_stats(&gpu_xyz, &modelled),
+                mesh_vs_reference: mesh_error(rgb),
+                per_vertex: true,
+            });
+        }
         reports.push(VariantReport {
             variant: variant.clone(),
             gpu_ms: median(gpu),
@@ -420,7 +537,14 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             conditioning,
             vs_reference: error_stats(&gpu_xyz, &refs),
             vs_model: error_stats(&gpu_xyz, &modelled),
+            mesh_vs_reference: mesh.as_ref().and_then(|m| mesh_error(&m.1)),
+            per_vertex: false,
         });
+        if per_vertex_mesh.is_some() {
+            // Per-pixel row first, its per-vertex row after it.
+            let n = reports.len();
+            reports.swap(n - 1, n - 2);
+        }
         progress.inc(1);
     }
     progress.finish_and_clear();
@@ -447,10 +571,33 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
         setup.pixels,
         setup.frames
     );
-    s.push_str("| variant | fetches/px | build ms | GPU MB | GPU ms | mesh GPU ms | rel L2 vs ref | max ΔY vs ref | ΔE p50 | ΔE p99 | max ΔE | rel L2 vs f64 model |\n");
-    s.push_str("|---|---|---|---|---|---|---|---|---|---|---|---|\n");
+    let mesh_scored = reports.iter().any(|r| r.mesh_vs_reference.is_some());
+    if mesh_scored {
+        s.push_str("Per-vertex rows (thesis §1.5.1) measure the mesh view only: `mesh GPU ms` evaluated per vertex, and the last two columns, the mesh view against a per-pixel FLSS 1 nm render of it (rel L2 of XYZ, ΔE2000 p99). A BRDF map has no vertices: their map columns are `—`.\n\n");
+    }
+    s.push_str("| variant | fetches/px | build ms | GPU MB | GPU ms | mesh GPU ms | rel L2 vs ref | max ΔY vs ref | ΔE p50 | ΔE p99 | max ΔE | rel L2 vs f64 model |");
+    s.push_str(if mesh_scored {
+        " mesh rel L2 vs 1 nm | mesh ΔE p99 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+    } else {
+        "\n|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+    });
     for r in reports {
         let e = &r.vs_reference;
+        let mesh_cols = if mesh_scored {
+            r.mesh_vs_reference.map_or(" — | — |".to_string(), |m| {
+                format!(" {:.2e} | {:.3} |", m.rel_l2, m.p99_de)
+            })
+        } else {
+            String::new()
+        };
+        if r.per_vertex {
+            s.push_str(&format!(
+                "| {} | — | — | — | — | {} | — | — | — | — | — | — |{mesh_cols}\n",
+                r.variant.name,
+                ms(r.mesh_gpu_ms)
+            ));
+            continue;
+        }
         s.push_str(&format!(
             "| {} | {} | {:.0} | {:.1} | {} | {} | {:.2e} | {:.2e} | {:.3} | {:.3} | {:.3} | {:.2e} |\n",
             r.variant.name,
@@ -466,6 +613,9 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
             e.max_de,
             r.vs_model.rel_l2
         ));
+        s.pop();
+        s.push_str(&mesh_cols);
+        s.push('\n');
     }
     for r in reports {
         if let Some(k) = r.conditioning {
@@ -481,12 +631,12 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
 
 /// The CSV of the reports: the columns of the first profiler, then the new ones.
 pub fn format_csv(reports: &[VariantReport]) -> String {
-    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning\n");
+    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref\n");
     let opt = |v: Option<f64>| v.map_or(String::new(), |g| g.to_string());
     for r in reports {
         let v = &r.variant;
         csv.push_str(&format!(
-            "{},{},{},{},{},{:?},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{:?},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             v.name,
             v.expansion,
             v.terms,
@@ -509,7 +659,10 @@ pub fn format_csv(reports: &[VariantReport]) -> String {
             r.vs_reference.p50_de,
             r.vs_reference.p99_de,
             r.vs_model.p99_de,
-            opt(r.conditioning)
+            opt(r.conditioning),
+            r.per_vertex,
+            opt(r.mesh_vs_reference.map(|m| m.rel_l2)),
+            opt(r.mesh_vs_reference.map(|m| m.p99_de))
         ));
     }
     csv
@@ -548,6 +701,14 @@ pub struct ProfileArgs {
     /// Side of the mesh view (the default scene) timed per variant; 0: none.
     #[arg(long, default_value_t = 128)]
     pub mesh_size: u32,
+    /// Mesh view: quads along each side of a scale of the default scene's `scaly-snake`
+    /// (its resolution; 6 by default).
+    #[arg(long)]
+    pub mesh_quads: Option<u32>,
+    /// Also evaluate flss, nmm and pq per vertex on the mesh view (thesis §1.5.1), and score
+    /// every mesh view against a per-pixel FLSS 1 nm render of it.
+    #[arg(long)]
+    pub per_vertex: bool,
     /// Also write the table as CSV.
     #[arg(long)]
     pub csv: Option<PathBuf>,
@@ -594,10 +755,27 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     }
     let mut renderer = Renderer::new(crate::render::validation_requested())?;
     let base = args.material.apply(Material::default());
+    if args.per_vertex && args.mesh_size == 0 {
+        return Err(Error::invalid(
+            "per-vertex",
+            "needs the mesh view (--mesh-size > 0): a BRDF map has no vertices",
+        ));
+    }
+    if let Some(q) = args.mesh_quads {
+        if !(1..=32).contains(&q) || args.mesh_size == 0 {
+            return Err(Error::invalid(
+                "mesh-quads",
+                format!("{q}; expected 1..=32 with a mesh view (--mesh-size > 0)"),
+            ));
+        }
+    }
     let mesh = (args.mesh_size > 0).then(|| {
         let mut s = Scene::default_scene();
         s.output.width = args.mesh_size;
         s.output.height = args.mesh_size;
+        if args.mesh_quads.is_some() {
+            s.mesh.scale_quads = args.mesh_quads;
+        }
         s
     });
     let setup = ProfileSetup {
@@ -610,6 +788,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         brightest: args.brightest,
         frames: args.frames,
         mesh,
+        per_vertex: args.per_vertex,
         cache_dir: (!args.no_cache)
             .then(|| args.cache_dir.clone().or_else(default_cache_dir))
             .flatten(),
@@ -620,7 +799,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         crate::fsutil::write_atomic(path, format_csv(&reports).as_bytes())?;
     }
     if let Some(path) = &args.plot {
-        let points: Vec<crate::plot::Point> = reports
+        let mut points: Vec<crate::plot::Point> = reports
             .iter()
             .filter_map(|r| {
                 r.gpu_ms.map(|t| crate::plot::Point {
@@ -630,6 +809,20 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
                 })
             })
             .collect();
+        // Per-vertex rows and their per-pixel twins on the mesh view (mesh GPU time, error
+        // against the per-pixel FLSS 1 nm mesh render).
+        points.extend(reports.iter().filter_map(|r| {
+            let e = r.mesh_vs_reference?;
+            let per_vertex_twin = r.per_vertex
+                || reports
+                    .iter()
+                    .any(|o| o.variant.name == format!("{} per-vertex", r.variant.name));
+            (per_vertex_twin && e.rel_l2 > 0.0).then(|| crate::plot::Point {
+                label: format!("{} (mesh)", r.variant.name),
+                time_ms: r.mesh_gpu_ms.unwrap_or(f64::NAN),
+                error: e.rel_l2,
+            })
+        }));
         crate::plot::error_vs_time(
             path,
             &format!(

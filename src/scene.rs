@@ -148,6 +148,10 @@ pub struct MeshSpec {
     /// Flat skin scales pitched about the tangent by up to this many degrees.
     #[serde(default)]
     pub scale_pitch_deg: f32,
+    /// `scaly-snake` only: quads along each side of a scale (1..=32, default 6): the mesh
+    /// resolution that per-vertex evaluation (thesis §1.5.1) depends on.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_quads: Option<u32>,
 }
 
 fn one() -> f32 {
@@ -164,6 +168,7 @@ impl Default for MeshSpec {
             scale: 1.0,
             scale_roll_deg: 0.0,
             scale_pitch_deg: 0.0,
+            scale_quads: None,
         }
     }
 }
@@ -183,6 +188,9 @@ impl MeshSpec {
     pub fn load_untransformed(&self) -> Result<Mesh> {
         match (&self.path, &self.builtin) {
             (Some(p), None) => Mesh::load_obj(p),
+            (None, Some(b)) if b == "scaly-snake" && self.scale_quads.is_some() => Ok(
+                Mesh::scaly_snake_with(2.0, 0.08, 64, 18, self.scale_quads.unwrap_or(6)),
+            ),
             (None, Some(b)) => Mesh::builtin(b).ok_or_else(|| {
                 Error::invalid(
                     "mesh",
@@ -569,6 +577,14 @@ impl Scene {
                 ))
             }
             _ => {}
+        }
+        if let Some(q) = m.scale_quads {
+            if m.builtin.as_deref() != Some("scaly-snake") {
+                return Err("[mesh] scale_quads applies to builtin = \"scaly-snake\" only".into());
+            }
+            if !(1..=32).contains(&q) {
+                return Err(format!("[mesh] scale_quads = {q}: expected 1 to 32"));
+            }
         }
         finite3("[mesh] translate", m.translate)?;
         finite3("[mesh] rotate_deg", m.rotate_deg)?;

@@ -590,6 +590,12 @@ fn corpus() -> Vec<Case> {
             Fail("line 3, column 1: [mesh]"),
         ),
         case(
+            "scene: scale_quads on a mesh that is not scaly-snake",
+            |d| scene(d, "[mesh]\nbuiltin = \"sphere\"\nscale_quads = 4\n"),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("scale_quads applies to builtin"),
+        ),
+        case(
             "scene: /dev/zero",
             |d| link("/dev/zero", &d.join("z.toml")),
             &["render", "--scene", "{d}/z.toml", "-o", "{d}/o.png"],
@@ -861,6 +867,25 @@ fn corpus() -> Vec<Case> {
             |_| {},
             &["render", "--brdf-map", "--theta-i", "91", "-o", "{d}/m.exr"],
             Fail("theta-i"),
+        ),
+        case(
+            "flag: render --brdf-map --per-vertex",
+            |_| {},
+            &["render", "--brdf-map", "--per-vertex", "-o", "{d}/m.exr"],
+            Fail("a BRDF map has no vertices"),
+        ),
+        case(
+            "flag: render --variant volume --per-vertex",
+            |_| {},
+            &[
+                "render",
+                "--variant",
+                "volume",
+                "--per-vertex",
+                "-o",
+                "{d}/o.png",
+            ],
+            Fail("'volume' has no per-vertex evaluation"),
         ),
         case(
             "flag: --size without --brdf-map",

@@ -9,6 +9,7 @@
 pub mod bessel;
 pub mod model;
 pub mod nmm;
+pub mod pq;
 pub mod query;
 pub mod reference;
 pub mod table;

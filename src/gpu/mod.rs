@@ -31,6 +31,18 @@ pub mod shaders {
     pub const FLSS_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/flss.frag.spv"));
     /// Variant `nmm`: FLSS at the wavelengths of the grating's orders.
     pub const NMM_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/nmm.frag.spv"));
+    /// Variant `pq`: one period's spectrum × the periodic factor.
+    pub const PQ_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/pq.frag.spv"));
+    /// Per-vertex evaluation (thesis §1.5.1): the vertex stages of `flss`, `nmm`, `pq` and
+    /// the fragment stage that blends the interpolated colour.
+    pub const FLSS_VERTEX_VERT: &[u8] =
+        include_bytes!(concat!(env!("OUT_DIR"), "/flss_vertex.vert.spv"));
+    pub const NMM_VERTEX_VERT: &[u8] =
+        include_bytes!(concat!(env!("OUT_DIR"), "/nmm_vertex.vert.spv"));
+    pub const PQ_VERTEX_VERT: &[u8] =
+        include_bytes!(concat!(env!("OUT_DIR"), "/pq_vertex.vert.spv"));
+    pub const PER_VERTEX_FRAG: &[u8] =
+        include_bytes!(concat!(env!("OUT_DIR"), "/per_vertex.frag.spv"));
     /// Variant `volume`: G(u, v, w) in a 3D texture.
     pub const VOLUME_FRAG: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/volume.frag.spv"));
     /// Variant `chebyshev-w`: Chebyshev coefficient planes in w, Clenshaw.

@@ -85,6 +85,10 @@ pub struct RenderArgs {
     /// Storage format of the DFT terms on the GPU (flss).
     #[arg(long, value_enum, default_value_t = StorageFormat::Rg32f)]
     pub storage: StorageFormat,
+    /// Evaluate the BRDF per vertex and interpolate the colour (thesis §1.5.1; flss, nmm,
+    /// pq; scenes only: a BRDF map has no vertices).
+    #[arg(long)]
+    pub per_vertex: bool,
     #[command(flatten)]
     pub table: TableArgs,
     #[command(flatten)]
@@ -103,6 +107,30 @@ pub struct RenderArgs {
     /// Say what was left out in detail (which wavelengths, the texel band, the terms).
     #[arg(long)]
     pub verbose: bool,
+}
+
+/// Refuses `--per-vertex` where it cannot apply: on a BRDF map (no vertices) and for a
+/// variant without a per-vertex stage. Checked before the device is opened.
+pub fn check_per_vertex(per_vertex: bool, brdf_map: bool, variant: VariantKind) -> Result<()> {
+    if !per_vertex {
+        return Ok(());
+    }
+    if brdf_map {
+        return Err(Error::invalid(
+            "per-vertex",
+            "a BRDF map has no vertices (every pixel is its own direction); drop --per-vertex or --brdf-map",
+        ));
+    }
+    if super::variant::per_vertex_file(variant).is_none() {
+        return Err(Error::invalid(
+            "per-vertex",
+            format!(
+                "'{}' has no per-vertex evaluation: a table variant's lookup already costs about what a vertex does, so interpolating it would add error and save nothing; use flss, nmm or pq",
+                variant.resolve()
+            ),
+        ));
+    }
+    Ok(())
 }
 
 /// Whether to enable Vulkan validation: always in debug builds, or with
@@ -129,10 +157,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     crate::image_io::output_format(&args.out)?;
     crate::guard::render_args(args, &scene)?;
+    check_per_vertex(args.per_vertex, args.brdf_map, args.variant)?;
     // The device first: a machine without Vulkan fails before the term precompute.
     let mut renderer = Renderer::new(validation_requested())?;
     renderer.set_storage_format(args.storage);
     renderer.set_variant(args.variant);
+    renderer.set_per_vertex(args.per_vertex);
     renderer.set_table_options(args.table.options());
     renderer.set_leave_out(!args.keep_all);
     if args.lambda_nm.is_some() && !args.variant.is_spectral() {

@@ -18,7 +18,7 @@ use std::time::Instant;
 
 use ash::vk;
 
-pub use command::{run, validation_requested, RenderArgs, TableArgs};
+pub use command::{check_per_vertex, run, validation_requested, RenderArgs, TableArgs};
 pub use pass::{MapView, PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 
@@ -149,6 +149,8 @@ pub struct Renderer {
     /// Leave out what a draw cannot need (issue #8; off by default, `render` and `view`
     /// switch it on).
     leave_out: bool,
+    /// Mesh frames evaluate the BRDF per vertex (thesis §1.5.1; `flss`, `nmm`, `pq`).
+    per_vertex: bool,
     cache_dir: Option<std::path::PathBuf>,
     prepared: Option<(PreparedKey, Arc<dyn PreparedVariant>)>,
     /// Table variants: when positive, built for the needed region widened by this much and
@@ -180,6 +182,7 @@ impl Renderer {
             table: TableOptions::default(),
             keep_models: false,
             leave_out: false,
+            per_vertex: false,
             cache_dir: None,
             prepared: None,
             region_margin: 0.0,
@@ -282,6 +285,23 @@ impl Renderer {
     /// What the last prepared variant left out (`None` before the first frame).
     pub fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
         self.prepared.as_ref().and_then(|(_, v)| v.left_out())
+    }
+
+    /// Mesh frames from now on evaluate the BRDF per vertex and interpolate the colour
+    /// (thesis §1.5.1). Variants without a per-vertex stage refuse mesh frames then; BRDF
+    /// maps (no vertices) are drawn per pixel.
+    pub fn set_per_vertex(&mut self, per_vertex: bool) {
+        self.per_vertex = per_vertex;
+    }
+
+    /// Whether mesh frames are evaluated per vertex.
+    pub fn per_vertex(&self) -> bool {
+        self.per_vertex
+    }
+
+    /// The periodic structure `pq` found for the last frame (when it drew).
+    pub fn pq_periodicity(&self) -> Option<crate::brdf::pq::Periodicity> {
+        self.prepared.as_ref().and_then(|(_, v)| v.periodicity())
     }
 
     /// The grating period `nmm` estimated for the last frame (when it drew).
@@ -523,6 +543,10 @@ impl Renderer {
         aspect: f32,
     ) -> Result<ScenePass> {
         let out = &scene.output;
+        if self.per_vertex {
+            // Before any table is built for nothing.
+            self.per_vertex_shader()?;
+        }
         let region = scene_region(scene, mesh).unwrap_or(Region::ALL);
         self.prepare_variant(prepared, region, OutputMode::Mesh)?;
         let mut params = self.params(prepared);
@@ -712,6 +736,23 @@ impl Renderer {
         ShaderModule::new(&self.dev, name, spirv)
     }
 
+    /// The current variant's per-vertex stage (thesis §1.5.1), or why it has none.
+    fn per_vertex_shader(&self) -> Result<ShaderModule> {
+        let (Some(spirv), Some(name)) = (
+            self.variant.implementation().per_vertex_spirv(),
+            variant::per_vertex_file(self.variant),
+        ) else {
+            return Err(Error::invalid(
+                "per-vertex",
+                format!(
+                    "'{}' has no per-vertex evaluation (its table lookup already costs about as much as a vertex; per-vertex is built for flss, nmm and pq)",
+                    self.variant
+                ),
+            ));
+        };
+        self.shader(name, spirv)
+    }
+
     /// Builds a pass: layout, uniform and colour buffers, descriptor set and a pipeline for
     /// `render_pass` specialised for `output` and `options`.
     #[allow(clippy::too_many_arguments)]
@@ -748,8 +789,20 @@ impl Renderer {
                 stages: vk::ShaderStageFlags::FRAGMENT,
             },
         ];
-        bindings.extend(variant.bindings());
-        let stats = variant.stats();
+        let per_vertex = self.per_vertex && mesh.is_some();
+        bindings.extend(variant.bindings().into_iter().map(|mut b| {
+            if per_vertex {
+                b.stages |= vk::ShaderStageFlags::VERTEX;
+            }
+            b
+        }));
+        if per_vertex {
+            bindings[1].stages |= vk::ShaderStageFlags::VERTEX;
+        }
+        let mut stats = variant.stats();
+        if per_vertex {
+            stats.name = format!("{} per-vertex", stats.name);
+        }
         let layout = PipelineLayout::new(
             dev,
             &format!("{} layout", stats.name),
@@ -825,7 +878,9 @@ impl Renderer {
             None => ("brdfmap.vert", None, false),
             Some(_) => ("diffraction.vert", Some(mesh_vertex_layout()), true),
         };
-        let override_vertex = if self.shader_overrides.contains_key(vertex_name) {
+        let override_vertex = if per_vertex {
+            Some(self.per_vertex_shader()?)
+        } else if self.shader_overrides.contains_key(vertex_name) {
             Some(self.shader(vertex_name, &[])?)
         } else {
             None
@@ -841,10 +896,14 @@ impl Renderer {
         spec[6] = texture_blending as u32;
         spec[8] = output as u32;
         variant.specialise(&mut spec);
-        let fragment = self.shader(
-            fragment_file(self.variant),
-            self.variant.implementation().fragment_spirv(),
-        )?;
+        let fragment = if per_vertex {
+            self.shader("per_vertex.frag", shaders::PER_VERTEX_FRAG)?
+        } else {
+            self.shader(
+                fragment_file(self.variant),
+                self.variant.implementation().fragment_spirv(),
+            )?
+        };
         let name = format!(
             "{} {output:?}{}{}{}",
             variant.pipeline_name(),
@@ -935,6 +994,7 @@ pub fn fragment_file(kind: VariantKind) -> &'static str {
     match kind.resolve() {
         VariantKind::Flss => "flss.frag",
         VariantKind::Nmm => "nmm.frag",
+        VariantKind::Pq => "pq.frag",
         VariantKind::Dhillon => "dhillon.frag",
         VariantKind::ChebyshevW => "chebyshev_w.frag",
         // resolve() never returns the alias.

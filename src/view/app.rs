@@ -38,6 +38,7 @@ const REGION_MARGIN: f64 = 0.25;
 /// What `diffract view` was asked for (parsed arguments).
 pub(super) struct Settings {
     pub variant: VariantKind,
+    pub per_vertex: bool,
     pub storage: StorageFormat,
     pub table: TableOptions,
     pub cache_dir: Option<PathBuf>,
@@ -269,6 +270,7 @@ impl Viewer {
         let dev = Device::on_surface(instance, &surface)?;
         let mut renderer = Renderer::on(dev.clone())?;
         renderer.set_variant(settings.variant);
+        renderer.set_per_vertex(settings.per_vertex);
         renderer.set_storage_format(settings.storage);
         renderer.set_table_options(settings.table);
         renderer.set_cache_dir(settings.cache_dir.clone());
@@ -283,6 +285,7 @@ impl Viewer {
             .map_err(Error::vk("vkCreateCommandPool"))?;
         dev.set_name(pool, "viewer command pool");
         let mut controls = Controls::new(ViewState::from_scene(scene), settings.variant);
+        controls.per_vertex = settings.per_vertex;
         controls.map = settings.map;
         controls.state.map_exposure = settings.map_exposure;
         let mut viewer = Viewer {

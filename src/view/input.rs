@@ -81,6 +81,9 @@ pub struct Controls {
     pub variant: VariantKind,
     /// The BRDF map is drawn beside the mesh.
     pub map: bool,
+    /// Mesh frames are evaluated per vertex: `V` cycles only the variants that have a
+    /// vertex stage.
+    pub per_vertex: bool,
     /// Left, right, middle.
     buttons: [bool; 3],
     shift: bool,
@@ -93,6 +96,7 @@ impl Controls {
             state,
             variant: variant.resolve(),
             map: false,
+            per_vertex: false,
             buttons: [false; 3],
             shift: false,
             cursor: None,
@@ -122,7 +126,13 @@ impl Controls {
                     return Effect::Map;
                 }
                 "v" => {
-                    let all = VariantKind::ALL;
+                    let per_vertex = self.per_vertex;
+                    let all: Vec<VariantKind> = VariantKind::ALL
+                        .into_iter()
+                        .filter(|k| {
+                            !per_vertex || crate::render::variant::per_vertex_file(*k).is_some()
+                        })
+                        .collect();
                     let i = all.iter().position(|k| *k == self.variant).unwrap_or(0);
                     self.variant = all[(i + 1) % all.len()];
                     return Effect::Rebuild(format!("variant → {}", self.variant.name()));

@@ -48,6 +48,10 @@ pub struct ViewArgs {
     /// Storage format of the DFT terms on the GPU (flss).
     #[arg(long, value_enum, default_value_t = StorageFormat::Rg32f)]
     pub storage: StorageFormat,
+    /// Evaluate the BRDF per vertex and interpolate the colour (thesis §1.5.1; flss, nmm,
+    /// pq; V then cycles through those).
+    #[arg(long)]
+    pub per_vertex: bool,
     #[command(flatten)]
     pub table: TableArgs,
     #[command(flatten)]
@@ -183,9 +187,11 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         .iter()
         .map(|a| parse_at(a))
         .collect::<Result<Vec<_>>>()?;
+    crate::render::check_per_vertex(args.per_vertex, false, args.variant)?;
     scene.material = args.material.apply(scene.material.clone());
     let settings = app::Settings {
         variant: args.variant.resolve(),
+        per_vertex: args.per_vertex,
         storage: args.storage,
         table: args.table.options(),
         cache_dir: if args.no_cache {

@@ -32,6 +32,10 @@ impl Variant for Flss {
         shaders::FLSS_FRAG
     }
 
+    fn per_vertex_spirv(&self) -> Option<&'static [u8]> {
+        Some(shaders::FLSS_VERTEX_VERT)
+    }
+
     fn prepare(
         &self,
         dev: &Arc<Device>,

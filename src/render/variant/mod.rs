@@ -10,6 +10,7 @@ mod chebyshev_w;
 mod dhillon;
 mod flss;
 mod nmm;
+mod pq;
 mod table;
 mod volume;
 
@@ -37,6 +38,8 @@ pub enum VariantKind {
     Flss,
     /// Thesis §1.5.2 done right: FLSS at the wavelengths of the grating's orders only.
     Nmm,
+    /// Thesis §1.5.3 done right: one period's spectrum (3×3 sinc taps) × the periodic factor.
+    Pq,
     /// Dhillon et al. 2014: tables of the powers of w, Horner per pixel.
     Dhillon,
     /// G as a Chebyshev series in w: K bilinear fetches, Clenshaw.
@@ -49,9 +52,10 @@ pub enum VariantKind {
 
 impl VariantKind {
     /// Every variant, the alias excluded, in listing order.
-    pub const ALL: [VariantKind; 5] = [
+    pub const ALL: [VariantKind; 6] = [
         VariantKind::Flss,
         VariantKind::Nmm,
+        VariantKind::Pq,
         VariantKind::Dhillon,
         VariantKind::ChebyshevW,
         VariantKind::Volume,
@@ -74,6 +78,7 @@ impl VariantKind {
         match self.resolve() {
             VariantKind::Flss => "flss",
             VariantKind::Nmm => "nmm",
+            VariantKind::Pq => "pq",
             VariantKind::Dhillon => "dhillon",
             VariantKind::ChebyshevW => "chebyshev-w",
             VariantKind::Volume => "volume",
@@ -86,6 +91,7 @@ impl VariantKind {
         match self.resolve() {
             VariantKind::Flss => "thesis Algorithm 3: every wavelength × term × window tap per pixel (exact to its T, R, Δλ)",
             VariantKind::Nmm => "thesis §1.5.2 done right: FLSS at the wavelengths of the grating's orders only, Jacobian-weighted (needs a dominant period)",
+            VariantKind::Pq => "thesis §1.5.3 done right: one period's spectrum from 3×3 periodic-sinc taps × |F_x F_y|² of N copies, N·L = 2√π σs (needs whole copies of one period)",
             VariantKind::Dhillon => "Dhillon et al. 2014: G = Σ_p I_p(u,v)·w^p from f64 tables, Horner (monomials: ill-conditioned in f32)",
             VariantKind::ChebyshevW => "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw in w, cubic B-spline in (u,v): 4K bilinear fetches",
             VariantKind::Volume => "G(u,v,w) in a 3D texture from f64 tables: one trilinear fetch (the floor)",
@@ -111,6 +117,10 @@ impl VariantKind {
                 let taps = (2 * material.window_radius + 1).pow(2);
                 (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * (terms + 1) * taps
             }
+            VariantKind::Pq => {
+                let lambdas = (400 / material.lambda_step_nm.max(1) + 1) as usize;
+                lambdas * (terms + 1) * crate::brdf::pq::TAPS.pow(2)
+            }
             VariantKind::Volume => 1,
             VariantKind::ChebyshevW => 4 * table.w_nodes_for(self),
             k => table.w_nodes_for(k),
@@ -121,6 +131,7 @@ impl VariantKind {
         match self.resolve() {
             VariantKind::Flss => &flss::Flss,
             VariantKind::Nmm => &nmm::Nmm,
+            VariantKind::Pq => &pq::Pq,
             VariantKind::Dhillon => &dhillon::Dhillon,
             VariantKind::ChebyshevW => &chebyshev_w::ChebyshevW,
             VariantKind::Volume => &volume::Volume,
@@ -306,6 +317,11 @@ pub(crate) trait Variant: Sync {
     fn kind(&self) -> VariantKind;
     /// SPIR-V of its fragment shader (the vertex stages are shared).
     fn fragment_spirv(&self) -> &'static [u8];
+    /// SPIR-V of its per-vertex stage (thesis §1.5.1: the BRDF evaluated per vertex, the
+    /// colour interpolated), where the variant has one.
+    fn per_vertex_spirv(&self) -> Option<&'static [u8]> {
+        None
+    }
     /// Builds and uploads what the shader reads for `setup`.
     fn prepare(&self, dev: &Arc<Device>, setup: &DrawSetup<'_>)
         -> Result<Box<dyn PreparedVariant>>;
@@ -326,6 +342,10 @@ pub(crate) trait PreparedVariant {
     fn grating(&self) -> Option<crate::brdf::nmm::Grating> {
         None
     }
+    /// The periodic structure `pq` found in the height field.
+    fn periodicity(&self) -> Option<crate::brdf::pq::Periodicity> {
+        None
+    }
     /// The f64 CPU model of a table variant, when it was kept.
     fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
         None
@@ -342,6 +362,16 @@ pub(crate) trait PreparedVariant {
     /// What it left out of what the scene does not need (`None`: nothing recorded).
     fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
         None
+    }
+}
+
+/// The glsl file of a variant's per-vertex stage (the key of hot-reloaded SPIR-V).
+pub(crate) fn per_vertex_file(kind: VariantKind) -> Option<&'static str> {
+    match kind.resolve() {
+        VariantKind::Flss => Some("flss_vertex.vert"),
+        VariantKind::Nmm => Some("nmm_vertex.vert"),
+        VariantKind::Pq => Some("pq_vertex.vert"),
+        _ => None,
     }
 }
 
@@ -382,7 +412,7 @@ pub fn list() -> String {
     );
     for kind in VariantKind::ALL {
         let memory = match kind {
-            VariantKind::Flss => {
+            VariantKind::Flss | VariantKind::Nmm | VariantKind::Pq => {
                 "term band × (T+1) layers, RG32F (≈ 120 MB for the 704² gratings)".to_string()
             }
             k => match table.spec(k, &material, 0.375, region) {
@@ -410,6 +440,7 @@ pub fn list() -> String {
             kind.summary()
         ));
     }
+    s.push_str("per-vertex (--per-vertex on render, view, profile; thesis §1.5.1): flss, nmm and pq evaluated once per mesh vertex, the colour interpolated; cost per vertex, not per pixel\n");
     s
 }
 

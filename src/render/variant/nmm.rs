@@ -43,6 +43,10 @@ impl Variant for Nmm {
         shaders::NMM_FRAG
     }
 
+    fn per_vertex_spirv(&self) -> Option<&'static [u8]> {
+        Some(shaders::NMM_VERTEX_VERT)
+    }
+
     fn prepare(
         &self,
         dev: &Arc<Device>,
