@@ -227,3 +227,129 @@ fn eval_grating_is_quiet_on_a_pipe() {
     assert_quiet(&o, &[]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("period mean"));
 }
+
+/// A 64² height field for the GPU commands (a fast precompute; their own bar or spinner is
+/// what is checked).
+fn small_field(d: &Path) -> PathBuf {
+    let hf = d.join("small.png");
+    image::GrayImage::from_fn(64, 64, |x, y| {
+        image::Luma([((x * 37 + y * 11) % 256) as u8])
+    })
+    .save(&hf)
+    .unwrap();
+    std::fs::write(d.join("small.toml"), "dh_um = 0.1\nh_max_um = 0.2\n").unwrap();
+    hf
+}
+
+/// Whether a piped run failed only because this machine has no Vulkan device (then the GPU
+/// half is skipped with a notice, like the other GPU tests).
+fn no_vulkan(o: &Output) -> bool {
+    let err = String::from_utf8_lossy(&o.stderr);
+    let none = !o.status.success() && err.contains("Vulkan");
+    if none {
+        eprintln!("SKIPPED: no Vulkan device on this machine ({})", err.trim());
+    }
+    none
+}
+
+fn render_args(hf: &str, out: &str) -> Vec<String> {
+    [
+        "render",
+        "--variant",
+        "flss",
+        "--brdf-map",
+        "--size",
+        "32",
+        "--heightfield",
+        hf,
+        "--terms",
+        "2",
+        "--window-radius",
+        "1",
+        "--lambda-step-nm",
+        "50",
+        "--no-cache",
+        "-o",
+        out,
+    ]
+    .map(String::from)
+    .to_vec()
+}
+
+#[test]
+fn render_draws_a_spinner_on_a_terminal_only() {
+    let d = scratch("render");
+    let hf = small_field(&d);
+    let out = d.join("m.exr");
+    let args = render_args(hf.to_str().unwrap(), out.to_str().unwrap());
+    let args: Vec<&str> = args.iter().map(String::as_str).collect();
+    let o = piped(&args);
+    if no_vulkan(&o) {
+        return;
+    }
+    assert_quiet(&o, &[]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("BRDF map (XYZ) 32×32"));
+    if !have_script() {
+        eprintln!("SKIPPED: util-linux `script` is not installed (no pseudo-terminal)");
+        return;
+    }
+    let (tty, stdout, ok) = on_terminal(&d, &args);
+    assert!(ok, "terminal run failed:\n{tty}");
+    assert!(tty.contains("\r\u{1b}[2K"), "no spinner drawn: {tty:?}");
+    assert!(
+        tty.contains("rendering"),
+        "the spinner is not named: {tty:?}"
+    );
+    assert!(stdout.contains("BRDF map (XYZ) 32×32"), "stdout: {stdout}");
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+#[test]
+fn profile_draws_its_bars_on_a_terminal_only() {
+    let d = scratch("profile");
+    let hf = small_field(&d);
+    let args = [
+        "profile",
+        "--heightfield",
+        hf.to_str().unwrap(),
+        "--size",
+        "16",
+        "--pixels",
+        "8",
+        "--brightest",
+        "4",
+        "--frames",
+        "1",
+        "--mesh-size",
+        "0",
+        "--only",
+        "thesis: taylor R=1",
+        "--no-cache",
+    ];
+    let o = piped(&args);
+    if no_vulkan(&o) {
+        return;
+    }
+    assert_quiet(&o, &[]);
+    assert!(String::from_utf8_lossy(&o.stdout).contains("| thesis: taylor R=1 |"));
+    if !have_script() {
+        eprintln!("SKIPPED: util-linux `script` is not installed (no pseudo-terminal)");
+        return;
+    }
+    let (tty, stdout, ok) = on_terminal(&d, &args);
+    assert!(ok, "terminal run failed:\n{tty}");
+    assert!(tty.contains("\r\u{1b}[2K"), "no bar drawn: {tty:?}");
+    assert!(
+        tty.contains("profile: thesis: taylor R=1"),
+        "no profile bar: {tty:?}"
+    );
+    assert!(
+        tty.contains("f64 reference at 1 nm"),
+        "no reference bar: {tty:?}"
+    );
+    assert!(
+        stdout.contains("| thesis: taylor R=1 |"),
+        "stdout: {stdout}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
