@@ -264,6 +264,19 @@ impl Material {
         reach: &Reach,
         precision: Precision,
     ) -> Result<PreparedMaterial> {
+        let (heightfield, plan) = self.load_planned(reach, precision)?;
+        self.prepare_planned(heightfield, plan, cache_dir)
+    }
+
+    /// The cheap first half of [`prepare_for`](Self::prepare_for): validates the numbers,
+    /// loads the height field, resolves the plan (printing its warnings and the Nyquist
+    /// warning) and refuses a stack over the memory limit, all without computing a term.
+    /// Commands call it before opening the device, so bad input never waits for Vulkan.
+    pub fn load_planned(
+        &self,
+        reach: &Reach,
+        precision: Precision,
+    ) -> Result<(HeightField, TermPlan)> {
         self.validate()?;
         let heightfield = HeightField::load_source(&self.heightfield, self.dh_um, self.h_max_um)?;
         let plan = self.plan(&heightfield, reach, precision)?;
@@ -274,7 +287,8 @@ impl Material {
         if let Some(w) = heightfield.nyquist_warning(req.lambda_min_um) {
             eprintln!("warning: {w}");
         }
-        self.prepare_planned(heightfield, plan, cache_dir)
+        spectrum::cache::check_memory(&heightfield, &req)?;
+        Ok((heightfield, plan))
     }
 
     /// Builds the prepared material from a loaded height field and a resolved plan.

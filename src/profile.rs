@@ -753,7 +753,6 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         }
         variants.retain(|v| args.only.contains(&v.name));
     }
-    let mut renderer = Renderer::new(crate::render::validation_requested())?;
     let base = args.material.apply(Material::default());
     if args.per_vertex && args.mesh_size == 0 {
         return Err(Error::invalid(
@@ -769,6 +768,11 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
             ));
         }
     }
+    // The user's numbers and height field are checked before the device opens (each
+    // variant loads the field again when it prepares; that is cheap next to its terms).
+    base.validate()?;
+    crate::heightfield::HeightField::load_source(&base.heightfield, base.dh_um, base.h_max_um)?;
+    let mut renderer = Renderer::new(crate::render::validation_requested())?;
     let mesh = (args.mesh_size > 0).then(|| {
         let mut s = Scene::default_scene();
         s.output.width = args.mesh_size;

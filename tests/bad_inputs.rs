@@ -5,9 +5,9 @@
 //! existed before byte-for-byte as it was (no output either). Cases that must succeed with a
 //! warning (a corrupt cache is recomputed) say so.
 //!
-//! Most cases run with no Vulkan driver (`VK_ICD_FILENAMES` pointing nowhere): their errors
-//! must be found before the device is opened, so a missing driver message instead of the
-//! expected one means the check came too late.
+//! Every case runs with no Vulkan driver (`VK_ICD_FILENAMES` pointing nowhere): errors must
+//! be found before the device is opened, so a missing driver message instead of the expected
+//! one means the check came too late.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -32,8 +32,6 @@ struct Case {
     args: Vec<&'static str>,
     /// Extra environment (`{d}` replaced too).
     env: Vec<(&'static str, &'static str)>,
-    /// Whether the run may open a Vulkan device.
-    gpu: bool,
     expect: Expect,
 }
 
@@ -48,7 +46,6 @@ fn case(
         setup: Box::new(setup),
         args: args.to_vec(),
         env: Vec::new(),
-        gpu: false,
         expect,
     }
 }
@@ -56,10 +53,6 @@ fn case(
 impl Case {
     fn env(mut self, k: &'static str, v: &'static str) -> Self {
         self.env.push((k, v));
-        self
-    }
-    fn gpu(mut self) -> Self {
-        self.gpu = true;
         self
     }
 }
@@ -492,7 +485,8 @@ fn corpus() -> Vec<Case> {
             &brdf_with(&out),
             Fail("not a regular file"),
         ),
-        // OBJ meshes (scene renders; content errors surface after the device opened).
+        // OBJ meshes (scene renders). None of them may open the device: the mesh is read
+        // and checked first, so a check after the device opens fails the case.
         case(
             "obj: /dev/zero",
             |d| {
@@ -534,8 +528,7 @@ fn corpus() -> Vec<Case> {
                 "--no-cache",
             ],
             Fail("m.obj"),
-        )
-        .gpu(),
+        ),
         case(
             "obj: face index out of range",
             |d| obj_scene(d, b"v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n"),
@@ -548,8 +541,7 @@ fn corpus() -> Vec<Case> {
                 "--no-cache",
             ],
             Fail("m.obj"),
-        )
-        .gpu(),
+        ),
         case(
             "obj: binary junk",
             |d| obj_scene(d, &[0xffu8, 0xfe, 0x00, 0x01, 0x80].repeat(200)),
@@ -562,8 +554,94 @@ fn corpus() -> Vec<Case> {
                 "--no-cache",
             ],
             Fail("m.obj"),
-        )
-        .gpu(),
+        ),
+        case(
+            "obj: vertices but no faces",
+            |d| obj_scene(d, b"v 0 0 0\nv 1 0 0\nv 0 1 0\n"),
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("no triangles"),
+        ),
+        case(
+            "obj: NaN coordinate",
+            |d| obj_scene(d, b"v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n"),
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("not finite"),
+        ),
+        case(
+            "obj: not UTF-8",
+            |d| obj_scene(d, b"v 0 0 0\nv 1 0 0\nv 0 1 0\n# \xff\nf 1 2 3\n"),
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("invalid UTF-8"),
+        ),
+        // The scene's texture and a render's height field are read before the device too.
+        case(
+            "png: truncated scene texture",
+            |d| {
+                scene(
+                    d,
+                    "[material]\nheightfield = \"hf.png\"\nterms = 1\n\n[output]\nwidth = 8\nheight = 8\n\n[texture]\npath = \"t.png\"\n",
+                );
+                put(&d.join("t.png"), &png_bytes()[..40]);
+            },
+            &[
+                "render",
+                "--scene",
+                "{d}/s.toml",
+                "-o",
+                "{d}/o.png",
+                "--no-cache",
+            ],
+            Fail("t.png"),
+        ),
+        case(
+            "png: truncated height field of a BRDF map",
+            |d| {
+                put(&d.join("t.png"), &png_bytes()[..40]);
+                put(&d.join("t.toml"), "dh_um = 0.1\nh_max_um = 1\n");
+            },
+            &[
+                "render",
+                "--brdf-map",
+                "--size",
+                "8",
+                "--heightfield",
+                "{d}/t.png",
+                "-o",
+                "{d}/o.exr",
+                "--no-cache",
+            ],
+            Fail("t.png"),
+        ),
+        case(
+            "png: truncated height field of a profile",
+            |d| {
+                put(&d.join("t.png"), &png_bytes()[..40]);
+                put(&d.join("t.toml"), "dh_um = 0.1\nh_max_um = 1\n");
+            },
+            &["profile", "--heightfield", "{d}/t.png", "--no-cache"],
+            Fail("t.png"),
+        ),
         // Scene TOML.
         case(
             "scene: syntax error",
@@ -599,6 +677,18 @@ fn corpus() -> Vec<Case> {
             "scene: /dev/zero",
             |d| link("/dev/zero", &d.join("z.toml")),
             &["render", "--scene", "{d}/z.toml", "-o", "{d}/o.png"],
+            Fail("not a regular file"),
+        ),
+        case(
+            "scene: its height field is /dev/zero",
+            |d| {
+                put(
+                    &d.join("s.toml"),
+                    "[material]\nheightfield = \"z.png\"\ndh_um = 0.1\nh_max_um = 0.2\n",
+                );
+                link("/dev/zero", &d.join("z.png"));
+            },
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
             Fail("not a regular file"),
         ),
         case(
@@ -945,6 +1035,12 @@ fn corpus() -> Vec<Case> {
             Fail("refusing to overwrite"),
         ),
         case(
+            "output: a scene render onto its height field",
+            |d| grey_png(&d.join("hf.png")),
+            &["render", "--heightfield", "{d}/hf.png", "-o", "{d}/hf.png"],
+            Fail("refusing to overwrite"),
+        ),
+        case(
             "output: the --png sibling is the height field",
             |d| grey_png(&d.join("hf.png")),
             &[
@@ -1066,10 +1162,9 @@ fn run(c: &Case, root: &Path, index: usize) -> Result<(), String> {
     let args: Vec<String> = c.args.iter().map(|a| a.replace("{d}", ds)).collect();
     let mut cmd = Command::new(env!("CARGO_BIN_EXE_diffract"));
     cmd.args(&args).env("DIFFRACT_CACHE", "");
-    if !c.gpu {
-        cmd.env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
-            .env("VK_DRIVER_FILES", "/nonexistent/icd.json");
-    }
+    // No case may need the device: every error is found before it opens.
+    cmd.env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json");
     for (k, v) in &c.env {
         cmd.env(k, v.replace("{d}", ds));
     }

@@ -112,3 +112,31 @@ fn spectral_map_matches_cpu_rho() {
         );
     }
 }
+
+/// Later maps of the same size and material reuse the first map's pipeline, target and
+/// command buffer (issue #10, soak) and only rewrite the uniform block: a map drawn after a
+/// spectral map and a map at another angle is the map a fresh renderer draws.
+#[test]
+fn a_reused_map_pass_draws_what_a_fresh_one_draws() {
+    let Some(mut r) = renderer() else { return };
+    let p = prepare(&small_material(
+        "builtin:blazed",
+        Expansion::Chebyshev,
+        4,
+        1,
+    ));
+    r.render_brdf_map(&p, 70.0, 45.0, 24, Some(550.0))
+        .expect("spectral map");
+    // Builds the XYZ pass, which the next map reuses.
+    r.render_brdf_map(&p, 10.0, 0.0, 24, None)
+        .expect("first map");
+    let reused = r.render_brdf_map(&p, 35.0, 20.0, 24, None).expect("reused");
+    assert_no_validation(&r);
+    let Some(mut fresh) = renderer() else { return };
+    let want = fresh
+        .render_brdf_map(&p, 35.0, 20.0, 24, None)
+        .expect("fresh map");
+    assert_no_validation(&fresh);
+    assert!(want.rgb.iter().flatten().any(|v| *v > 0.0));
+    assert_eq!(reused.rgb, want.rgb);
+}

@@ -140,3 +140,49 @@ fn map_writes_exr_and_png() {
     assert!(px.iter().flatten().all(|c| c.is_finite()));
     assert!(png.exists(), "--png writes {}", png.display());
 }
+
+/// Issue #10: the completion line of `render --brdf-map -o X.exr --png` names the PNG it
+/// wrote beside the EXR (it used to name the EXR only).
+#[test]
+fn the_completion_line_names_the_png_beside_the_exr() {
+    let Some(_) = renderer() else { return };
+    let out = tmp("named.exr");
+    let png = out.with_extension("png");
+    let _ = std::fs::remove_file(&png);
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+        .args([
+            "render",
+            "--brdf-map",
+            "--size",
+            "8",
+            "--variant",
+            "flss",
+            "--heightfield",
+            "builtin:blazed",
+            "--terms",
+            "2",
+            "--window-radius",
+            "1",
+            "--lambda-step-nm",
+            "50",
+            "--png",
+            "--no-cache",
+            "-o",
+        ])
+        .arg(&out)
+        .env("DIFFRACT_VALIDATION", "1")
+        .output()
+        .expect("run diffract");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{stdout}{}",
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let line = stdout.lines().last().unwrap_or_default();
+    assert!(
+        line.contains(&format!("{} + {}", out.display(), png.display())),
+        "{line}"
+    );
+    assert!(png.exists());
+}

@@ -4,14 +4,14 @@
 //! against the default 4) differ, over the pixels the snake covers, by mean CIEDE2000 ≤ 2
 //! and p99 ≤ 10. Without supersampling the same comparison fails, so the test can tell.
 //! The default scene also has a golden image (64², `tests/golden/closeup_64.png`). Both
-//! live in one test so the table of the view is built once.
+//! live in one test so the table of the view is built once (then read from a disk cache).
 
 mod gpu_util;
 
 use std::path::Path;
 
 use diffract::image_io;
-use diffract::render::{Frame, Renderer, TableOptions};
+use diffract::render::{Frame, TableOptions, VariantKind};
 use diffract::scene::Scene;
 use gpu_util::golden::check_golden;
 use gpu_util::*;
@@ -24,15 +24,36 @@ fn default_scene() -> Scene {
         .expect("default scene")
 }
 
-/// `scene` at `size`², supersampled `ss`×, resolved as `diffract render` writes a PNG.
-fn render_at(r: &mut Renderer, scene: &Scene, size: u32, ss: u32) -> Frame {
+/// `scene` at `size`², supersampled `ss`×, resolved as `diffract render` writes a PNG, by a
+/// renderer of its own (each `diffract render` is one process) whose table comes from the
+/// disk cache `cache` after the first build.
+fn render_at(scene: &Scene, size: u32, ss: u32, cache: &Path) -> Option<Frame> {
+    let mut r = renderer()?;
+    // What `diffract render` draws with (a renderer starts on flss).
+    r.set_variant(VariantKind::Default);
+    // The table at 5 nm instead of 1 nm keeps its build under a minute on two cores; the
+    // test is about sampling in space, which the table's spectral step does not change.
+    r.set_table_options(TableOptions {
+        step_nm: 5,
+        ..TableOptions::default()
+    });
+    r.set_cache_dir(Some(cache.to_path_buf()));
     let mut s = scene.clone();
     s.output.width = size;
     s.output.height = size;
     s.output.supersample = ss;
     let p = prepare(&s.material);
-    r.render_output(&s, &p, true)
-        .expect("render the default scene")
+    let start = std::time::Instant::now();
+    let frame = r
+        .render_output(&s, None, &p, true)
+        .expect("render the default scene");
+    assert_no_validation(&r);
+    eprintln!(
+        "{size}² × {ss}²: GPU {:.0} ms, wall {:.1} s",
+        frame.gpu_ms.unwrap_or(f64::NAN),
+        start.elapsed().as_secs_f64()
+    );
+    Some(frame)
 }
 
 /// Mean and p99 ΔE2000 between `frame` (512²) and `fine` (1024²) box-filtered to 512², over
@@ -56,23 +77,18 @@ fn aliasing(scene: &Scene, frame: &Frame, fine: &Frame) -> (f64, f64, usize) {
 
 #[test]
 fn default_scene_matches_golden_and_is_free_of_aliasing() {
-    let Some(mut r) = renderer() else { return };
-    // The table at 5 nm instead of 1 nm keeps its build under a minute on two cores; the
-    // test is about sampling in space, which the table's spectral step does not change.
-    r.set_table_options(TableOptions {
-        step_nm: 5,
-        ..TableOptions::default()
-    });
+    let cache = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-output/look-cache");
+    std::fs::create_dir_all(&cache).expect("cache dir");
     let scene = default_scene();
     assert_eq!(scene.output.supersample, 2, "the default supersamples 2×2");
-    let small = render_at(&mut r, &scene, 64, 2);
-    assert_no_validation(&r);
+    let Some(small) = render_at(&scene, 64, 2, &cache) else {
+        return;
+    };
     assert!(small.rgb.iter().flatten().all(|c| c.is_finite()));
     check_golden("closeup_64", &small);
 
-    let a = render_at(&mut r, &scene, 512, 2);
-    let fine = render_at(&mut r, &scene, 1024, 2);
-    assert_no_validation(&r);
+    let a = render_at(&scene, 512, 2, &cache).unwrap();
+    let fine = render_at(&scene, 1024, 2, &cache).unwrap();
     let (mean, p99, covered) = aliasing(&scene, &a, &fine);
     eprintln!(
         "default 512² (4 samples) vs 1024² → 512² (16 samples), {covered} covered pixels: \
@@ -89,8 +105,7 @@ fn default_scene_matches_golden_and_is_free_of_aliasing() {
 
     // The same comparison without supersampling must see the aliasing, else this test
     // could not fail.
-    let single = render_at(&mut r, &scene, 512, 1);
-    assert_no_validation(&r);
+    let single = render_at(&scene, 512, 1, &cache).unwrap();
     let (mean1, p99_1, _) = aliasing(&scene, &single, &fine);
     eprintln!("one sample a pixel: ΔE2000 mean {mean1:.3}, p99 {p99_1:.3}");
     assert!(

@@ -260,3 +260,65 @@ fn precompute_beyond_the_memory_limit_is_refused_before_any_work() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Peak RSS (kB) of `cmd` run under GNU time, with its output; `None` without /usr/bin/time.
+fn peak_kb(cmd: &Command) -> Option<(u64, std::process::Output)> {
+    let time = Path::new("/usr/bin/time");
+    if !time.exists() {
+        eprintln!("SKIPPED: /usr/bin/time (GNU time) is not installed");
+        return None;
+    }
+    let mut c = Command::new(time);
+    c.args(["-f", "peak-rss-kb %M"]).arg(cmd.get_program());
+    c.args(cmd.get_args());
+    for (k, v) in cmd.get_envs() {
+        match v {
+            Some(v) => c.env(k, v),
+            None => c.env_remove(k),
+        };
+    }
+    let o = c.output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    let kb = err
+        .lines()
+        .rev()
+        .find_map(|l| l.strip_prefix("peak-rss-kb "))
+        .and_then(|v| v.trim().parse().ok())
+        .expect("GNU time's report");
+    Some((kb, o))
+}
+
+/// Issue #10, "memory at the documented limit": the largest request the limit allows at
+/// 2048² (`T = 14`) runs in well under 4 GB of peak RSS (it took 15.2 GB at 4096² before the
+/// limit), and one over it is refused before it takes memory.
+#[test]
+fn precompute_at_the_memory_limit_stays_under_4_gb() {
+    let d = scratch("peak");
+    let hf = field(&d, 2048, 0.0923);
+    let q = queries(&d);
+    let out = d.join("r.csv");
+    let mut ok = bin();
+    ok.args(["brdf", "--heightfield"])
+        .arg(&hf)
+        .arg("--queries")
+        .arg(&q)
+        .arg("--out")
+        .arg(&out)
+        .args(["--no-cache", "--terms", "14"]);
+    let Some((kb, o)) = peak_kb(&ok) else { return };
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(kb < 4_000_000, "peak RSS {kb} kB at the limit");
+    let mut over = bin();
+    over.args(["brdf", "--heightfield"])
+        .arg(&hf)
+        .arg("--queries")
+        .arg(&q)
+        .arg("--out")
+        .arg(d.join("r2.csv"))
+        .args(["--no-cache", "--terms", "30"]);
+    let (kb, o) = peak_kb(&over).unwrap();
+    assert!(!o.status.success());
+    assert!(String::from_utf8_lossy(&o.stderr).contains("the limit is 1.0 GB"));
+    assert!(kb < 500_000, "peak RSS {kb} kB for a refused request");
+    let _ = std::fs::remove_dir_all(&d);
+}

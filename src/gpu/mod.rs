@@ -1,6 +1,7 @@
 //! Everything `ash`: the headless device layer ([`context`]), memory objects ([`memory`]),
 //! texel storage formats ([`formats`]), layouts/descriptors/pipelines ([`pipeline`]), render
-//! targets ([`target`]), presentation ([`swapchain`], optional), GPU timestamps ([`timer`]) and the SPIR-V compiled by `build.rs`.
+//! targets ([`target`]), presentation ([`swapchain`], optional), GPU timestamps ([`timer`]), a
+//! reusable submission ([`submit`]) and the SPIR-V compiled by `build.rs`.
 //!
 //! This module knows Vulkan, not physics: what the bindings and specialisation constants
 //! mean is decided by `render.rs` and `glsl/`. Every object is named (debug utils), owned by
@@ -12,6 +13,7 @@ pub mod context;
 pub mod formats;
 pub mod memory;
 pub mod pipeline;
+pub mod submit;
 pub mod swapchain;
 pub mod target;
 pub mod timer;

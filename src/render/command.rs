@@ -4,7 +4,8 @@
 use std::path::PathBuf;
 
 use super::variant::{TableFormat, TableOptions, VariantKind};
-use super::{Frame, Renderer};
+use super::{Frame, Renderer, SceneInputs};
+use crate::brdf::truncation::{Precision, Reach};
 use crate::gpu::StorageFormat;
 use crate::material::MaterialArgs;
 use crate::scene::Scene;
@@ -158,13 +159,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     crate::image_io::output_format(&args.out)?;
     crate::guard::render_args(args, &scene)?;
     check_per_vertex(args.per_vertex, args.brdf_map, args.variant)?;
-    // The device first: a machine without Vulkan fails before the term precompute.
-    let mut renderer = Renderer::new(validation_requested())?;
-    renderer.set_storage_format(args.storage);
-    renderer.set_variant(args.variant);
-    renderer.set_per_vertex(args.per_vertex);
-    renderer.set_table_options(args.table.options());
-    renderer.set_leave_out(!args.keep_all);
     if args.lambda_nm.is_some() && !args.variant.is_spectral() {
         return Err(Error::invalid(
             "variant",
@@ -174,7 +168,28 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             ),
         ));
     }
+    if let Some(w) = args.width {
+        scene.output.width = w;
+    }
+    if let Some(h) = args.height {
+        scene.output.height = h;
+    }
+    // Every file the user gave is read and checked before the device opens (a bad OBJ
+    // or PNG must not wait for Vulkan, nor be hidden by a missing driver); the term
+    // precompute, the slow part, comes after it, so a machine without Vulkan fails first.
     let material = args.material.apply(scene.material.clone());
+    let (heightfield, plan) = material.load_planned(&Reach::ALL, Precision::F32)?;
+    let inputs = if args.brdf_map {
+        None
+    } else {
+        Some(SceneInputs::load(&scene, true)?)
+    };
+    let mut renderer = Renderer::new(validation_requested())?;
+    renderer.set_storage_format(args.storage);
+    renderer.set_variant(args.variant);
+    renderer.set_per_vertex(args.per_vertex);
+    renderer.set_table_options(args.table.options());
+    renderer.set_leave_out(!args.keep_all);
     let cache_dir = if args.no_cache {
         None
     } else {
@@ -183,14 +198,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .or_else(crate::material::default_cache_dir)
     };
     renderer.set_cache_dir(cache_dir.clone());
-    let prepared = material.prepare(cache_dir.as_deref())?;
+    let prepared = material.prepare_planned(heightfield, plan, cache_dir.as_deref())?;
     // Table variants show their own bar while they build; the draw after it is short.
     let spin = args
         .variant
         .is_spectral()
         .then(|| crate::progress::spinner("rendering"));
 
-    let (frame, what) = if args.brdf_map {
+    let (frame, what) = if let Some(inputs) = &inputs {
+        let frame = render_resolved(&mut renderer, &scene, inputs, &prepared, &args.out)?;
+        (frame, "scene".to_string())
+    } else {
         let frame = renderer.render_brdf_map(
             &prepared,
             args.theta_i.unwrap_or(super::DEFAULT_MAP_THETA_I),
@@ -204,26 +222,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             None => "BRDF map (XYZ)".to_string(),
         };
         (frame, what)
-    } else {
-        if let Some(w) = args.width {
-            scene.output.width = w;
-        }
-        if let Some(h) = args.height {
-            scene.output.height = h;
-        }
-        for (what, v) in [
-            ("width", scene.output.width),
-            ("height", scene.output.height),
-        ] {
-            if !(1..=8192).contains(&v) {
-                return Err(Error::invalid(
-                    "image size",
-                    format!("{what} {v}; expected 1..=8192"),
-                ));
-            }
-        }
-        let frame = render_resolved(&mut renderer, &scene, &prepared, &args.out)?;
-        (frame, "scene".to_string())
     };
     drop(spin);
     let left = renderer.left_out();
@@ -321,6 +319,7 @@ fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
 fn render_resolved(
     renderer: &mut Renderer,
     scene: &Scene,
+    inputs: &SceneInputs,
     prepared: &crate::material::PreparedMaterial,
     out_path: &std::path::Path,
 ) -> Result<Frame> {
@@ -328,7 +327,7 @@ fn render_resolved(
         crate::image_io::output_format(out_path)?,
         crate::image_io::OutputFormat::Exr
     );
-    let frame = renderer.render_output(scene, prepared, tone)?;
+    let frame = renderer.render_output(scene, Some(inputs), prepared, tone)?;
     crate::image_io::write_image(out_path, frame.width, frame.height, &frame.rgb, 1.0)?;
     Ok(frame)
 }

@@ -28,6 +28,7 @@ use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
 use crate::gpu::pipeline::{
     Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
 };
+use crate::gpu::submit::Submitter;
 use crate::gpu::target::OffscreenTarget;
 use crate::gpu::timer::GpuTimer;
 use crate::gpu::{shaders, Device, StorageFormat};
@@ -56,8 +57,8 @@ pub struct Frame {
     pub rgb: Vec<[f32; 3]>,
     /// GPU time of the draw from timestamps; `None` where the queue has none.
     pub gpu_ms: Option<f64>,
-    /// Wall time of the whole call: variant preparation (unless cached), pipeline
-    /// creation, draw and readback.
+    /// Wall time of the whole call: variant preparation and pipeline creation (unless
+    /// reused from the previous frame), draw and readback.
     pub wall_ms: f64,
     /// The variant that drew it.
     pub variant: VariantStats,
@@ -78,6 +79,28 @@ pub(crate) enum OutputMode {
     MapSpectral = 2,
     /// The viewer's map: linear sRGB × exposure for an sRGB target.
     MapDisplay = 3,
+}
+
+/// What a scene frame reads from the user's files — the mesh (in world space) and the
+/// texture's pixels — loaded apart from the device, so `render` can report a bad OBJ or
+/// PNG before it opens Vulkan.
+pub struct SceneInputs {
+    pub mesh: crate::mesh::Mesh,
+    /// `(width, height, sRGB bytes)` of the scene's texture, when it has one and it is used.
+    pub texture: Option<(u32, u32, Vec<[u8; 3]>)>,
+}
+
+impl SceneInputs {
+    /// Loads `scene`'s mesh (one without triangles is an error) and, with `texture`, its
+    /// texture.
+    pub fn load(scene: &Scene, texture: bool) -> Result<Self> {
+        let mesh = load_scene_mesh(scene)?;
+        let texture = match &scene.texture {
+            Some(t) if texture => Some(t.load()?),
+            _ => None,
+        };
+        Ok(Self { mesh, texture })
+    }
 }
 
 /// Mirror of `Params` in glsl/interface.glsl (std140: vec4-sized members only).
@@ -139,9 +162,38 @@ struct PreparedKey {
     leave_out: bool,
 }
 
-/// Owns the GPU device, what every frame shares (vertex shaders, the texture sampler) and
-/// the last prepared variant, which later frames of the same material reuse.
+/// What a BRDF map pass is built for: the objects of a [`MapPass`] are reused while
+/// none of these change (a new `θi`, `φi` or `λ` only rewrites the uniform block).
+#[derive(Debug, Clone, PartialEq)]
+struct MapKey {
+    /// Address of the prepared variant the descriptor set points at (the pass holds an
+    /// `Arc` of it, so the address cannot be reused while the key lives).
+    variant: usize,
+    output: OutputMode,
+    options: PassOptions,
+    size: u32,
+    /// The colour table as uploaded (`λ` and weights).
+    colour: Vec<[f32; 4]>,
+}
+
+/// The last BRDF map's objects: pass (pipeline, descriptor set, buffers), offscreen target,
+/// timestamp pool, command buffer and fence. Creating and destroying them for every map cost
+/// time (most of lavapipe's 135 ms a 16² frame went to the pipeline) and, with the
+/// validation layer on, ~11 KB of its bookkeeping a frame (README: soak).
+struct MapPass {
+    key: MapKey,
+    submitter: Submitter,
+    pass: ScenePass,
+    timer: Option<GpuTimer>,
+    target: OffscreenTarget,
+}
+
+/// Owns the GPU device, what every frame shares (vertex shaders, the texture sampler), the
+/// last prepared variant, which later frames of the same material reuse, and the last BRDF
+/// map's pass and target, which later maps of the same size and variant reuse.
 pub struct Renderer {
+    /// First: its descriptor set points at the sampler and the prepared variant below.
+    map: Option<MapPass>,
     storage: StorageFormat,
     variant: VariantKind,
     table: TableOptions,
@@ -177,6 +229,7 @@ impl Renderer {
     /// A renderer on an existing device (the viewer's, which can present).
     pub fn on(dev: Arc<Device>) -> Result<Self> {
         Ok(Self {
+            map: None,
             storage: StorageFormat::default(),
             variant: VariantKind::Flss,
             table: TableOptions::default(),
@@ -265,6 +318,7 @@ impl Renderer {
     /// Replaces built-in SPIR-V by glsl file name (e.g. `flss.frag`) for the passes built
     /// from now on; an empty map restores the built-in shaders.
     pub fn set_shader_overrides(&mut self, spirv: std::collections::HashMap<String, Vec<u8>>) {
+        self.map = None;
         self.shader_overrides = spirv;
     }
 
@@ -347,23 +401,57 @@ impl Renderer {
             lambda_nm.map_or(0.0, |l| (l * 1e-3) as f32),
         ];
         params.map_info = [size as f32, 0.0, 0.0, 0.0];
-        let target = OffscreenTarget::new(&self.dev, size, size)?;
         let options = PassOptions {
             fresnel: prepared.shading.fresnel,
             shadowing: prepared.shading.shadowing,
             texture_blending: false,
         };
-        let pass = self.build_pass(
-            prepared,
-            params,
+        let Some((_, variant)) = &self.prepared else {
+            return Err(Error::invalid("variant", "no variant prepared"));
+        };
+        let key = MapKey {
+            variant: Arc::as_ptr(variant) as *const () as usize,
             output,
             options,
-            None,
-            [0.0; 4],
-            None,
-            target.render_pass,
+            size,
+            colour: colour_weights(prepared, variant.as_ref()),
+        };
+        // Taken out while it draws: a failed frame drops it rather than leave a pass in an
+        // unknown state for the next one.
+        let mut map = match self.map.take() {
+            Some(m) if m.key == key => m,
+            old => {
+                // The old objects go before the new ones are made.
+                drop(old);
+                let target = OffscreenTarget::new(&self.dev, size, size)?;
+                let pass = self.build_pass(
+                    prepared,
+                    params,
+                    output,
+                    options,
+                    None,
+                    [0.0; 4],
+                    None,
+                    target.render_pass,
+                )?;
+                let timer = GpuTimer::new(&self.dev, "brdf map timestamps")?;
+                MapPass {
+                    key,
+                    submitter: Submitter::new(&self.dev, "brdf map frame")?,
+                    pass,
+                    timer,
+                    target,
+                }
+            }
+        };
+        map.pass.params = params;
+        let mut frame = self.draw(
+            &map.pass,
+            &map.target,
+            map.timer.as_ref(),
+            Some(&map.submitter),
         )?;
-        let mut frame = self.draw(&pass, &target)?;
+        self.map = Some(map);
         frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(frame)
     }
@@ -373,6 +461,17 @@ impl Renderer {
     /// Pixels are linear sRGB already multiplied by the light intensity, `cosθi` and the
     /// scene's exposure; uncovered pixels hold the background colour as given.
     pub fn render_scene(&mut self, scene: &Scene, prepared: &PreparedMaterial) -> Result<Frame> {
+        let inputs = SceneInputs::load(scene, true)?;
+        self.render_scene_with(scene, &inputs, prepared)
+    }
+
+    /// [`render_scene`](Self::render_scene) with the scene's files already loaded.
+    pub fn render_scene_with(
+        &mut self,
+        scene: &Scene,
+        inputs: &SceneInputs,
+        prepared: &PreparedMaterial,
+    ) -> Result<Frame> {
         let start = Instant::now();
         let out = &scene.output;
         let options = PassOptions {
@@ -380,17 +479,17 @@ impl Renderer {
             shadowing: prepared.shading.shadowing,
             texture_blending: true,
         };
-        let mesh = load_scene_mesh(scene)?;
         let target = OffscreenTarget::new(&self.dev, out.width, out.height)?;
         let pass = self.scene_pass_of(
             scene,
-            &mesh,
+            inputs,
             prepared,
             options,
             target.render_pass,
             out.aspect(),
         )?;
-        let mut frame = self.draw(&pass, &target)?;
+        let timer = GpuTimer::new(&self.dev, "frame timestamps")?;
+        let mut frame = self.draw(&pass, &target, timer.as_ref(), None)?;
         frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(frame)
     }
@@ -400,9 +499,11 @@ impl Renderer {
     /// light, then exposed and, with `tone`, tone-mapped ([`crate::scene::Output::resolve`]);
     /// without `tone` (EXR) it stays linear after the exposure. The background is drawn
     /// divided by the exposure, so it comes out as given (before the tone curve).
+    /// `inputs`: the scene's files already loaded ([`SceneInputs`]), else they are loaded here.
     pub fn render_output(
         &mut self,
         scene: &Scene,
+        inputs: Option<&SceneInputs>,
         prepared: &PreparedMaterial,
         tone: bool,
     ) -> Result<Frame> {
@@ -413,7 +514,10 @@ impl Renderer {
         big.output.height = rh;
         big.output.exposure = 1.0;
         big.output.background = out.background.map(|c| c / out.exposure);
-        let mut frame = self.render_scene(&big, prepared)?;
+        let mut frame = match inputs {
+            Some(inputs) => self.render_scene_with(&big, inputs, prepared)?,
+            None => self.render_scene(&big, prepared)?,
+        };
         frame.rgb = if tone {
             out.resolve(&frame.rgb)?
         } else {
@@ -439,8 +543,8 @@ impl Renderer {
         render_pass: vk::RenderPass,
         aspect: f32,
     ) -> Result<ScenePass> {
-        let mesh = load_scene_mesh(scene)?;
-        self.scene_pass_of(scene, &mesh, prepared, options, render_pass, aspect)
+        let inputs = SceneInputs::load(scene, options.texture_blending)?;
+        self.scene_pass_of(scene, &inputs, prepared, options, render_pass, aspect)
     }
 
     /// Whether the prepared table covers what `scene`'s view needs, so a pass built now
@@ -536,7 +640,7 @@ impl Renderer {
     fn scene_pass_of(
         &mut self,
         scene: &Scene,
-        mesh: &crate::mesh::Mesh,
+        inputs: &SceneInputs,
         prepared: &PreparedMaterial,
         options: PassOptions,
         render_pass: vk::RenderPass,
@@ -547,6 +651,7 @@ impl Renderer {
             // Before any table is built for nothing.
             self.per_vertex_shader()?;
         }
+        let mesh = &inputs.mesh;
         let region = scene_region(scene, mesh).unwrap_or(Region::ALL);
         self.prepare_variant(prepared, region, OutputMode::Mesh)?;
         let mut params = self.params(prepared);
@@ -562,8 +667,10 @@ impl Renderer {
         params.shading[1] = gain;
         let bg = out.background;
 
-        let texture = match &scene.texture {
-            Some(t) if options.texture_blending => Some(self.upload_texture(t)?),
+        let texture = match (&scene.texture, &inputs.texture) {
+            (Some(t), Some(pixels)) if options.texture_blending => {
+                Some(self.upload_texture(t, pixels)?)
+            }
             _ => None,
         };
         let vertices = Buffer::with_data(
@@ -657,7 +764,9 @@ impl Renderer {
                 }
             }
         }
-        // Free the old resources before building new ones.
+        // Free the old resources (and the map pass that points at them) before building new
+        // ones.
+        self.map = None;
         self.prepared = None;
         let setup = DrawSetup {
             prepared,
@@ -674,10 +783,14 @@ impl Renderer {
         Ok(())
     }
 
-    /// Loads a scene texture (sRGB PNG) into an `R8G8B8A8_SRGB` image, so sampling returns
-    /// linear colour.
-    fn upload_texture(&self, spec: &crate::scene::TextureSpec) -> Result<Image> {
-        let (w, h, rgb) = spec.load()?;
+    /// Uploads a scene texture's pixels (sRGB bytes) into an `R8G8B8A8_SRGB` image, so
+    /// sampling returns linear colour.
+    fn upload_texture(
+        &self,
+        spec: &crate::scene::TextureSpec,
+        (w, h, rgb): &(u32, u32, Vec<[u8; 3]>),
+    ) -> Result<Image> {
+        let (w, h) = (*w, *h);
         let max = self.dev.info.max_image_dimension_2d;
         if w == 0 || h == 0 || w > max || h > max {
             return Err(Error::Image {
@@ -819,27 +932,7 @@ impl Renderer {
             vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
             std::slice::from_ref(&params),
         )?;
-        let table = &prepared.colour;
-        let all: Vec<usize>;
-        let kept = match variant.kept_wavelengths() {
-            Some(k) => k,
-            None => {
-                all = (0..table.len()).collect();
-                &all
-            }
-        };
-        let weights: Vec<[f32; 4]> = kept
-            .iter()
-            .map(|&i| {
-                let w = table.weights[i];
-                [
-                    w[0] as f32,
-                    w[1] as f32,
-                    w[2] as f32,
-                    table.lambdas_nm[i] as f32,
-                ]
-            })
-            .collect();
+        let weights = colour_weights(prepared, variant.as_ref());
         let colour = Buffer::with_data(
             dev,
             "colour weights",
@@ -952,23 +1045,32 @@ impl Renderer {
         })
     }
 
-    /// Records `pass` into the offscreen `target` between timestamps, submits, waits and
-    /// reads the linear result back.
-    fn draw(&self, pass: &ScenePass, target: &OffscreenTarget) -> Result<Frame> {
-        let dev = &self.dev;
-        let timer = GpuTimer::new(dev, "frame timestamps")?;
-        dev.submit_once("diffraction frame", |cb| {
-            if let Some(t) = &timer {
+    /// Records `pass` into the offscreen `target` between timestamps (when the queue has
+    /// them), submits (through `submitter`, else a one-shot command buffer), waits and reads
+    /// the linear result back.
+    fn draw(
+        &self,
+        pass: &ScenePass,
+        target: &OffscreenTarget,
+        timer: Option<&GpuTimer>,
+        submitter: Option<&Submitter>,
+    ) -> Result<Frame> {
+        let record = |cb: vk::CommandBuffer| -> Result<()> {
+            if let Some(t) = timer {
                 t.record_start(cb);
             }
             pass.record(cb, &target.frame());
-            if let Some(t) = &timer {
+            if let Some(t) = timer {
                 t.record_end(cb);
             }
             target.record_readback(cb);
             Ok(())
-        })?;
-        let gpu_ms = match &timer {
+        };
+        match submitter {
+            Some(s) => s.submit_and_wait("diffraction frame", record)?,
+            None => self.dev.submit_once("diffraction frame", record)?,
+        }
+        let gpu_ms = match timer {
             Some(t) => Some(t.elapsed_ms()?),
             None => None,
         };
@@ -999,6 +1101,26 @@ pub fn fragment_file(kind: VariantKind) -> &'static str {
         VariantKind::ChebyshevW => "chebyshev_w.frag",
         // resolve() never returns the alias.
         VariantKind::Volume | VariantKind::Default => "volume.frag",
+    }
+}
+
+/// The colour table as the shader reads it: the XYZ weights and `λ` of each line.
+/// The colour table as binding 2 holds it: per spectral sample the CIE weight and `λ`, only
+/// the samples the variant keeps (all of them when it leaves none out).
+fn colour_weights(prepared: &PreparedMaterial, variant: &dyn PreparedVariant) -> Vec<[f32; 4]> {
+    let table = &prepared.colour;
+    let sample = |i: usize| {
+        let w = table.weights[i];
+        [
+            w[0] as f32,
+            w[1] as f32,
+            w[2] as f32,
+            table.lambdas_nm[i] as f32,
+        ]
+    };
+    match variant.kept_wavelengths() {
+        Some(kept) => kept.iter().map(|&i| sample(i)).collect(),
+        None => (0..table.len()).map(sample).collect(),
     }
 }
 
