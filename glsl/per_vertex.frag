@@ -1,7 +1,7 @@
 #version 450
 // Fragment stage of per-vertex evaluation (thesis §1.5.1): the diffraction colour comes
-// interpolated from the vertices (per_vertex.glsl); irradiance, texture blending
-// (Algorithm 4) and exposure are applied per fragment as in shade.glsl's mesh branch.
+// interpolated from the vertices (per_vertex.glsl), lit over the light's disc there; texture
+// blending (Algorithm 4) and exposure are applied per fragment as in shade.glsl's mesh branch.
 #include "interface.glsl"
 #include "gain.glsl"
 #include "colour.glsl"
@@ -21,13 +21,17 @@ vec3 safeNormalize(vec3 v) {
 void main() {
     vec3 wi = safeNormalize(inWi);
     vec3 wr = safeNormalize(inWr);
-    float irradiance = max(wi.z, 0.0) * params.lighting.x;
-    vec3 c = inDiffraction * irradiance;
+    // The vertices carry the diffraction already lit (Σ over the disc of weight·cos θi·c).
+    vec3 c = inDiffraction * params.lighting.x;
     if (TEXTURE_BLENDING) {
+        // Algorithm 4 (colour.glsl's textureBlend), its texture part lit from the disc's
+        // centre: (1 − w_d)·c_diffraction + ((1 − α) + w_d)·t, plus the sky's ambient·t.
+        float irradiance = max(wi.z, 0.0) * params.lighting.x;
         vec3 cTexture = params.shading.y * texture(surfaceTexture, inUv).rgb;
         vec3 h = safeNormalize(wi + wr);
         float f = schlickFresnel(clamp(dot(wr, h), 0.0, 1.0));
-        c = textureBlend(inDiffraction, cTexture, f, params.lighting.z) * irradiance
+        c = textureBlend(c, vec3(0.0), f, params.lighting.z)
+          + textureBlend(vec3(0.0), cTexture, f, params.lighting.z) * irradiance
           + params.lighting.w * cTexture;
     }
     c *= params.lighting.y;

@@ -22,7 +22,8 @@ layout(push_constant) uniform Transforms {
 layout(location = 0) out vec3 outWi;
 layout(location = 1) out vec3 outWr;
 layout(location = 2) out vec2 outUv;
-// Diffraction colour (linear sRGB) of this vertex, before irradiance and exposure.
+// Diffraction colour (linear sRGB) of this vertex summed over the light's disc, each
+// direction weighted by its cos θi: the lit colour per unit light intensity, before exposure.
 layout(location = 3) out vec3 outDiffraction;
 
 vec3 projectVectorOnTo(vec3 v, vec3 t, vec3 b, vec3 n) {
@@ -51,8 +52,17 @@ void main() {
     outWr = wr;
     outUv = vec2(inUv.x, 1.0 - inUv.y);
 
-    // §1.5.1: the BRDF at this vertex (the per-pixel path evaluates it per fragment).
-    vec3 c = xyzToLinearSrgb(diffractionXyz(wi, safeNormalizeOr(wr, vec3(0.0, 0.0, 1.0))));
+    // §1.5.1: the BRDF at this vertex (the per-pixel path evaluates it per fragment), over
+    // the directions of the light's disc as shade.glsl does.
+    vec3 wrUnit = safeNormalizeOr(wr, vec3(0.0, 0.0, 1.0));
+    vec3 c = vec3(0.0);
+    int samples = clamp(params.lightInfo.x, 1, MAX_DISK_SAMPLES);
+    for (int k = 0; k < samples; ++k) {
+        vec3 wik = safeNormalizeOr(projectVectorOnTo(params.lightDisk[k].xyz, t, b, n),
+                                   vec3(0.0, 0.0, 1.0));
+        c += params.lightDisk[k].w * max(wik.z, 0.0)
+           * xyzToLinearSrgb(diffractionXyz(wik, wrUnit));
+    }
     outDiffraction = (any(isnan(c)) || any(isinf(c))) ? vec3(0.0) : c;
 
     gl_Position = transforms.viewProj * position;
