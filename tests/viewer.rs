@@ -714,7 +714,9 @@ fn map_mode_screenshot_matches_offscreen_brdf_map() {
         .filter(|p| p.iter().any(|&c| c > 0.02))
         .count();
     eprintln!("mesh: {lit} of 4096 pixels lit");
-    assert!(lit >= 40, "the mesh beside the map is lit: {lit} pixels");
+    // Sparse sparkle at 64² (32 pixels above 0.02 under the sun's disc, which spreads each
+    // glint thinner than a point light did): enough that a black mesh fails.
+    assert!(lit >= 16, "the mesh beside the map is lit: {lit} pixels");
     check_close("viewer mesh beside the map", &actual, &expected, (64, 64));
     let _ = std::fs::remove_dir_all(&dir);
 }
