@@ -28,26 +28,11 @@ use winit::dpi::PhysicalPosition;
 use winit::event::{MouseButton, MouseScrollDelta};
 use winit::keyboard::{Key, ModifiersState, NamedKey};
 
-/// Limits of tests/gpu_golden.rs: the swapchain path must agree with the offscreen path as
-/// closely as lavapipe agrees with a golden image.
-const MAX_MEAN_DELTA_E: f64 = 0.5;
-const MAX_P95_DELTA_E: f64 = 1.5;
-const MAX_P99_ABS: f64 = 0.03;
-
-fn srgb8_to_linear(v: u8) -> f32 {
-    let c = v as f64 / 255.0;
-    (if c <= 0.04045 {
-        c / 12.92
-    } else {
-        ((c + 0.055) / 1.055).powf(2.4)
-    }) as f32
-}
-
-fn output_dir() -> PathBuf {
-    let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-output");
-    std::fs::create_dir_all(&d).expect("create target/test-output");
-    d
-}
+// The limits of the golden images (gpu_util::golden): the swapchain path must agree with
+// the offscreen path as closely as lavapipe agrees with a golden image.
+use gpu_util::golden::{
+    output_dir, srgb8_to_linear, MAX_MEAN_DELTA_E, MAX_P95_DELTA_E, MAX_P99_ABS,
+};
 
 fn temp_dir(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("diffract-viewer-{name}-{}", std::process::id()));

@@ -10,14 +10,14 @@ use diffract::image_io;
 use diffract::render::Frame;
 
 /// Mean CIEDE2000 over all pixels.
-const MAX_MEAN_DELTA_E: f64 = 0.5;
+pub const MAX_MEAN_DELTA_E: f64 = 0.5;
 /// 95th percentile of CIEDE2000: a few pixels on edges may differ between rasterisers.
-const MAX_P95_DELTA_E: f64 = 1.5;
+pub const MAX_P95_DELTA_E: f64 = 1.5;
 /// 99th percentile of the per-channel linear difference: the sparse diffraction colours
 /// (a few percent of the pixels) are beyond the ΔE p95, so they are held by this one.
-const MAX_P99_ABS: f64 = 0.03;
+pub const MAX_P99_ABS: f64 = 0.03;
 
-fn srgb8_to_linear(v: u8) -> f32 {
+pub fn srgb8_to_linear(v: u8) -> f32 {
     let c = v as f64 / 255.0;
     (if c <= 0.04045 {
         c / 12.92
@@ -38,7 +38,7 @@ fn golden_dir() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/golden")
 }
 
-fn output_dir() -> PathBuf {
+pub fn output_dir() -> PathBuf {
     let d = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-output");
     std::fs::create_dir_all(&d).expect("create target/test-output");
     d
