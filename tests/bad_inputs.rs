@@ -1248,6 +1248,7 @@ fn run(c: &Case, root: &Path, index: usize) -> Result<(), String> {
 #[test]
 fn corpus_has_at_least_40_cases_across_every_kind() {
     let cases = corpus();
+    eprintln!("bad-input corpus: {} cases", cases.len());
     assert!(cases.len() >= 40, "{} cases", cases.len());
     for kind in [
         "png", "f32", "sidecar", "obj", "scene", "csv", "cache", "flag", "output",
