@@ -4,6 +4,7 @@
 // position p = P·C⁻¹·M·p_local (eq. 1.2). ωi is projected per fragment instead (shade.glsl),
 // once for each direction over the light's disc: the frame is passed on for that.
 #include "interface.glsl"
+#include "frame.glsl"
 
 layout(location = 0) in vec3 inPosition;
 layout(location = 1) in vec3 inNormal;
@@ -21,26 +22,10 @@ layout(location = 2) out vec2 outUv;
 layout(location = 3) out vec3 outBitangent;
 layout(location = 4) out vec3 outNormal;
 
-// projectVectorOnTo(): coordinates of v in the orthonormal frame (T, B, N).
-vec3 projectVectorOnTo(vec3 v, vec3 t, vec3 b, vec3 n) {
-    return vec3(dot(v, t), dot(v, b), dot(v, n));
-}
-
-vec3 safeNormalize(vec3 v, vec3 fallback) {
-    float l = length(v);
-    return l > 1e-20 ? v / l : fallback;
-}
-
 void main() {
-    // Lines 2–5. Normals transform with the inverse transpose, so non-uniform scale keeps
-    // them perpendicular; T is re-orthogonalised against N so the frame stays orthonormal.
-    mat3 m = mat3(transforms.model);
-    vec3 n = safeNormalize(transpose(inverse(m)) * inNormal, vec3(0.0, 0.0, 1.0));
-    vec3 t = m * inTangent.xyz;
-    vec3 anyPerp = normalize(cross(n, abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
-    t = safeNormalize(t - n * dot(n, t), anyPerp);
-    // MODEL §1 has B = N × T; a mirrored UV map (w = −1) mirrors the grating with the texture.
-    vec3 b = (inTangent.w < 0.0 ? -1.0 : 1.0) * cross(n, t);
+    // Lines 2–5 (frame.glsl).
+    vec3 t, b, n;
+    tangentFrame(mat3(transforms.model), inNormal, inTangent, t, b, n);
 
     // Lines 6–10: ωr towards the eye. ωi towards the light (lines 7–8) needs one projection
     // per direction over the sun's disc: the frame goes to the fragment stage, where

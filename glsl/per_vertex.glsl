@@ -8,6 +8,7 @@
 #define PER_VERTEX_GLSL
 #include "interface.glsl"
 #include "colour.glsl"
+#include "frame.glsl"
 
 layout(location = 0) in vec3 inPosition;
 layout(location = 1) in vec3 inNormal;
@@ -26,23 +27,10 @@ layout(location = 2) out vec2 outUv;
 // direction weighted by its cos θi: the lit colour per unit light intensity, before exposure.
 layout(location = 3) out vec3 outDiffraction;
 
-vec3 projectVectorOnTo(vec3 v, vec3 t, vec3 b, vec3 n) {
-    return vec3(dot(v, t), dot(v, b), dot(v, n));
-}
-
-vec3 safeNormalizeOr(vec3 v, vec3 fallback) {
-    float l = length(v);
-    return l > 1e-20 ? v / l : fallback;
-}
-
 void main() {
     // Algorithm 2 lines 2–10, exactly as diffraction.vert.
-    mat3 m = mat3(transforms.model);
-    vec3 n = safeNormalizeOr(transpose(inverse(m)) * inNormal, vec3(0.0, 0.0, 1.0));
-    vec3 t = m * inTangent.xyz;
-    vec3 anyPerp = normalize(cross(n, abs(n.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
-    t = safeNormalizeOr(t - n * dot(n, t), anyPerp);
-    vec3 b = (inTangent.w < 0.0 ? -1.0 : 1.0) * cross(n, t);
+    vec3 t, b, n;
+    tangentFrame(mat3(transforms.model), inNormal, inTangent, t, b, n);
     vec4 position = transforms.model * vec4(inPosition, 1.0);
     vec3 viewerDir = params.eyeWorld.xyz - position.xyz / position.w;
     vec3 lightDir = -safeNormalizeOr(params.lightDirWorld.xyz, vec3(0.0, 0.0, -1.0));
