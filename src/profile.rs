@@ -17,6 +17,7 @@ use crate::brdf::{direction, model, reference};
 use crate::colour::{delta_e2000, xyz_to_lab, ColourTable};
 use crate::gpu::StorageFormat;
 use crate::material::{default_cache_dir, Material, MaterialArgs};
+use crate::render::variant::{Family, Preset};
 use crate::render::{map_direction, Renderer, TableArgs, TableOptions, VariantKind};
 use crate::scene::Scene;
 use crate::spectrum::Expansion;
@@ -37,92 +38,84 @@ pub struct Variant {
 }
 
 impl Variant {
-    /// `base` with this variant's numerical choices (FLSS reads them; the table variants
-    /// read only the height field and coherence length).
+    /// `base` with this variant's numerical choices (the DFT-term variants read them; the
+    /// table variants read only the height field and coherence length).
     pub fn material(&self, base: &Material) -> Material {
-        match self.kind {
-            VariantKind::Flss | VariantKind::Nmm | VariantKind::Pq => Material {
+        match self.kind.family() {
+            Family::Terms => Material {
                 expansion: self.expansion,
                 terms: crate::material::Terms::Fixed(self.terms),
                 window_radius: self.window_radius,
                 lambda_step_nm: self.lambda_step_nm,
                 ..base.clone()
             },
-            _ => base.clone(),
+            Family::Table | Family::Debug => base.clone(),
+        }
+    }
+
+    /// The row of `kind` for `preset`, with the profile's Taylor `terms` and `table` options.
+    fn from_preset(kind: VariantKind, preset: &Preset, terms: usize, table: &TableOptions) -> Self {
+        let table = TableOptions {
+            step_nm: preset.table_step_nm.unwrap_or(table.step_nm),
+            format: preset.table_format.unwrap_or(table.format),
+            ..*table
+        };
+        let name = if preset.label.is_empty() {
+            kind.name().to_string()
+        } else {
+            preset.label.to_string()
+        };
+        match kind.family() {
+            Family::Terms => Variant {
+                name,
+                kind,
+                expansion: preset.expansion,
+                terms: preset.terms(terms),
+                window_radius: preset.window_radius,
+                lambda_step_nm: preset.lambda_step_nm,
+                storage: preset.storage,
+                table,
+            },
+            Family::Table | Family::Debug => Variant {
+                name,
+                kind,
+                expansion: Expansion::Taylor,
+                terms: 0,
+                window_radius: 0,
+                lambda_step_nm: table.step_nm,
+                storage: StorageFormat::Rg32f,
+                table,
+            },
         }
     }
 }
 
-/// The FLSS set: the thesis setting (Taylor, R = 1), the default, larger R, Chebyshev, the
-/// compact storage formats, and coarser and finer wavelength steps. `terms` is T of the
-/// Taylor variants; Chebyshev gets about two thirds of it (it converges faster, README).
+/// The rows of every registered variant of `family`, from the presets each declares.
+fn rows_of(family: Family, terms: usize, table: &TableOptions) -> Vec<Variant> {
+    VariantKind::ALL
+        .into_iter()
+        .filter(|k| k.family() == family)
+        .flat_map(|k| {
+            k.profile_presets()
+                .iter()
+                .map(move |p| Variant::from_preset(k, p, terms, table))
+        })
+        .collect()
+}
+
+/// The DFT-term set (flss, nmm, pq): the rows each variant declares, e.g. FLSS's thesis
+/// setting (Taylor, R = 1), the default, larger R, Chebyshev, the compact storage formats,
+/// and coarser and finer wavelength steps. `terms` is T of the Taylor rows; Chebyshev gets
+/// about two thirds of it (it converges faster, README).
 pub fn flss_variants(terms: usize) -> Vec<Variant> {
-    let v = |name: &str, expansion, terms, r, step, storage| Variant {
-        name: name.to_string(),
-        kind: VariantKind::Flss,
-        expansion,
-        terms,
-        window_radius: r,
-        lambda_step_nm: step,
-        storage,
-        table: TableOptions::default(),
-    };
-    let cheb = (2 * terms).div_ceil(3);
-    use Expansion::{Chebyshev, Taylor};
-    use StorageFormat::{Rg16f, Rg32f, Unorm16};
-    vec![
-        v("thesis: taylor R=1", Taylor, terms, 1, 5, Rg32f),
-        v("taylor R=2", Taylor, terms, 2, 5, Rg32f),
-        v("taylor R=3", Taylor, terms, 3, 5, Rg32f),
-        v("chebyshev R=2", Chebyshev, cheb, 2, 5, Rg32f),
-        v("taylor R=2 rg16f", Taylor, terms, 2, 5, Rg16f),
-        v("taylor R=2 unorm16", Taylor, terms, 2, 5, Unorm16),
-        v("taylor R=2 10nm", Taylor, terms, 2, 10, Rg32f),
-        v("taylor R=2 1nm", Taylor, terms, 2, 1, Rg32f),
-        Variant {
-            kind: VariantKind::Nmm,
-            ..v("nmm taylor R=2", Taylor, terms, 2, 5, Rg32f)
-        },
-        Variant {
-            kind: VariantKind::Pq,
-            ..v("pq taylor", Taylor, terms, 2, 5, Rg32f)
-        },
-        Variant {
-            kind: VariantKind::Pq,
-            ..v("pq taylor 1nm", Taylor, terms, 2, 1, Rg32f)
-        },
-    ]
+    rows_of(Family::Terms, terms, &TableOptions::default())
 }
 
 /// The pre-integrated set with `table` as the base options: each table variant at its
-/// defaults, plus `chebyshev-w` with its spectrum integrated at 5 nm (as FLSS samples it)
-/// and `volume` in float16.
+/// defaults, plus the extra rows each declares (`chebyshev-w` with its spectrum integrated
+/// at 5 nm as FLSS samples it, `volume` in float16).
 pub fn table_variants(table: &TableOptions) -> Vec<Variant> {
-    let v = |name: &str, kind, table: TableOptions| Variant {
-        name: name.to_string(),
-        kind,
-        expansion: Expansion::Taylor,
-        terms: 0,
-        window_radius: 0,
-        lambda_step_nm: table.step_nm,
-        storage: StorageFormat::Rg32f,
-        table,
-    };
-    let coarse = TableOptions {
-        step_nm: 5,
-        ..*table
-    };
-    let half = TableOptions {
-        format: crate::render::TableFormat::Rgba16f,
-        ..*table
-    };
-    vec![
-        v("dhillon", VariantKind::Dhillon, *table),
-        v("chebyshev-w", VariantKind::ChebyshevW, *table),
-        v("chebyshev-w 5nm", VariantKind::ChebyshevW, coarse),
-        v("volume", VariantKind::Volume, *table),
-        v("volume rgba16f", VariantKind::Volume, half),
-    ]
+    rows_of(Family::Table, 0, table)
 }
 
 /// Every variant: [`flss_variants`] then [`table_variants`].
@@ -498,7 +491,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
         let mesh = mesh_view(renderer, false)?;
         let mesh_gpu_ms = mesh.as_ref().map(|m| m.0);
         let per_vertex_mesh = if setup.per_vertex
-            && crate::render::variant::per_vertex_file(variant.kind).is_some()
+            && variant.kind.per_vertex_file().is_some()
         {
             mesh_view(renderer, true)?
         } else {

@@ -122,12 +122,18 @@ pub fn check_per_vertex(per_vertex: bool, brdf_map: bool, variant: VariantKind) 
             "a BRDF map has no vertices (every pixel is its own direction); drop --per-vertex or --brdf-map",
         ));
     }
-    if super::variant::per_vertex_file(variant).is_none() {
+    if variant.per_vertex_file().is_none() {
+        let with: Vec<&str> = VariantKind::ALL
+            .into_iter()
+            .filter(|k| k.per_vertex_file().is_some())
+            .map(VariantKind::name)
+            .collect();
         return Err(Error::invalid(
             "per-vertex",
             format!(
-                "'{}' has no per-vertex evaluation: a table variant's lookup already costs about what a vertex does, so interpolating it would add error and save nothing; use flss, nmm or pq",
-                variant.resolve()
+                "'{}' has no per-vertex evaluation: a table variant's lookup already costs about what a vertex does, so interpolating it would add error and save nothing; use {}",
+                variant.resolve(),
+                with.join(", ")
             ),
         ));
     }
@@ -159,14 +165,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     crate::image_io::output_format(&args.out)?;
     crate::guard::render_args(args, &scene)?;
     check_per_vertex(args.per_vertex, args.brdf_map, args.variant)?;
-    if args.lambda_nm.is_some() && !args.variant.is_spectral() {
-        return Err(Error::invalid(
-            "variant",
-            format!(
-                "'{}' integrates the spectrum offline and cannot draw one wavelength; use --variant flss with --lambda-nm",
-                args.variant.resolve()
-            ),
-        ));
+    if args.lambda_nm.is_some() {
+        args.variant.check_output(super::OutputMode::MapSpectral)?;
     }
     if let Some(w) = args.width {
         scene.output.width = w;

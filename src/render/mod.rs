@@ -208,6 +208,7 @@ pub struct Renderer {
     /// Table variants: when positive, built for the needed region widened by this much and
     /// reused while later regions fall inside it (the viewer); 0: built for exactly the region.
     region_margin: f64,
+    table_region: Option<Region>,
     /// Run-time SPIR-V by glsl file name (`flss.frag`, `diffraction.vert`, ...) that
     /// replaces the SPIR-V built in (hot reload).
     shader_overrides: std::collections::HashMap<String, Vec<u8>>,
@@ -239,6 +240,7 @@ impl Renderer {
             cache_dir: None,
             prepared: None,
             region_margin: 0.0,
+            table_region: None,
             shader_overrides: Default::default(),
             linear: Sampler::new(
                 &dev,
@@ -313,6 +315,13 @@ impl Renderer {
     /// exactly each frame's region).
     pub fn set_region_margin(&mut self, margin: f64) {
         self.region_margin = margin.max(0.0);
+    }
+
+    /// Table variants (and the `coverage` view): tabulate `region` whatever the draw reaches
+    /// (`None`, the default: the region each draw reaches). Lookups outside it draw black
+    /// (magenta in `coverage`).
+    pub fn set_table_region(&mut self, region: Option<Region>) {
+        self.table_region = region;
     }
 
     /// Replaces built-in SPIR-V by glsl file name (e.g. `flss.frag`) for the passes built
@@ -715,9 +724,12 @@ impl Renderer {
         region: Region,
         output: OutputMode,
     ) -> Result<()> {
-        variant::require_spectral(self.variant, output)?;
-        // flss reads the whole band unless it leaves out texels outside the region.
-        let per_region = self.variant != VariantKind::Flss || self.leave_out;
+        self.variant.check_output(output)?;
+        let region = self.table_region.unwrap_or(region);
+        let per_region = self
+            .variant
+            .implementation()
+            .reads_region(self.leave_out);
         let covering = self.region_margin > 0.0 && per_region;
         let needed = region;
         let region = if covering {
@@ -851,10 +863,7 @@ impl Renderer {
 
     /// The current variant's per-vertex stage (thesis §1.5.1), or why it has none.
     fn per_vertex_shader(&self) -> Result<ShaderModule> {
-        let (Some(spirv), Some(name)) = (
-            self.variant.implementation().per_vertex_spirv(),
-            variant::per_vertex_file(self.variant),
-        ) else {
+        let Some(name) = self.variant.per_vertex_file() else {
             return Err(Error::invalid(
                 "per-vertex",
                 format!(
@@ -863,7 +872,7 @@ impl Renderer {
                 ),
             ));
         };
-        self.shader(name, spirv)
+        self.shader(name, built_in(name)?)
     }
 
     /// Builds a pass: layout, uniform and colour buffers, descriptor set and a pipeline for
@@ -992,10 +1001,8 @@ impl Renderer {
         let fragment = if per_vertex {
             self.shader("per_vertex.frag", shaders::PER_VERTEX_FRAG)?
         } else {
-            self.shader(
-                fragment_file(self.variant),
-                self.variant.implementation().fragment_spirv(),
-            )?
+            let file = self.variant.fragment_file();
+            self.shader(file, built_in(file)?)?
         };
         let name = format!(
             "{} {output:?}{}{}{}",
@@ -1090,18 +1097,15 @@ impl Renderer {
     }
 }
 
-/// The glsl file of a variant's fragment shader (`chebyshev-w` → `chebyshev_w.frag`), the
-/// key of hot-reloaded SPIR-V.
-pub fn fragment_file(kind: VariantKind) -> &'static str {
-    match kind.resolve() {
-        VariantKind::Flss => "flss.frag",
-        VariantKind::Nmm => "nmm.frag",
-        VariantKind::Pq => "pq.frag",
-        VariantKind::Dhillon => "dhillon.frag",
-        VariantKind::ChebyshevW => "chebyshev_w.frag",
-        // resolve() never returns the alias.
-        VariantKind::Volume | VariantKind::Default => "volume.frag",
-    }
+/// The SPIR-V build.rs compiled from glsl/`file`; an error names a stage a variant declares
+/// but glsl/ does not have (the registry test renders every variant, so it shows there).
+fn built_in(file: &str) -> Result<&'static [u8]> {
+    shaders::spirv(file).ok_or_else(|| {
+        Error::invalid(
+            "shader",
+            format!("glsl/{file} was not compiled into this build"),
+        )
+    })
 }
 
 /// The colour table as the shader reads it: the XYZ weights and `λ` of each line.

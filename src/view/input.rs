@@ -129,9 +129,7 @@ impl Controls {
                     let per_vertex = self.per_vertex;
                     let all: Vec<VariantKind> = VariantKind::ALL
                         .into_iter()
-                        .filter(|k| {
-                            !per_vertex || crate::render::variant::per_vertex_file(*k).is_some()
-                        })
+                        .filter(|k| !per_vertex || k.per_vertex_file().is_some())
                         .collect();
                     let i = all.iter().position(|k| *k == self.variant).unwrap_or(0);
                     self.variant = all[(i + 1) % all.len()];

@@ -5,20 +5,51 @@
 use std::sync::Arc;
 
 use super::table::{prepare, Layout};
-use super::{DrawSetup, PreparedVariant, Variant, VariantKind};
+use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant};
 use crate::brdf::table;
-use crate::gpu::{shaders, Device};
+use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct ChebyshevW;
 
 impl Variant for ChebyshevW {
-    fn kind(&self) -> VariantKind {
-        VariantKind::ChebyshevW
+    fn name(&self) -> &'static str {
+        "chebyshev-w"
     }
 
-    fn fragment_spirv(&self) -> &'static [u8] {
-        shaders::CHEBYSHEV_W_FRAG
+    fn summary(&self) -> &'static str {
+        "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw in w, cubic B-spline in (u,v): 4K bilinear fetches"
+    }
+
+    fn family(&self) -> Family {
+        Family::Table
+    }
+
+    fn fragment(&self) -> &'static str {
+        "chebyshev_w.frag"
+    }
+
+    fn table_w_nodes(&self) -> Option<usize> {
+        Some(16)
+    }
+
+    fn w_nodes_follow_the_field(&self) -> bool {
+        true
+    }
+
+    fn fetches(&self, f: &FetchInputs<'_>) -> usize {
+        4 * f.table.w_nodes_for(Self::KIND)
+    }
+
+    fn profile_presets(&self) -> &'static [Preset] {
+        const ROWS: &[Preset] = &[
+            Preset::named("chebyshev-w"),
+            Preset {
+                table_step_nm: Some(5),
+                ..Preset::named("chebyshev-w 5nm")
+            },
+        ];
+        ROWS
     }
 
     fn prepare(
@@ -27,7 +58,7 @@ impl Variant for ChebyshevW {
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
         prepare(
-            self.kind(),
+            Self::KIND,
             dev,
             setup,
             Layout::Planes,

@@ -6,20 +6,41 @@
 use std::sync::Arc;
 
 use super::table::{prepare, Layout};
-use super::{DrawSetup, PreparedVariant, Variant, VariantKind};
+use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant};
 use crate::brdf::table;
-use crate::gpu::{shaders, Device};
+use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct Dhillon;
 
 impl Variant for Dhillon {
-    fn kind(&self) -> VariantKind {
-        VariantKind::Dhillon
+    fn name(&self) -> &'static str {
+        "dhillon"
     }
 
-    fn fragment_spirv(&self) -> &'static [u8] {
-        shaders::DHILLON_FRAG
+    fn summary(&self) -> &'static str {
+        "Dhillon et al. 2014: G = Σ_p I_p(u,v)·w^p from f64 tables, Horner (monomials: ill-conditioned in f32)"
+    }
+
+    fn family(&self) -> Family {
+        Family::Table
+    }
+
+    fn fragment(&self) -> &'static str {
+        "dhillon.frag"
+    }
+
+    fn table_w_nodes(&self) -> Option<usize> {
+        Some(12)
+    }
+
+    fn fetches(&self, f: &FetchInputs<'_>) -> usize {
+        f.table.w_nodes_for(Self::KIND)
+    }
+
+    fn profile_presets(&self) -> &'static [Preset] {
+        const ROWS: &[Preset] = &[Preset::named("dhillon")];
+        ROWS
     }
 
     fn prepare(
@@ -28,7 +49,7 @@ impl Variant for Dhillon {
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
         prepare(
-            self.kind(),
+            Self::KIND,
             dev,
             setup,
             Layout::Planes,

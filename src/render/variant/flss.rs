@@ -9,12 +9,14 @@ use std::time::Instant;
 
 use ash::vk;
 
-use super::{DrawSetup, PreparedVariant, Variant, VariantKind, VariantStats, SPEC_COUNT};
+use super::{
+    DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant, VariantStats, SPEC_COUNT,
+};
 use crate::colour::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 use crate::gpu::formats::{pack_layers, Layer};
 use crate::gpu::memory::{Image, ImageDesc, Sampler};
 use crate::gpu::pipeline::{Binding, Resource};
-use crate::gpu::{shaders, Device, StorageFormat};
+use crate::gpu::{Device, StorageFormat};
 use crate::leave_out::{crop, intersect, LeftOut, TexelsLeft, UvBox, WavelengthsLeft};
 use crate::material::PreparedMaterial;
 use crate::render::{OutputMode, ParamsUbo, MAX_TERMS};
@@ -24,16 +26,76 @@ use crate::{Error, Result};
 pub(crate) struct Flss;
 
 impl Variant for Flss {
-    fn kind(&self) -> VariantKind {
-        VariantKind::Flss
+    fn name(&self) -> &'static str {
+        "flss"
     }
 
-    fn fragment_spirv(&self) -> &'static [u8] {
-        shaders::FLSS_FRAG
+    fn summary(&self) -> &'static str {
+        "thesis Algorithm 3: every wavelength × term × window tap per pixel (exact to its T, R, Δλ)"
     }
 
-    fn per_vertex_spirv(&self) -> Option<&'static [u8]> {
-        Some(shaders::FLSS_VERTEX_VERT)
+    fn family(&self) -> Family {
+        Family::Terms
+    }
+
+    fn fragment(&self) -> &'static str {
+        "flss.frag"
+    }
+
+    fn per_vertex(&self) -> Option<&'static str> {
+        Some("flss_vertex.vert")
+    }
+
+    fn spectral(&self) -> bool {
+        true
+    }
+
+    fn fetches(&self, f: &FetchInputs<'_>) -> usize {
+        f.lambdas() * (f.terms + 1) * f.taps()
+    }
+
+    /// Without leaving out, the whole band is uploaded whatever the draw reaches.
+    fn reads_region(&self, leave_out: bool) -> bool {
+        leave_out
+    }
+
+    /// The thesis setting (Taylor, R = 1), the default, larger R, Chebyshev, the compact
+    /// storage formats, and coarser and finer wavelength steps.
+    fn profile_presets(&self) -> &'static [Preset] {
+        use crate::spectrum::Expansion::Chebyshev;
+        use StorageFormat::{Rg16f, Unorm16};
+        const ROWS: &[Preset] = &[
+            Preset {
+                window_radius: 1,
+                ..Preset::named("thesis: taylor R=1")
+            },
+            Preset::named("taylor R=2"),
+            Preset {
+                window_radius: 3,
+                ..Preset::named("taylor R=3")
+            },
+            Preset {
+                expansion: Chebyshev,
+                ..Preset::named("chebyshev R=2")
+            },
+            Preset {
+                storage: Rg16f,
+                ..Preset::named("taylor R=2 rg16f")
+            },
+            Preset {
+                storage: Unorm16,
+                ..Preset::named("taylor R=2 unorm16")
+            },
+            Preset {
+                lambda_step_nm: 10,
+                ..Preset::named("taylor R=2 10nm")
+            },
+            Preset {
+                lambda_step_nm: 1,
+                ..Preset::named("taylor R=2 1nm")
+            },
+        ];
+        ROWS
     }
 
     fn prepare(

@@ -1,12 +1,17 @@
-//! Shader variants (MODEL §7): each one owns its fragment shader, the descriptor bindings
-//! beyond the shared ones, its GPU resources and its specialisation constants, behind
-//! [`Variant`] and [`PreparedVariant`]. The renderer only knows this interface; adding a
-//! variant is one new file here plus one line in [`VariantKind`].
+//! Shader variants (MODEL §7). Each variant is one room: its file declares everything about
+//! it through [`Variant`] — name, one line, shader stages, `w`-node default, fetch formula,
+//! what it refuses, its profile rows — and builds its GPU resources behind
+//! [`PreparedVariant`]; its GLSL lives in glsl/ (build.rs embeds every stage there). The
+//! registry at the bottom of this header is the one list of variants: the enum
+//! [`VariantKind`], `--variant` parsing, `diffract variants`, the profiler's rows and the
+//! viewer's `V` cycle all come from it. Adding a variant is its file, its GLSL and one
+//! registry line.
 //!
 //! Shared bindings (every variant's layout has them): 0 `Params` uniform block, 2 colour
 //! weights, 3 surface texture. A variant adds binding 1 (its main table) and 4 onwards.
 
 mod chebyshev_w;
+mod coverage;
 mod dhillon;
 mod flss;
 mod nmm;
@@ -20,6 +25,7 @@ use crate::brdf::table::{Region, TableSpec};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::{Device, StorageFormat};
 use crate::material::{Material, PreparedMaterial};
+use crate::spectrum::Expansion;
 use crate::{Error, Result};
 
 use super::{OutputMode, ParamsUbo};
@@ -27,40 +33,59 @@ use super::{OutputMode, ParamsUbo};
 /// Number of specialisation constants (`constant_id` 0..=9 of glsl/interface.glsl).
 pub(crate) const SPEC_COUNT: usize = 10;
 
-/// The variants, by name.
-#[derive(
-    Debug, Clone, Copy, PartialEq, Eq, Hash, clap::ValueEnum, serde::Serialize, serde::Deserialize,
-)]
-#[serde(rename_all = "kebab-case")]
-#[value(rename_all = "kebab-case")]
-pub enum VariantKind {
-    /// Thesis Algorithm 3: the whole spectrum, every term and tap, per pixel.
-    Flss,
-    /// Thesis §1.5.2 done right: FLSS at the wavelengths of the grating's orders only.
-    Nmm,
-    /// Thesis §1.5.3 done right: one period's spectrum (3×3 sinc taps) × the periodic factor.
-    Pq,
-    /// Dhillon et al. 2014: tables of the powers of w, Horner per pixel.
-    Dhillon,
-    /// G as a Chebyshev series in w: K bilinear fetches, Clenshaw.
-    ChebyshevW,
-    /// G(u, v, w) in a 3D texture: one trilinear fetch.
-    Volume,
-    /// The default variant (an alias; see [`VariantKind::DEFAULT`]).
-    Default,
+/// Declares the registry: the enum of variants (plus the `default` alias), [`VariantKind::ALL`]
+/// in listing order, each variant's implementation, and `--variant` parsing by the names the
+/// implementations declare.
+macro_rules! registry {
+    ($($kind:ident => $imp:path,)+) => {
+        /// A registered variant (or the `default` alias); everything about it comes from its
+        /// implementation ([`VariantKind::implementation`]).
+        #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+        pub enum VariantKind {
+            $(#[doc = concat!("See [`", stringify!($imp), "`].")] $kind,)+
+            /// The default variant (an alias; see [`VariantKind::DEFAULT`]).
+            Default,
+        }
+
+        impl VariantKind {
+            /// Every variant, the alias excluded, in listing order.
+            pub const ALL: [VariantKind; [$(VariantKind::$kind),+].len()] = [$(VariantKind::$kind),+];
+
+            /// What `--variant` accepts: every variant and the alias.
+            const CHOICES: [VariantKind; [$(VariantKind::$kind),+].len() + 1] =
+                [$(VariantKind::$kind,)+ VariantKind::Default];
+
+            /// The variant's own declarations and resources.
+            ///
+            /// (Each implementation also knows its key, `Self::KIND`.)
+            pub(crate) fn implementation(self) -> &'static dyn Variant {
+                match self.resolve() {
+                    $(VariantKind::$kind => &$imp,)+
+                    VariantKind::Default => Self::DEFAULT.implementation(),
+                }
+            }
+        }
+
+        $(impl $imp {
+            /// This variant's key in the registry.
+            #[allow(dead_code)]
+            pub(crate) const KIND: VariantKind = VariantKind::$kind;
+        })+
+    };
+}
+
+// The registry: one line per variant, in listing order.
+registry! {
+    Flss => flss::Flss,
+    Nmm => nmm::Nmm,
+    Pq => pq::Pq,
+    Dhillon => dhillon::Dhillon,
+    ChebyshevW => chebyshev_w::ChebyshevW,
+    Volume => volume::Volume,
+    Coverage => coverage::Coverage,
 }
 
 impl VariantKind {
-    /// Every variant, the alias excluded, in listing order.
-    pub const ALL: [VariantKind; 6] = [
-        VariantKind::Flss,
-        VariantKind::Nmm,
-        VariantKind::Pq,
-        VariantKind::Dhillon,
-        VariantKind::ChebyshevW,
-        VariantKind::Volume,
-    ];
-
     /// What `default` stands for: the fastest variant whose error against the 1 nm
     /// reference stays within ΔE2000 p99 ≤ 1 on the shipped gratings (README, profile).
     pub const DEFAULT: VariantKind = VariantKind::ChebyshevW;
@@ -73,70 +98,71 @@ impl VariantKind {
         }
     }
 
-    /// Command-line name.
+    /// Command-line name (the alias gives the name of what it stands for).
     pub fn name(self) -> &'static str {
-        match self.resolve() {
-            VariantKind::Flss => "flss",
-            VariantKind::Nmm => "nmm",
-            VariantKind::Pq => "pq",
-            VariantKind::Dhillon => "dhillon",
-            VariantKind::ChebyshevW => "chebyshev-w",
-            VariantKind::Volume => "volume",
-            VariantKind::Default => unreachable!("resolved above"),
-        }
+        self.implementation().name()
     }
 
     /// One line for `diffract variants`.
     pub fn summary(self) -> &'static str {
-        match self.resolve() {
-            VariantKind::Flss => "thesis Algorithm 3: every wavelength × term × window tap per pixel (exact to its T, R, Δλ)",
-            VariantKind::Nmm => "thesis §1.5.2 done right: FLSS at the wavelengths of the grating's orders only, Jacobian-weighted (needs a dominant period)",
-            VariantKind::Pq => "thesis §1.5.3 done right: one period's spectrum from 3×3 periodic-sinc taps × |F_x F_y|² of N copies, N·L = 2√π σs (needs whole copies of one period)",
-            VariantKind::Dhillon => "Dhillon et al. 2014: G = Σ_p I_p(u,v)·w^p from f64 tables, Horner (monomials: ill-conditioned in f32)",
-            VariantKind::ChebyshevW => "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw in w, cubic B-spline in (u,v): 4K bilinear fetches",
-            VariantKind::Volume => "G(u,v,w) in a 3D texture from f64 tables: one trilinear fetch (the floor)",
-            VariantKind::Default => unreachable!("resolved above"),
-        }
+        self.implementation().summary()
     }
 
-    /// Whether it can draw a single wavelength (FLSS evaluates every one per pixel).
+    /// How it is profiled and listed.
+    pub fn family(self) -> Family {
+        self.implementation().family()
+    }
+
+    /// Its rows in `diffract profile`'s standard set.
+    pub fn profile_presets(self) -> &'static [Preset] {
+        self.implementation().profile_presets()
+    }
+
+    /// Whether it evaluates wavelengths per pixel and so can draw one wavelength.
     pub fn is_spectral(self) -> bool {
-        self.resolve() == VariantKind::Flss
+        self.implementation().spectral()
+    }
+
+    /// The variant called `name` (or the alias `default`).
+    pub fn named(name: &str) -> Option<VariantKind> {
+        Self::CHOICES.into_iter().find(|k| k.cli_name() == name)
+    }
+
+    /// The name `--variant` takes: `default` for the alias.
+    fn cli_name(self) -> &'static str {
+        match self {
+            VariantKind::Default => "default",
+            k => k.name(),
+        }
     }
 
     /// Texel fetches per pixel for `material` with highest term `terms` (FLSS and NMM) and
     /// the table options.
     pub fn fetches(self, terms: usize, material: &Material, table: &TableOptions) -> usize {
-        match self.resolve() {
-            VariantKind::Flss => {
-                let lambdas = (400 / material.lambda_step_nm.max(1) + 1) as usize;
-                let taps = (2 * material.window_radius + 1).pow(2);
-                lambdas * (terms + 1) * taps
-            }
-            VariantKind::Nmm => {
-                let taps = (2 * material.window_radius + 1).pow(2);
-                (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * (terms + 1) * taps
-            }
-            VariantKind::Pq => {
-                let lambdas = (400 / material.lambda_step_nm.max(1) + 1) as usize;
-                lambdas * (terms + 1) * crate::brdf::pq::TAPS.pow(2)
-            }
-            VariantKind::Volume => 1,
-            VariantKind::ChebyshevW => 4 * table.w_nodes_for(self),
-            k => table.w_nodes_for(k),
-        }
+        self.implementation().fetches(&FetchInputs {
+            terms,
+            material,
+            table,
+        })
     }
 
-    pub(crate) fn implementation(self) -> &'static dyn Variant {
-        match self.resolve() {
-            VariantKind::Flss => &flss::Flss,
-            VariantKind::Nmm => &nmm::Nmm,
-            VariantKind::Pq => &pq::Pq,
-            VariantKind::Dhillon => &dhillon::Dhillon,
-            VariantKind::ChebyshevW => &chebyshev_w::ChebyshevW,
-            VariantKind::Volume => &volume::Volume,
-            VariantKind::Default => unreachable!("resolved above"),
+    /// Refuses a draw of `output` this variant cannot make (one wavelength from a variant
+    /// that integrates the spectrum offline).
+    pub(crate) fn check_output(self, output: OutputMode) -> Result<()> {
+        if output == OutputMode::MapSpectral && !self.is_spectral() {
+            return Err(spectral_refusal(self));
         }
+        Ok(())
+    }
+
+    /// The glsl file of its fragment stage (the key of hot-reloaded SPIR-V).
+    pub fn fragment_file(self) -> &'static str {
+        self.implementation().fragment()
+    }
+
+    /// The glsl file of its per-vertex stage (thesis §1.5.1), where it has one.
+    pub fn per_vertex_file(self) -> Option<&'static str> {
+        self.implementation().per_vertex()
     }
 }
 
@@ -144,6 +170,106 @@ impl std::fmt::Display for VariantKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         f.write_str(self.name())
     }
+}
+
+impl clap::ValueEnum for VariantKind {
+    fn value_variants<'a>() -> &'a [Self] {
+        &Self::CHOICES
+    }
+
+    fn to_possible_value(&self) -> Option<clap::builder::PossibleValue> {
+        let help = match self {
+            VariantKind::Default => format!("the default variant, {}", Self::DEFAULT.name()),
+            k => k.summary().to_string(),
+        };
+        Some(clap::builder::PossibleValue::new(self.cli_name()).help(help))
+    }
+}
+
+/// The one-line refusal of a single-wavelength draw by `kind`.
+pub(crate) fn spectral_refusal(kind: VariantKind) -> Error {
+    Error::invalid(
+        "variant",
+        format!(
+            "'{}' integrates the spectrum offline and cannot draw one wavelength; use --variant flss with --lambda-nm",
+            kind.resolve()
+        ),
+    )
+}
+
+/// What a variant's fetch formula reads.
+pub struct FetchInputs<'a> {
+    /// Highest term index `T` of the DFT-term variants.
+    pub terms: usize,
+    pub material: &'a Material,
+    pub table: &'a TableOptions,
+}
+
+impl FetchInputs<'_> {
+    /// Window taps per lookup, `(2R + 1)²`.
+    pub fn taps(&self) -> usize {
+        (2 * self.material.window_radius + 1).pow(2)
+    }
+
+    /// Wavelengths of the material's step over 380–780 nm.
+    pub fn lambdas(&self) -> usize {
+        (400 / self.material.lambda_step_nm.max(1) + 1) as usize
+    }
+}
+
+/// One row of `diffract profile`'s standard set: a label and the numerical choices of the
+/// variant in that row. The DFT-term variants read the expansion, `R`, `Δλ` and storage
+/// (and `T`: the profile's Taylor `T`, two thirds of it for Chebyshev); the table variants
+/// read the table's step and format overrides.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Preset {
+    pub label: &'static str,
+    pub expansion: Expansion,
+    pub window_radius: usize,
+    pub lambda_step_nm: u32,
+    pub storage: StorageFormat,
+    /// Table variants: the offline integral's step instead of the profile's.
+    pub table_step_nm: Option<u32>,
+    /// Table variants: the texel format instead of the profile's.
+    pub table_format: Option<TableFormat>,
+}
+
+impl Preset {
+    /// Taylor, `R = 2`, 5 nm, RG32F, the profile's table options: the base of every row.
+    pub const BASE: Preset = Preset {
+        label: "",
+        expansion: Expansion::Taylor,
+        window_radius: 2,
+        lambda_step_nm: 5,
+        storage: StorageFormat::Rg32f,
+        table_step_nm: None,
+        table_format: None,
+    };
+
+    /// The base settings under `label`.
+    pub const fn named(label: &'static str) -> Preset {
+        Preset { label, ..Self::BASE }
+    }
+
+    /// `T` of this row for the profile's Taylor `T`: Chebyshev converges faster and gets two
+    /// thirds of it.
+    pub fn terms(&self, taylor_terms: usize) -> usize {
+        match self.expansion {
+            Expansion::Taylor => taylor_terms,
+            Expansion::Chebyshev => (2 * taylor_terms).div_ceil(3),
+        }
+    }
+}
+
+/// How a variant is profiled and listed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Family {
+    /// Evaluates the DFT terms per pixel (flss, nmm, pq): reads `T`, `R`, `Δλ`, storage.
+    Terms,
+    /// Reads a pre-integrated table of `G` (dhillon, chebyshev-w, volume).
+    Table,
+    /// Shows something about the draw instead of the BRDF (not profiled).
+    Debug,
 }
 
 /// Storage of the pre-integrated tables.
@@ -187,11 +313,9 @@ impl TableOptions {
     /// `w` nodes of variant `kind` unless the height field asks for more
     /// ([`TableOptions::w_nodes_for_field`]).
     pub fn w_nodes_for(&self, kind: VariantKind) -> usize {
-        self.w_nodes.unwrap_or(match kind.resolve() {
-            VariantKind::Volume => 32,
-            VariantKind::Dhillon => 12,
-            _ => 16,
-        })
+        self.w_nodes
+            .or(kind.implementation().table_w_nodes())
+            .unwrap_or(16)
     }
 
     /// `w` nodes of `kind` for a height range `h_range_um` over `w ∈ [w0, w1]`: the
@@ -203,7 +327,7 @@ impl TableOptions {
     /// An explicit `w_nodes` is kept as given.
     pub fn w_nodes_for_field(&self, kind: VariantKind, h_range_um: f64, w: [f64; 2]) -> usize {
         let base = self.w_nodes_for(kind);
-        if self.w_nodes.is_some() || kind.resolve() != VariantKind::ChebyshevW {
+        if self.w_nodes.is_some() || !kind.implementation().w_nodes_follow_the_field() {
             return base;
         }
         let k_max = 2.0 * std::f64::consts::PI / (crate::colour::LAMBDA_MIN_NM as f64 * 1e-3);
@@ -312,43 +436,90 @@ impl DrawSetup<'_> {
     }
 }
 
-/// A variant: its fragment shader and how to build its resources.
+/// A variant: everything it declares about itself, and how to build its resources. One
+/// implementation per file; the registry lists them.
 pub(crate) trait Variant: Sync {
-    fn kind(&self) -> VariantKind;
-    /// SPIR-V of its fragment shader (the vertex stages are shared).
-    fn fragment_spirv(&self) -> &'static [u8];
-    /// SPIR-V of its per-vertex stage (thesis §1.5.1: the BRDF evaluated per vertex, the
-    /// colour interpolated), where the variant has one.
-    fn per_vertex_spirv(&self) -> Option<&'static [u8]> {
+    /// Command-line name (`--variant`, `diffract variants`, the viewer's title).
+    fn name(&self) -> &'static str;
+    /// One line for `diffract variants` and the README's table.
+    fn summary(&self) -> &'static str;
+    /// How it is profiled and listed.
+    fn family(&self) -> Family;
+    /// The glsl/ file of its fragment stage (build.rs embeds it; the key of hot reload).
+    fn fragment(&self) -> &'static str;
+    /// The glsl/ file of its per-vertex stage (thesis §1.5.1: the BRDF evaluated per vertex,
+    /// the colour interpolated), where it has one.
+    fn per_vertex(&self) -> Option<&'static str> {
         None
+    }
+    /// Whether it evaluates wavelengths per pixel and so can draw one wavelength.
+    fn spectral(&self) -> bool {
+        false
+    }
+    /// Table variants: the default number of `w` nodes.
+    fn table_w_nodes(&self) -> Option<usize> {
+        None
+    }
+    /// Table variants: whether the `w` nodes grow with the height range (a series in `w`
+    /// whose coefficients decay like Bessel functions; [`TableOptions::w_nodes_for_field`]).
+    fn w_nodes_follow_the_field(&self) -> bool {
+        false
+    }
+    /// Texel fetches per evaluation (one pixel, one direction of the light).
+    fn fetches(&self, inputs: &FetchInputs<'_>) -> usize;
+    /// Whether its resources depend on the region the draw reaches (leaving out on or off).
+    fn reads_region(&self, _leave_out: bool) -> bool {
+        true
+    }
+    /// Its rows in `diffract profile`'s standard set.
+    fn profile_presets(&self) -> &'static [Preset] {
+        &[]
     }
     /// Builds and uploads what the shader reads for `setup`.
     fn prepare(&self, dev: &Arc<Device>, setup: &DrawSetup<'_>)
         -> Result<Box<dyn PreparedVariant>>;
 }
 
-/// A variant's GPU resources for one material and region.
+/// A variant's GPU resources for one material and region. A variant built on another's
+/// resources (nmm and pq on flss's terms) returns them from [`PreparedVariant::base`], and
+/// every method it does not override answers from there.
 pub(crate) trait PreparedVariant {
+    /// The resources this one extends, if any.
+    fn base(&self) -> Option<&dyn PreparedVariant> {
+        None
+    }
     /// Its descriptor bindings beyond the shared ones.
-    fn bindings(&self) -> Vec<Binding>;
+    fn bindings(&self) -> Vec<Binding> {
+        self.base().map_or_else(Vec::new, |b| b.bindings())
+    }
     /// What those bindings point at.
-    fn resources(&self) -> Vec<(u32, Resource<'_>)>;
+    fn resources(&self) -> Vec<(u32, Resource<'_>)> {
+        self.base().map_or_else(Vec::new, |b| b.resources())
+    }
     /// Sets its specialisation constants.
-    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]);
+    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
+        if let Some(b) = self.base() {
+            b.specialise(spec);
+        }
+    }
     /// Fills its part of the shared uniform block.
-    fn fill_params(&self, _params: &mut ParamsUbo) {}
+    fn fill_params(&self, params: &mut ParamsUbo) {
+        if let Some(b) = self.base() {
+            b.fill_params(params);
+        }
+    }
     fn stats(&self) -> VariantStats;
     /// The grating NMM estimated from the height field.
     fn grating(&self) -> Option<crate::brdf::nmm::Grating> {
-        None
+        self.base().and_then(|b| b.grating())
     }
     /// The periodic structure `pq` found in the height field.
     fn periodicity(&self) -> Option<crate::brdf::pq::Periodicity> {
-        None
+        self.base().and_then(|b| b.periodicity())
     }
     /// The f64 CPU model of a table variant, when it was kept.
     fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
-        None
+        self.base().and_then(|b| b.table_model())
     }
     /// The pipeline's name (validation messages and captures show it).
     fn pipeline_name(&self) -> String {
@@ -357,35 +528,12 @@ pub(crate) trait PreparedVariant {
     /// Indices into the material's colour table of the wavelengths the shader loops over
     /// (binding 2 holds only these); `None`: all of them.
     fn kept_wavelengths(&self) -> Option<&[usize]> {
-        None
+        self.base().and_then(|b| b.kept_wavelengths())
     }
     /// What it left out of what the scene does not need (`None`: nothing recorded).
     fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
-        None
+        self.base().and_then(|b| b.left_out())
     }
-}
-
-/// The glsl file of a variant's per-vertex stage (the key of hot-reloaded SPIR-V).
-pub(crate) fn per_vertex_file(kind: VariantKind) -> Option<&'static str> {
-    match kind.resolve() {
-        VariantKind::Flss => Some("flss_vertex.vert"),
-        VariantKind::Nmm => Some("nmm_vertex.vert"),
-        VariantKind::Pq => Some("pq_vertex.vert"),
-        _ => None,
-    }
-}
-
-/// Rejects a spectral (single-wavelength) draw for a variant that integrates offline.
-pub(crate) fn require_spectral(kind: VariantKind, output: OutputMode) -> Result<()> {
-    if output == OutputMode::MapSpectral && !kind.is_spectral() {
-        return Err(Error::invalid(
-            "variant",
-            format!(
-                "'{kind}' integrates the spectrum offline and cannot draw one wavelength; use --variant flss with --lambda-nm"
-            ),
-        ));
-    }
-    Ok(())
 }
 
 /// `diffract variants`: the list, with fetches and memory for the default material on a
@@ -411,11 +559,12 @@ pub fn list() -> String {
         "variant       fetches/pixel  memory (default material, BRDF map at θi = 60°)\n",
     );
     for kind in VariantKind::ALL {
-        let memory = match kind {
-            VariantKind::Flss | VariantKind::Nmm | VariantKind::Pq => {
+        let memory = match kind.implementation().family() {
+            Family::Terms => {
                 "term band × (T+1) layers, RG32F (≈ 120 MB for the 704² gratings)".to_string()
             }
-            k => match table.spec(k, &material, 0.375, region) {
+            Family::Debug => "none (a uniform block)".to_string(),
+            Family::Table => match table.spec(kind, &material, 0.375, region) {
                 Ok((spec, _)) => match spec.uv_nodes() {
                     Ok((nu, nv)) => format!(
                         "{:.0} MB ({nu}×{nv}×{} RGBA32F, u/v texel {:.4})",
@@ -440,7 +589,44 @@ pub fn list() -> String {
             kind.summary()
         ));
     }
-    s.push_str("per-vertex (--per-vertex on render, view, profile; thesis §1.5.1): flss, nmm and pq evaluated once per mesh vertex, the colour interpolated; cost per vertex, not per pixel\n");
+    let per_vertex: Vec<&str> = VariantKind::ALL
+        .into_iter()
+        .filter(|k| k.per_vertex_file().is_some())
+        .map(VariantKind::name)
+        .collect();
+    s.push_str(&format!(
+        "per-vertex (--per-vertex on render, view, profile; thesis §1.5.1): {} evaluated once per mesh vertex, the colour interpolated; cost per vertex, not per pixel\n",
+        per_vertex.join(", ")
+    ));
+    s
+}
+
+/// The Markdown table of the variants (the README's and docs/variants.md's): name, family,
+/// stages and the one line, from the registry.
+pub fn markdown_table() -> String {
+    let mut s = String::from("| variant | kind | stages | what it does |\n|---|---|---|---|\n");
+    for kind in VariantKind::ALL {
+        let v = kind.implementation();
+        let family = match v.family() {
+            Family::Terms => "DFT terms per pixel",
+            Family::Table => "pre-integrated table",
+            Family::Debug => "debug view",
+        };
+        let stages = match v.per_vertex() {
+            Some(pv) => format!("`{}`, `{pv}`", v.fragment()),
+            None => format!("`{}`", v.fragment()),
+        };
+        let mark = if kind == VariantKind::DEFAULT {
+            " **(default)**"
+        } else {
+            ""
+        };
+        s.push_str(&format!(
+            "| `{}`{mark} | {family} | {stages} | {} |\n",
+            v.name(),
+            v.summary().replace('|', "\\|")
+        ));
+    }
     s
 }
 
@@ -504,10 +690,17 @@ mod tests {
         for k in VariantKind::ALL {
             assert_eq!(k.resolve(), k);
             assert!(!k.summary().is_empty());
+            assert_eq!(VariantKind::named(k.name()), Some(k));
         }
+        let mut names: Vec<&str> = VariantKind::ALL.into_iter().map(VariantKind::name).collect();
+        names.sort_unstable();
+        names.dedup();
+        assert_eq!(names.len(), VariantKind::ALL.len(), "names are unique");
         assert_eq!(VariantKind::Default.resolve(), VariantKind::DEFAULT);
         assert_eq!(VariantKind::Default.name(), VariantKind::DEFAULT.name());
+        assert_eq!(VariantKind::named("default"), Some(VariantKind::Default));
         assert!(VariantKind::Flss.is_spectral() && !VariantKind::Volume.is_spectral());
         assert!(list().contains("(default)"));
+        assert!(markdown_table().contains("**(default)**"));
     }
 }

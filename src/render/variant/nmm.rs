@@ -8,14 +8,11 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::flss::{prepare_terms, FlssGpu};
-use super::{
-    require_spectral, DrawSetup, PreparedVariant, Variant, VariantKind, VariantStats, SPEC_COUNT,
-};
+use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant, VariantStats};
 use crate::brdf::nmm::{estimate_grating, Density, Grating};
 use crate::gpu::memory::{Buffer, Pod};
 use crate::gpu::pipeline::{Binding, Resource};
-use crate::gpu::{shaders, Device};
-use crate::render::ParamsUbo;
+use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct Nmm;
@@ -35,16 +32,33 @@ struct NmmInfoUbo {
 unsafe impl Pod for NmmInfoUbo {}
 
 impl Variant for Nmm {
-    fn kind(&self) -> VariantKind {
-        VariantKind::Nmm
+    fn name(&self) -> &'static str {
+        "nmm"
     }
 
-    fn fragment_spirv(&self) -> &'static [u8] {
-        shaders::NMM_FRAG
+    fn summary(&self) -> &'static str {
+        "thesis §1.5.2 done right: FLSS at the wavelengths of the grating's orders only, Jacobian-weighted (needs a dominant period)"
     }
 
-    fn per_vertex_spirv(&self) -> Option<&'static [u8]> {
-        Some(shaders::NMM_VERTEX_VERT)
+    fn family(&self) -> Family {
+        Family::Terms
+    }
+
+    fn fragment(&self) -> &'static str {
+        "nmm.frag"
+    }
+
+    fn per_vertex(&self) -> Option<&'static str> {
+        Some("nmm_vertex.vert")
+    }
+
+    fn fetches(&self, f: &FetchInputs<'_>) -> usize {
+        (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * (f.terms + 1) * f.taps()
+    }
+
+    fn profile_presets(&self) -> &'static [Preset] {
+        const ROWS: &[Preset] = &[Preset::named("nmm taylor R=2")];
+        ROWS
     }
 
     fn prepare(
@@ -52,7 +66,6 @@ impl Variant for Nmm {
         dev: &Arc<Device>,
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
-        require_spectral(self.kind(), setup.output)?;
         let p = setup.prepared;
         let grating = estimate_grating(&p.heightfield)?;
         let mut flss = prepare_terms(dev, setup)?;
@@ -128,6 +141,10 @@ struct NmmGpu {
 }
 
 impl PreparedVariant for NmmGpu {
+    fn base(&self) -> Option<&dyn PreparedVariant> {
+        Some(&self.flss)
+    }
+
     fn bindings(&self) -> Vec<Binding> {
         let mut b = self.flss.bindings();
         for (binding, kind) in [
@@ -150,27 +167,11 @@ impl PreparedVariant for NmmGpu {
         r
     }
 
-    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
-        self.flss.specialise(spec);
-    }
-
-    fn fill_params(&self, params: &mut ParamsUbo) {
-        self.flss.fill_params(params);
-    }
-
     fn stats(&self) -> VariantStats {
         self.flss.stats()
     }
 
     fn grating(&self) -> Option<Grating> {
         Some(self.grating)
-    }
-
-    fn kept_wavelengths(&self) -> Option<&[usize]> {
-        self.flss.kept_wavelengths()
-    }
-
-    fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
-        self.flss.left_out()
     }
 }

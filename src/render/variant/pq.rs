@@ -9,14 +9,11 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::flss::{prepare_terms, FlssGpu};
-use super::{
-    require_spectral, DrawSetup, PreparedVariant, Variant, VariantKind, VariantStats, SPEC_COUNT,
-};
+use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant, VariantStats};
 use crate::brdf::pq::{estimate_periodicity, Periodicity, TAPS};
 use crate::gpu::memory::{Buffer, Pod};
 use crate::gpu::pipeline::{Binding, Resource};
-use crate::gpu::{shaders, Device};
-use crate::render::ParamsUbo;
+use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct Pq;
@@ -34,16 +31,39 @@ struct PqInfoUbo {
 unsafe impl Pod for PqInfoUbo {}
 
 impl Variant for Pq {
-    fn kind(&self) -> VariantKind {
-        VariantKind::Pq
+    fn name(&self) -> &'static str {
+        "pq"
     }
 
-    fn fragment_spirv(&self) -> &'static [u8] {
-        shaders::PQ_FRAG
+    fn summary(&self) -> &'static str {
+        "thesis §1.5.3 done right: one period's spectrum from 3×3 periodic-sinc taps × |F_x F_y|² of N copies, N·L = 2√π σs (needs whole copies of one period)"
     }
 
-    fn per_vertex_spirv(&self) -> Option<&'static [u8]> {
-        Some(shaders::PQ_VERTEX_VERT)
+    fn family(&self) -> Family {
+        Family::Terms
+    }
+
+    fn fragment(&self) -> &'static str {
+        "pq.frag"
+    }
+
+    fn per_vertex(&self) -> Option<&'static str> {
+        Some("pq_vertex.vert")
+    }
+
+    fn fetches(&self, f: &FetchInputs<'_>) -> usize {
+        f.lambdas() * (f.terms + 1) * TAPS.pow(2)
+    }
+
+    fn profile_presets(&self) -> &'static [Preset] {
+        const ROWS: &[Preset] = &[
+            Preset::named("pq taylor"),
+            Preset {
+                lambda_step_nm: 1,
+                ..Preset::named("pq taylor 1nm")
+            },
+        ];
+        ROWS
     }
 
     fn prepare(
@@ -51,7 +71,6 @@ impl Variant for Pq {
         dev: &Arc<Device>,
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
-        require_spectral(self.kind(), setup.output)?;
         let p = setup.prepared;
         let pq = estimate_periodicity(&p.heightfield, p.material.coherence_um)?;
         if pq.off_lattice > crate::brdf::pq::WARN_OFF_LATTICE {
@@ -139,6 +158,10 @@ struct PqGpu {
 }
 
 impl PreparedVariant for PqGpu {
+    fn base(&self) -> Option<&dyn PreparedVariant> {
+        Some(&self.flss)
+    }
+
     fn bindings(&self) -> Vec<Binding> {
         let mut b = self.flss.bindings();
         b.push(Binding {
@@ -153,14 +176,6 @@ impl PreparedVariant for PqGpu {
         let mut r = self.flss.resources();
         r.push((4, Resource::Uniform(&self.info)));
         r
-    }
-
-    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
-        self.flss.specialise(spec);
-    }
-
-    fn fill_params(&self, params: &mut ParamsUbo) {
-        self.flss.fill_params(params);
     }
 
     fn stats(&self) -> VariantStats {

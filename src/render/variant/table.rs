@@ -10,8 +10,7 @@ use ash::vk;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{
-    require_spectral, DrawSetup, PreparedVariant, TableFormat, VariantKind, VariantStats,
-    SPEC_COUNT,
+    DrawSetup, PreparedVariant, TableFormat, VariantKind, VariantStats, SPEC_COUNT,
 };
 use crate::brdf::table::{GTable, Region, Slices, TableSpec};
 use crate::brdf::table_cache::sample_g_cached_kept;
@@ -55,7 +54,6 @@ pub(crate) fn prepare<T: GTable + 'static>(
     nodes: fn(&TableSpec) -> Vec<f64>,
     assemble: impl FnOnce(Region, Slices) -> T,
 ) -> Result<Box<dyn PreparedVariant>> {
-    require_spectral(kind, setup.output)?;
     let start = Instant::now();
     let material = &setup.prepared.material;
     let (lo, hi) = setup.prepared.heightfield.range();

@@ -4,20 +4,48 @@
 use std::sync::Arc;
 
 use super::table::{prepare, Layout};
-use super::{DrawSetup, PreparedVariant, Variant, VariantKind};
+use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant};
+use super::TableFormat;
 use crate::brdf::table;
-use crate::gpu::{shaders, Device};
+use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct Volume;
 
 impl Variant for Volume {
-    fn kind(&self) -> VariantKind {
-        VariantKind::Volume
+    fn name(&self) -> &'static str {
+        "volume"
     }
 
-    fn fragment_spirv(&self) -> &'static [u8] {
-        shaders::VOLUME_FRAG
+    fn summary(&self) -> &'static str {
+        "G(u,v,w) in a 3D texture from f64 tables: one trilinear fetch (the floor)"
+    }
+
+    fn family(&self) -> Family {
+        Family::Table
+    }
+
+    fn fragment(&self) -> &'static str {
+        "volume.frag"
+    }
+
+    fn table_w_nodes(&self) -> Option<usize> {
+        Some(32)
+    }
+
+    fn fetches(&self, _: &FetchInputs<'_>) -> usize {
+        1
+    }
+
+    fn profile_presets(&self) -> &'static [Preset] {
+        const ROWS: &[Preset] = &[
+            Preset::named("volume"),
+            Preset {
+                table_format: Some(TableFormat::Rgba16f),
+                ..Preset::named("volume rgba16f")
+            },
+        ];
+        ROWS
     }
 
     fn prepare(
@@ -26,7 +54,7 @@ impl Variant for Volume {
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
         prepare(
-            self.kind(),
+            Self::KIND,
             dev,
             setup,
             Layout::Volume,

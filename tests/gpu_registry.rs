@@ -1,0 +1,186 @@
+//! The variant registry: every registered variant renders a BRDF map on lavapipe with
+//! validation on, every one is listed, parsed, profiled (unless it is a debug view) and in
+//! the Markdown table, and the `coverage` debug view colours a map whose region is known:
+//! `0.1 + 0.8·(û, v̂, ŵ)` where a lookup falls inside the table region, magenta outside.
+
+mod gpu_util;
+
+use std::path::Path;
+
+use clap::ValueEnum;
+use diffract::brdf::table::Region;
+use diffract::brdf::uvw;
+use diffract::heightfield::HeightField;
+use diffract::material::{Material, Terms};
+use diffract::render::variant::{markdown_table, Family};
+use diffract::render::{TableOptions, VariantKind};
+use gpu_util::*;
+
+fn scratch(name: &str) -> std::path::PathBuf {
+    let d = std::env::temp_dir().join(format!("diffract-registry-{}-{name}", std::process::id()));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+/// Whole copies of a 5 µm ridge along x and a 13 µm wave along y over a 65 µm patch: a
+/// field every variant can draw (nmm finds a dominant period, pq whole copies of one).
+fn periodic_material(dir: &Path) -> Material {
+    let n = 130;
+    let tau = 2.0 * std::f64::consts::PI;
+    let h = (0..n * n)
+        .map(|i| {
+            let (c, r) = ((i % n) as f64, (i / n) as f64);
+            0.1 * (1.0 + (tau * c / 10.0).sin()) + 0.04 * (1.0 + (tau * r / 26.0).cos())
+        })
+        .collect();
+    let path = dir.join("field.f32");
+    HeightField::new(n, n, 0.5, h).unwrap().save(&path).unwrap();
+    Material {
+        heightfield: path.to_string_lossy().into_owned(),
+        terms: Terms::Fixed(8),
+        lambda_step_nm: 20,
+        ..Material::default()
+    }
+}
+
+const SIZE: u32 = 16;
+const THETA: f64 = 30.0;
+
+#[test]
+fn every_registered_variant_renders_a_map() {
+    let Some(mut r) = renderer() else { return };
+    let dir = scratch("all");
+    let prepared = prepare(&periodic_material(&dir));
+    r.set_table_options(TableOptions {
+        texel_uv: Some(0.02),
+        step_nm: 20,
+        ..TableOptions::default()
+    });
+    for kind in VariantKind::ALL {
+        r.set_variant(kind);
+        let frame = r
+            .render_brdf_map(&prepared, THETA, 0.0, SIZE, None)
+            .unwrap_or_else(|e| panic!("{kind}: {e}"));
+        assert_eq!(
+            frame.variant.name.split(' ').next(),
+            Some(kind.name()),
+            "{kind} reports itself"
+        );
+        let mut lit = 0;
+        for j in 0..SIZE {
+            for i in 0..SIZE {
+                let c = frame.at(i, j);
+                assert!(c.iter().all(|x| x.is_finite()), "{kind}: pixel {i},{j} {c:?}");
+                if map_direction(i, j, SIZE).is_some() && c[1] > 0.0 {
+                    lit += 1;
+                }
+            }
+        }
+        assert!(lit > 0, "{kind}: an all-black map");
+    }
+    assert_no_validation(&r);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn every_registered_variant_is_listed_parsed_profiled_and_tabled() {
+    let list = diffract::render::variant::list();
+    let table = markdown_table();
+    let rows = diffract::profile::standard_variants(12);
+    for kind in VariantKind::ALL {
+        let name = kind.name();
+        assert!(list.contains(name), "`variants` lists {name}");
+        assert!(table.contains(&format!("`{name}`")), "the table has {name}");
+        assert_eq!(VariantKind::from_str(name, false), Ok(kind), "--variant {name}");
+        assert_eq!(VariantKind::named(name), Some(kind));
+        assert!(!kind.summary().is_empty());
+        assert!(
+            diffract::gpu::shaders::spirv(kind.fragment_file()).is_some(),
+            "{name}: glsl/{} is compiled",
+            kind.fragment_file()
+        );
+        if let Some(pv) = kind.per_vertex_file() {
+            assert!(diffract::gpu::shaders::spirv(pv).is_some(), "{name}: glsl/{pv}");
+        }
+        let profiled = rows.iter().any(|v| v.kind == kind);
+        assert_eq!(
+            profiled,
+            kind.family() != Family::Debug,
+            "{name}: profiled unless a debug view"
+        );
+    }
+    assert_eq!(
+        VariantKind::from_str("default", false),
+        Ok(VariantKind::Default)
+    );
+    assert_eq!(VariantKind::Default.resolve(), VariantKind::DEFAULT);
+    assert!(VariantKind::from_str("nonsense", false).is_err());
+}
+
+/// The map's lookup of pixel `(i, j)` as the shader computes it.
+fn lookup(wi: [f64; 3], i: u32, j: u32) -> Option<[f64; 3]> {
+    map_direction(i, j, SIZE).map(|wr| uvw(wi, wr))
+}
+
+#[test]
+fn coverage_colours_inside_by_fraction_and_outside_magenta() {
+    let Some(mut r) = renderer() else { return };
+    let dir = scratch("coverage");
+    let prepared = prepare(&periodic_material(&dir));
+    let wi = uploaded_direction(THETA, 0.0);
+    r.set_variant(VariantKind::Coverage);
+
+    // The region the map reaches: every pixel inside, coloured by its fraction.
+    let full = Region::brdf_map(wi).widened(1e-5);
+    // Half of it in u: the pixels with u above the middle fall outside.
+    let mid = 0.5 * (full.lo[0] + full.hi[0]);
+    let half = Region {
+        hi: [mid, full.hi[1], full.hi[2]],
+        ..full
+    };
+    for (region, pinned) in [(full, false), (half, true)] {
+        r.set_table_region(pinned.then_some(region));
+        let frame = r
+            .render_brdf_map(&prepared, THETA, 0.0, SIZE, None)
+            .expect("coverage map");
+        assert!(frame.variant.name.contains("1 lookup per fragment"));
+        let (mut inside, mut outside) = (0, 0);
+        for j in 0..SIZE {
+            for i in 0..SIZE {
+                let c = frame.at(i, j);
+                let Some(p) = lookup(wi, i, j) else {
+                    assert_eq!(c, [0.0; 3], "outside the disk: black");
+                    continue;
+                };
+                // Pixels within float32 rounding of the region's edge may go either way.
+                let e = region.extent();
+                let f: [f64; 3] = std::array::from_fn(|a| (p[a] - region.lo[a]) / e[a]);
+                if f.iter().any(|x| (x.abs() < 1e-4) || ((x - 1.0).abs() < 1e-4)) {
+                    continue;
+                }
+                if f.iter().all(|x| (0.0..=1.0).contains(x)) {
+                    inside += 1;
+                    for a in 0..3 {
+                        let want = 0.1 + 0.8 * f[a];
+                        assert!(
+                            (c[a] as f64 - want).abs() < 1e-3,
+                            "pixel {i},{j} channel {a}: {} vs {want}",
+                            c[a]
+                        );
+                    }
+                } else {
+                    outside += 1;
+                    assert_eq!(c, [1.0, 0.0, 1.0], "pixel {i},{j} outside: magenta");
+                }
+            }
+        }
+        assert!(inside > 20, "{inside} inside");
+        if pinned {
+            assert!(outside > 20, "{outside} outside the half region");
+        } else {
+            assert_eq!(outside, 0, "the map's own region holds every lookup");
+        }
+    }
+    assert_no_validation(&r);
+    let _ = std::fs::remove_dir_all(dir);
+}
