@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use rayon::prelude::*;
 
 use crate::brdf::{direction, model};
-use crate::material::{default_cache_dir, MaterialArgs, PreparedMaterial};
+use crate::material::{MaterialArgs, PreparedMaterial};
 use crate::{Error, Result};
 
 /// One wavelength's result.
@@ -306,9 +306,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let count = ((to - from) / step).floor() as usize + 1;
     let lambdas: Vec<f64> = (0..count).map(|i| from + i as f64 * step).collect();
     let material = args.material.apply(crate::material::Material::default());
-    let cache = (!args.no_cache)
-        .then(|| args.cache_dir.clone().or_else(default_cache_dir))
-        .flatten();
+    let cache = crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref());
     // The f64 model evaluates in-plane directions only: |w| ≤ cos θi + 1.
     let p = material.prepare_for(
         cache.as_deref(),

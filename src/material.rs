@@ -3,8 +3,6 @@
 //! Fresnel/shadowing). Shared by `diffract brdf`, BRDF maps and scene files, so all three
 //! describe a material with the same words and defaults.
 
-use std::path::PathBuf;
-
 use crate::brdf::truncation::{self, Geometry, Precision, Reach, TermPlan};
 use crate::brdf::Shading;
 use crate::colour::ColourTable;
@@ -319,14 +317,4 @@ impl Material {
     }
 }
 
-/// Default directory of the term cache: `$DIFFRACT_CACHE`, else `$XDG_CACHE_HOME/diffract`,
-/// else `$HOME/.cache/diffract`; `None` when none is set.
-pub fn default_cache_dir() -> Option<PathBuf> {
-    if let Some(d) = std::env::var_os("DIFFRACT_CACHE") {
-        return (!d.is_empty()).then(|| PathBuf::from(d));
-    }
-    if let Some(d) = std::env::var_os("XDG_CACHE_HOME") {
-        return Some(PathBuf::from(d).join("diffract"));
-    }
-    std::env::var_os("HOME").map(|h| PathBuf::from(h).join(".cache").join("diffract"))
-}
+pub use crate::cachedir::default_cache_dir;

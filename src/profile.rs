@@ -16,7 +16,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use crate::brdf::{direction, model, reference};
 use crate::colour::{delta_e2000, xyz_to_lab, ColourTable};
 use crate::gpu::StorageFormat;
-use crate::material::{default_cache_dir, Material, MaterialArgs};
+use crate::material::{Material, MaterialArgs};
 use crate::render::variant::{Family, Preset};
 use crate::render::{map_direction, Renderer, TableArgs, TableOptions, VariantKind};
 use crate::scene::Scene;
@@ -490,9 +490,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             };
         let mesh = mesh_view(renderer, false)?;
         let mesh_gpu_ms = mesh.as_ref().map(|m| m.0);
-        let per_vertex_mesh = if setup.per_vertex
-            && variant.kind.per_vertex_file().is_some()
-        {
+        let per_vertex_mesh = if setup.per_vertex && variant.kind.per_vertex_file().is_some() {
             mesh_view(renderer, true)?
         } else {
             None
@@ -786,9 +784,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         frames: args.frames,
         mesh,
         per_vertex: args.per_vertex,
-        cache_dir: (!args.no_cache)
-            .then(|| args.cache_dir.clone().or_else(default_cache_dir))
-            .flatten(),
+        cache_dir: crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref()),
     };
     let reports = profile(&mut renderer, &setup)?;
     print!("{}", format_table(renderer.device_name(), &setup, &reports));

@@ -14,7 +14,7 @@ use rayon::prelude::*;
 use crate::colour::{monochromatic_xyz, ColourTable, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 use crate::fsutil::write_atomic;
 use crate::heightfield::HeightField;
-use crate::material::{default_cache_dir, MaterialArgs};
+use crate::material::MaterialArgs;
 use crate::{Error, Result};
 
 use super::{direction, model, reference};
@@ -257,11 +257,7 @@ pub fn run(args: &BrdfArgs) -> Result<()> {
             )
         }
         Method::Model => {
-            let cache = if args.no_cache {
-                None
-            } else {
-                args.cache_dir.clone().or_else(default_cache_dir)
-            };
+            let cache = crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref());
             let p = material.prepare(cache.as_deref())?;
             let t = p.terms();
             answer_all(

@@ -190,13 +190,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     renderer.set_per_vertex(args.per_vertex);
     renderer.set_table_options(args.table.options());
     renderer.set_leave_out(!args.keep_all);
-    let cache_dir = if args.no_cache {
-        None
-    } else {
-        args.cache_dir
-            .clone()
-            .or_else(crate::material::default_cache_dir)
-    };
+    let cache_dir = crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref());
     renderer.set_cache_dir(cache_dir.clone());
     let prepared = material.prepare_planned(heightfield, plan, cache_dir.as_deref())?;
     // Table variants show their own bar while they build; the draw after it is short.

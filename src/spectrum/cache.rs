@@ -731,7 +731,7 @@ pub fn run(args: &CacheArgs) -> Result<()> {
     let dir = args
         .cache_dir
         .clone()
-        .or_else(crate::material::default_cache_dir)
+        .or_else(crate::cachedir::default_cache_dir)
         .ok_or_else(|| {
             Error::invalid(
                 "cache directory",

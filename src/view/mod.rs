@@ -194,13 +194,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         per_vertex: args.per_vertex,
         storage: args.storage,
         table: args.table.options(),
-        cache_dir: if args.no_cache {
-            None
-        } else {
-            args.cache_dir
-                .clone()
-                .or_else(crate::material::default_cache_dir)
-        },
+        cache_dir: crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref()),
         watch: args.watch.then(|| {
             args.glsl_dir
                 .clone()
