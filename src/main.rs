@@ -26,7 +26,11 @@ enum Command {
     /// Shader variants on the GPU: error against the f64 reference together with GPU time.
     Profile(diffract::profile::ProfileArgs),
     /// List the shader variants: per-pixel fetches, memory, the default.
-    Variants,
+    Variants {
+        /// Print the Markdown table of the variants (as in the README) instead.
+        #[arg(long)]
+        markdown: bool,
+    },
     /// The DFT-term cache: list its files or clear it.
     Cache(diffract::spectrum::cache::CacheArgs),
     /// Stability matrix: error of each evaluator against the f64 reference over heights,
@@ -46,8 +50,12 @@ fn main() -> ExitCode {
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),
         Command::View(a) => diffract::view::run(a),
-        Command::Variants => {
-            print!("{}", diffract::render::variant::list());
+        Command::Variants { markdown } => {
+            if *markdown {
+                print!("{}", diffract::render::variant::markdown_table());
+            } else {
+                print!("{}", diffract::render::variant::list());
+            }
             Ok(())
         }
         Command::Cache(a) => diffract::spectrum::cache::run(a),

@@ -70,7 +70,10 @@ fn every_registered_variant_renders_a_map() {
         for j in 0..SIZE {
             for i in 0..SIZE {
                 let c = frame.at(i, j);
-                assert!(c.iter().all(|x| x.is_finite()), "{kind}: pixel {i},{j} {c:?}");
+                assert!(
+                    c.iter().all(|x| x.is_finite()),
+                    "{kind}: pixel {i},{j} {c:?}"
+                );
                 if map_direction(i, j, SIZE).is_some() && c[1] > 0.0 {
                     lit += 1;
                 }
@@ -91,7 +94,11 @@ fn every_registered_variant_is_listed_parsed_profiled_and_tabled() {
         let name = kind.name();
         assert!(list.contains(name), "`variants` lists {name}");
         assert!(table.contains(&format!("`{name}`")), "the table has {name}");
-        assert_eq!(VariantKind::from_str(name, false), Ok(kind), "--variant {name}");
+        assert_eq!(
+            VariantKind::from_str(name, false),
+            Ok(kind),
+            "--variant {name}"
+        );
         assert_eq!(VariantKind::named(name), Some(kind));
         assert!(!kind.summary().is_empty());
         assert!(
@@ -100,7 +107,10 @@ fn every_registered_variant_is_listed_parsed_profiled_and_tabled() {
             kind.fragment_file()
         );
         if let Some(pv) = kind.per_vertex_file() {
-            assert!(diffract::gpu::shaders::spirv(pv).is_some(), "{name}: glsl/{pv}");
+            assert!(
+                diffract::gpu::shaders::spirv(pv).is_some(),
+                "{name}: glsl/{pv}"
+            );
         }
         let profiled = rows.iter().any(|v| v.kind == kind);
         assert_eq!(
@@ -155,7 +165,9 @@ fn coverage_colours_inside_by_fraction_and_outside_magenta() {
                 // Pixels within float32 rounding of the region's edge may go either way.
                 let e = region.extent();
                 let f: [f64; 3] = std::array::from_fn(|a| (p[a] - region.lo[a]) / e[a]);
-                if f.iter().any(|x| (x.abs() < 1e-4) || ((x - 1.0).abs() < 1e-4)) {
+                if f.iter()
+                    .any(|x| (x.abs() < 1e-4) || ((x - 1.0).abs() < 1e-4))
+                {
                     continue;
                 }
                 if f.iter().all(|x| (0.0..=1.0).contains(x)) {
@@ -183,4 +195,21 @@ fn coverage_colours_inside_by_fraction_and_outside_magenta() {
     }
     assert_no_validation(&r);
     let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn the_readme_variant_table_is_the_registry_s() {
+    let readme = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/README.md"))
+        .expect("README.md");
+    let begin = "<!-- variants:begin -->\n";
+    let start = readme.find(begin).expect("README marks the variants table") + begin.len();
+    let end = readme[start..]
+        .find("<!-- variants:end -->")
+        .expect("README ends the variants table")
+        + start;
+    assert_eq!(
+        &readme[start..end],
+        markdown_table(),
+        "README's variant table is stale: paste `diffract variants --markdown`"
+    );
 }

@@ -726,10 +726,7 @@ impl Renderer {
     ) -> Result<()> {
         self.variant.check_output(output)?;
         let region = self.table_region.unwrap_or(region);
-        let per_region = self
-            .variant
-            .implementation()
-            .reads_region(self.leave_out);
+        let per_region = self.variant.implementation().reads_region(self.leave_out);
         let covering = self.region_margin > 0.0 && per_region;
         let needed = region;
         let region = if covering {

@@ -248,7 +248,10 @@ impl Preset {
 
     /// The base settings under `label`.
     pub const fn named(label: &'static str) -> Preset {
-        Preset { label, ..Self::BASE }
+        Preset {
+            label,
+            ..Self::BASE
+        }
     }
 
     /// `T` of this row for the profile's Taylor `T`: Chebyshev converges faster and gets two
@@ -692,7 +695,10 @@ mod tests {
             assert!(!k.summary().is_empty());
             assert_eq!(VariantKind::named(k.name()), Some(k));
         }
-        let mut names: Vec<&str> = VariantKind::ALL.into_iter().map(VariantKind::name).collect();
+        let mut names: Vec<&str> = VariantKind::ALL
+            .into_iter()
+            .map(VariantKind::name)
+            .collect();
         names.sort_unstable();
         names.dedup();
         assert_eq!(names.len(), VariantKind::ALL.len(), "names are unique");

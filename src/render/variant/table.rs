@@ -9,9 +9,7 @@ use std::time::Instant;
 use ash::vk;
 use indicatif::{ProgressBar, ProgressStyle};
 
-use super::{
-    DrawSetup, PreparedVariant, TableFormat, VariantKind, VariantStats, SPEC_COUNT,
-};
+use super::{DrawSetup, PreparedVariant, TableFormat, VariantKind, VariantStats, SPEC_COUNT};
 use crate::brdf::table::{GTable, Region, Slices, TableSpec};
 use crate::brdf::table_cache::sample_g_cached_kept;
 use crate::colour::ColourTable;

@@ -4,8 +4,8 @@
 use std::sync::Arc;
 
 use super::table::{prepare, Layout};
-use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant};
 use super::TableFormat;
+use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant};
 use crate::brdf::table;
 use crate::gpu::Device;
 use crate::Result;
