@@ -1,5 +1,14 @@
-//! Writing files so that a failure never leaves a half-written file where a good one (or
-//! nothing) was: every output of diffract goes through [`write_atomically`].
+//! Files in and out. Every file a command writes goes through one output policy:
+//!
+//! - [`check_outputs`], before any work: each output can be written, none is an input of
+//!   the command (the same path or the same file through a link), and no two outputs are
+//!   the same file;
+//! - [`write_atomically`]: a regular file (new or existing) is written to a temporary sibling
+//!   and renamed into place only when complete, so a failure never leaves a half-written file
+//!   where a good one (or nothing) was; a character device or a FIFO (`/dev/null`,
+//!   `/dev/stdout`, a named pipe) is written into and never replaced.
+//!
+//! Inputs are read with a size bound ([`read_bounded`]).
 
 use std::fs::File;
 use std::io::{BufWriter, Write};
@@ -9,21 +18,102 @@ use std::sync::Mutex;
 
 use crate::{Error, Result};
 
-/// Writes `path` through a temporary sibling file that is renamed into place only after
-/// `write` succeeded and the data reached the disk. On any failure the temporary file is
+/// Writes an output the user named. An existing character device or FIFO is opened and
+/// written into (`/dev/null` stays a device, a pipe's reader gets the bytes). Anything else
+/// is written through a temporary sibling file that is renamed into place only after
+/// `write` succeeded and the data reached the disk; when `path` is a symbolic link to a
+/// file, that file is replaced and the link kept. On any failure the temporary file is
 /// removed and an existing `path` is left untouched. I/O errors name `path`.
 pub fn write_atomically(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> Result<()>,
 ) -> Result<()> {
+    if let Ok(meta) = std::fs::metadata(path) {
+        if is_stream(&meta) {
+            return write_into(path, false, write);
+        }
+        // `/dev/stdout` redirected to a file (`> out.csv`, `>> log`): the shell's file,
+        // appended to like the shell would, instead of a new file renamed over it.
+        if meta.is_file() && names_a_descriptor(path) {
+            return write_into(path, true, write);
+        }
+    }
+    let link_target = std::fs::symlink_metadata(path)
+        .is_ok_and(|m| m.file_type().is_symlink())
+        .then(|| path.canonicalize().ok())
+        .flatten();
+    replace(link_target.as_deref().unwrap_or(path), path, write)
+}
+
+/// Writes `path` through a temporary sibling and a rename, whatever `path` is now (a link
+/// or a special file there is replaced, not followed): for files diffract owns, such as
+/// the term cache, where writing into a FIFO someone left there would block.
+pub fn write_replacing(
+    path: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> Result<()>,
+) -> Result<()> {
+    replace(path, path, write)
+}
+
+/// A character device or a FIFO: written into, never replaced.
+fn is_stream(meta: &std::fs::Metadata) -> bool {
+    use std::os::unix::fs::FileTypeExt;
+    let t = meta.file_type();
+    t.is_char_device() || t.is_fifo()
+}
+
+/// Whether `path` leads to an open file descriptor (`/dev/stdout`, `/dev/fd/1`,
+/// `/proc/self/fd/1`): it lies in `/proc` or `/dev/fd`, or its links lead there.
+fn names_a_descriptor(path: &Path) -> bool {
+    let mut p = path.to_path_buf();
+    for _ in 0..40 {
+        if p.starts_with("/proc") || p.starts_with("/dev/fd") {
+            return true;
+        }
+        match std::fs::read_link(&p) {
+            Ok(t) if t.is_absolute() => p = t,
+            Ok(t) => p = p.parent().unwrap_or(Path::new("/")).join(t),
+            Err(_) => return false,
+        }
+    }
+    false
+}
+
+/// Opens an existing file (a character device, a FIFO, or with `append` the file behind a
+/// descriptor) for writing and writes into it.
+fn write_into(
+    path: &Path,
+    append: bool,
+    write: impl FnOnce(&mut BufWriter<File>) -> Result<()>,
+) -> Result<()> {
+    let file = std::fs::OpenOptions::new()
+        .write(true)
+        .append(append)
+        .open(path)
+        .map_err(|e| Error::io(path, e))?;
+    let mut w = BufWriter::new(file);
+    write(&mut w)?;
+    w.into_inner()
+        .map_err(|e| Error::io(path, e.into_error()))?;
+    Ok(())
+}
+
+/// The temporary-file-and-rename write of `target`; errors name `shown` (the path the user
+/// gave).
+fn replace(
+    target: &Path,
+    shown: &Path,
+    write: impl FnOnce(&mut BufWriter<File>) -> Result<()>,
+) -> Result<()> {
     static COUNTER: AtomicU64 = AtomicU64::new(0);
-    let file_name = path.file_name().ok_or_else(|| {
+    let path = shown;
+    let file_name = target.file_name().ok_or_else(|| {
         Error::io(
             path,
             std::io::Error::new(std::io::ErrorKind::InvalidInput, "not a file path"),
         )
     })?;
-    let dir = match path.parent() {
+    let dir = match target.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
     };
@@ -42,7 +132,8 @@ pub fn write_atomically(
             .map_err(|e| Error::io(path, e.into_error()))?;
         file.sync_all().map_err(|e| Error::io(path, e))
     });
-    let result = result.and_then(|()| std::fs::rename(&tmp, path).map_err(|e| Error::io(path, e)));
+    let result =
+        result.and_then(|()| std::fs::rename(&tmp, target).map_err(|e| Error::io(path, e)));
     if result.is_err() {
         let _ = std::fs::remove_file(&tmp);
     }
@@ -90,6 +181,111 @@ pub fn remove_temps_on_interrupt() {
 /// [`write_atomically`] for a byte buffer.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomically(path, |w| w.write_all(bytes).map_err(|e| Error::io(path, e)))
+}
+
+// ---- the output policy: checked before any work -------------------------------------------
+
+/// An output path must name a file that can be written: a new file in a directory that
+/// exists, an existing regular file (replaced), or an existing character device or FIFO
+/// (written into). A directory, a block device or a socket is refused.
+pub fn check_output(path: &Path) -> Result<()> {
+    let bad = |msg: &str| {
+        Err(Error::invalid(
+            "output",
+            format!("{}: {msg}", path.display()),
+        ))
+    };
+    if path.as_os_str().is_empty() {
+        return bad("empty path");
+    }
+    if path.file_name().is_none() {
+        return bad("not a file name");
+    }
+    if let Ok(meta) = std::fs::metadata(path) {
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_dir() {
+            return bad("is a directory");
+        }
+        if t.is_block_device() {
+            return bad("is a block device; refusing to write over it");
+        }
+        if t.is_socket() {
+            return bad("is a socket; expected a file, a character device or a FIFO");
+        }
+    }
+    let dir = match path.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => Ok(()),
+        Ok(_) => bad(&format!("{} is not a directory", dir.display())),
+        Err(_) => bad(&format!("directory {} does not exist", dir.display())),
+    }
+}
+
+/// A path made comparable: the canonical path of the file, or of its directory joined with
+/// its name when the file does not exist yet.
+fn comparable(p: &Path) -> PathBuf {
+    if let Ok(c) = p.canonicalize() {
+        return c;
+    }
+    let dir = match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d,
+        _ => Path::new("."),
+    };
+    match (dir.canonicalize(), p.file_name()) {
+        (Ok(d), Some(n)) => d.join(n),
+        _ => p.to_path_buf(),
+    }
+}
+
+/// Whether `a` and `b` name the same file: the same device and inode when both exist (hard
+/// links, `./x`, symlinks), else the same comparable path.
+pub fn same_file(a: &Path, b: &Path) -> bool {
+    use std::os::unix::fs::MetadataExt;
+    if let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) {
+        return ma.dev() == mb.dev() && ma.ino() == mb.ino();
+    }
+    comparable(a) == comparable(b)
+}
+
+/// Refuses when an output names the same file as an input or as another output. `inputs`
+/// and `outputs` pair a role ("height field", "--png image") with the path.
+pub fn refuse_overwrite(inputs: &[(&str, PathBuf)], outputs: &[(&str, PathBuf)]) -> Result<()> {
+    for (k, (out_role, out)) in outputs.iter().enumerate() {
+        for (in_role, input) in inputs {
+            if same_file(out, input) {
+                return Err(Error::invalid(
+                    "output",
+                    format!(
+                        "{out_role} {} is the {in_role} {}; refusing to overwrite an input",
+                        out.display(),
+                        input.display()
+                    ),
+                ));
+            }
+        }
+        for (other_role, other) in &outputs[..k] {
+            if same_file(out, other) {
+                return Err(Error::invalid(
+                    "output",
+                    format!("{out_role} and {other_role} are both {}", out.display()),
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// The whole policy for one command: every output passes [`check_output`], and none is an
+/// input or another output ([`refuse_overwrite`]). Commands call it before any work.
+pub fn check_outputs(inputs: &[(&str, PathBuf)], outputs: &[(&str, PathBuf)]) -> Result<()> {
+    for (_, o) in outputs {
+        check_output(o)?;
+    }
+    refuse_overwrite(inputs, outputs)
 }
 
 /// Largest scene, sidecar or other TOML file read (bytes): real ones are a few KB.

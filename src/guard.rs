@@ -3,7 +3,9 @@
 //! that another height field also reads), and numbers a command accepts are in range. The
 //! commands call these at the top of `run`, before the Vulkan device or the term precompute
 //! starts, so a mistake costs milliseconds and never destroys a file. Nothing here reads
-//! file contents or computes anything.
+//! file contents or computes anything. The output policy itself (what may be written, and
+//! how) is [`crate::fsutil::check_outputs`]; this module lists each command's inputs and
+//! outputs for it.
 
 use std::path::{Path, PathBuf};
 
@@ -13,90 +15,7 @@ use crate::{Error, Result};
 /// Height-field extensions whose sidecar is `stem.toml` (see `heightfield::io`).
 const HEIGHTFIELD_EXTENSIONS: [&str; 2] = ["png", "f32"];
 
-/// An output path must name a file (not a directory) in a directory that exists.
-pub fn check_output(path: &Path) -> Result<()> {
-    let bad = |msg: &str| {
-        Err(Error::invalid(
-            "output",
-            format!("{}: {msg}", path.display()),
-        ))
-    };
-    if path.as_os_str().is_empty() {
-        return bad("empty path");
-    }
-    if path.file_name().is_none() {
-        return bad("not a file name");
-    }
-    if path.is_dir() {
-        return bad("is a directory");
-    }
-    let dir = match path.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    match std::fs::metadata(dir) {
-        Ok(m) if m.is_dir() => Ok(()),
-        Ok(_) => bad(&format!("{} is not a directory", dir.display())),
-        Err(_) => bad(&format!("directory {} does not exist", dir.display())),
-    }
-}
-
-/// A path made comparable: the canonical path of the file, or of its directory joined with
-/// its name when the file does not exist yet.
-fn comparable(p: &Path) -> PathBuf {
-    if let Ok(c) = p.canonicalize() {
-        return c;
-    }
-    let dir = match p.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
-    };
-    match (dir.canonicalize(), p.file_name()) {
-        (Ok(d), Some(n)) => d.join(n),
-        _ => p.to_path_buf(),
-    }
-}
-
-/// Whether `a` and `b` name the same file: the same device and inode when both exist (hard
-/// links, `./x`, symlinks), else the same comparable path.
-pub fn same_file(a: &Path, b: &Path) -> bool {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::MetadataExt;
-        if let (Ok(ma), Ok(mb)) = (std::fs::metadata(a), std::fs::metadata(b)) {
-            return ma.dev() == mb.dev() && ma.ino() == mb.ino();
-        }
-    }
-    comparable(a) == comparable(b)
-}
-
-/// Refuses when an output names the same file as an input or as another output. `inputs`
-/// and `outputs` pair a role ("height field", "--png image") with the path.
-pub fn refuse_overwrite(inputs: &[(&str, PathBuf)], outputs: &[(&str, PathBuf)]) -> Result<()> {
-    for (k, (out_role, out)) in outputs.iter().enumerate() {
-        for (in_role, input) in inputs {
-            if same_file(out, input) {
-                return Err(Error::invalid(
-                    "output",
-                    format!(
-                        "{out_role} {} is the {in_role} {}; refusing to overwrite an input",
-                        out.display(),
-                        input.display()
-                    ),
-                ));
-            }
-        }
-        for (other_role, other) in &outputs[..k] {
-            if same_file(out, other) {
-                return Err(Error::invalid(
-                    "output",
-                    format!("{out_role} and {other_role} are both {}", out.display()),
-                ));
-            }
-        }
-    }
-    Ok(())
-}
+pub use crate::fsutil::{check_output, check_outputs, refuse_overwrite, same_file};
 
 /// The files a height-field source reads: the image and its sidecar (none for `builtin:`).
 pub fn heightfield_inputs(spec: &str) -> Vec<(&'static str, PathBuf)> {
@@ -249,6 +168,7 @@ pub fn render_args(args: &crate::render::RenderArgs, scene: &crate::scene::Scene
             }
         }
     }
+    table_args(&args.table)?;
     let material = args.material.apply(scene.material.clone());
     material.validate()?;
 
@@ -256,22 +176,10 @@ pub fn render_args(args: &crate::render::RenderArgs, scene: &crate::scene::Scene
     if args.brdf_map && args.png {
         outputs.push(("--png image", png_sibling));
     }
-    for (_, o) in &outputs {
-        check_output(o)?;
-    }
-    let mut inputs = heightfield_inputs(&material.heightfield);
-    if let Some(s) = &args.scene {
-        inputs.push(("scene", s.clone()));
-    }
-    if !args.brdf_map {
-        if let Some(m) = &scene.mesh.path {
-            inputs.push(("mesh", m.clone()));
-        }
-        if let Some(t) = scene.texture.as_ref().filter(|t| !t.is_builtin()) {
-            inputs.push(("texture", t.path.clone()));
-        }
-    }
-    refuse_overwrite(&inputs, &outputs)?;
+    check_outputs(
+        &scene_inputs(args.scene.as_deref(), scene, &material.heightfield),
+        &outputs,
+    )?;
     if !args.brdf_map {
         if let Some(m) = &scene.mesh.path {
             crate::fsutil::check_input_file(m, "mesh", crate::fsutil::MAX_OBJ_BYTES)?;
@@ -283,12 +191,76 @@ pub fn render_args(args: &crate::render::RenderArgs, scene: &crate::scene::Scene
     Ok(())
 }
 
-/// `diffract heightfield -o OUT`: the image and its sidecar must be writable, and the
-/// sidecar must not belong to another height field.
-pub fn heightfield_args(out: &Path) -> Result<()> {
-    check_output(out)?;
-    refuse_overwrite(&[], &[("output", out.to_path_buf())])?;
+/// Every file a scene render reads: the scene file, the height field of `heightfield` (the
+/// scene's material after the command line's overrides) and its sidecar, the mesh and the
+/// texture. Each may be the target of a mistaken output path.
+pub fn scene_inputs(
+    scene_path: Option<&Path>,
+    scene: &crate::scene::Scene,
+    heightfield: &str,
+) -> Vec<(&'static str, PathBuf)> {
+    let mut inputs = heightfield_inputs(heightfield);
+    if let Some(s) = scene_path {
+        inputs.push(("scene", s.to_path_buf()));
+    }
+    if let Some(m) = &scene.mesh.path {
+        inputs.push(("mesh", m.clone()));
+    }
+    if let Some(t) = scene.texture.as_ref().filter(|t| !t.is_builtin()) {
+        inputs.push(("texture", t.path.clone()));
+    }
+    inputs
+}
+
+/// `diffract heightfield -o OUT [--from-sample S]`: the image and its sidecar must be
+/// writable, neither may be the sample or its sidecar, and the sidecar must not belong to
+/// another height field.
+pub fn heightfield_args(out: &Path, sample: Option<&str>) -> Result<()> {
+    let inputs = sample.map(heightfield_inputs).unwrap_or_default();
+    check_outputs(
+        &inputs,
+        &[("-o", out.to_path_buf()), ("-o sidecar", sidecar_path(out))],
+    )?;
     refuse_shared_sidecar(out)
+}
+
+/// A finite number above zero.
+pub fn positive(what: &'static str, v: f64, unit: &str) -> Result<f64> {
+    if v.is_finite() && v > 0.0 {
+        Ok(v)
+    } else {
+        Err(Error::invalid(
+            what,
+            format!("{v}{unit}; must be positive and finite"),
+        ))
+    }
+}
+
+/// The table variants' options (`--table-*`), checked the same way by every command that
+/// takes them, whichever variant is drawn: a spacing above zero, a `w` node count the
+/// table supports, a wavelength step that divides the visible range, a budget of at least
+/// 1 MB.
+pub fn table_args(t: &crate::render::TableArgs) -> Result<()> {
+    use crate::brdf::table::MAX_NODES_W;
+    if let Some(texel) = t.table_texel {
+        positive("table texel", texel, "")?;
+    }
+    if let Some(n) = t.table_w_nodes {
+        if !(2..=MAX_NODES_W).contains(&n) {
+            return Err(Error::invalid(
+                "table w nodes",
+                format!("{n}; expected 2..={MAX_NODES_W}"),
+            ));
+        }
+    }
+    crate::colour::ColourTable::new(t.table_step_nm)?;
+    if t.table_budget_mb == 0 {
+        return Err(Error::invalid(
+            "table budget",
+            "0 MB; expected at least 1 MB",
+        ));
+    }
+    Ok(())
 }
 
 /// Finest viewing-angle step of `eval-grating` (degrees): 179 800 samples per wavelength,
@@ -316,9 +288,15 @@ pub fn eval_args(args: &crate::eval::EvalArgs) -> Result<()> {
             ));
         }
     }
-    args.material
-        .apply(crate::material::Material::default())
-        .validate()
+    let material = args.material.apply(crate::material::Material::default());
+    material.validate()?;
+    if let Some(plot) = &args.plot {
+        check_outputs(
+            &heightfield_inputs(&material.heightfield),
+            &[("--plot", plot.clone())],
+        )?;
+    }
+    Ok(())
 }
 
 /// `diffract profile`: map size, angles, scored pixels (no more than the map's disk holds),
@@ -359,6 +337,15 @@ pub fn profile_args(args: &crate::profile::ProfileArgs) -> Result<()> {
             format!("{}; expected 0 (none) ..=8192", args.mesh_size),
         ));
     }
+    if let Some(q) = args.mesh_quads {
+        if !(1..=32).contains(&q) || args.mesh_size == 0 {
+            return Err(Error::invalid(
+                "mesh-quads",
+                format!("{q}; expected 1..=32 with a mesh view (--mesh-size > 0)"),
+            ));
+        }
+    }
+    table_args(&args.table)?;
     if args.variant_terms > 64 {
         return Err(Error::invalid(
             "variant-terms",
@@ -367,14 +354,133 @@ pub fn profile_args(args: &crate::profile::ProfileArgs) -> Result<()> {
     }
     let material = args.material.apply(crate::material::Material::default());
     material.validate()?;
-    for (flag, out) in [("--csv", &args.csv), ("--plot", &args.plot)] {
-        if let Some(out) = out {
-            check_output(out)?;
-            refuse_overwrite(
-                &heightfield_inputs(&material.heightfield),
-                &[(flag, out.clone())],
-            )?;
+    let outputs: Vec<(&str, PathBuf)> = [("--csv", &args.csv), ("--plot", &args.plot)]
+        .into_iter()
+        .filter_map(|(flag, out)| out.clone().map(|o| (flag, o)))
+        .collect();
+    check_outputs(&heightfield_inputs(&material.heightfield), &outputs)
+}
+
+/// Files `diffract stability -o DIR` writes into `DIR`.
+pub const STABILITY_FILES: [&str; 3] = ["stability.csv", "stability.md", "stability.png"];
+
+/// `diffract stability`: every number of the matrix (heights, angles, wavelengths, term
+/// counts, the tolerance, the map size) and the output directory, whose files must not be
+/// the height field or its sidecar.
+pub fn stability_args(args: &crate::stability::StabilityArgs) -> Result<()> {
+    use crate::brdf::truncation::MAX_TERMS;
+    use crate::render::MAX_MAP_SIZE;
+    let t = args.tolerance;
+    if !(t.is_finite() && t > 0.0 && t < 1.0) {
+        return Err(Error::invalid(
+            "tolerance",
+            format!("{t}; must be in (0, 1)"),
+        ));
+    }
+    for &h in &args.hmax_um {
+        if !(h.is_finite() && h >= 0.0) {
+            return Err(Error::invalid(
+                "hmax-um",
+                format!("{h} µm; must be finite and ≥ 0"),
+            ));
         }
+    }
+    for &th in &args.theta_i {
+        if !(th.is_finite() && (0.0..90.0).contains(&th)) {
+            return Err(Error::invalid(
+                "theta-i",
+                format!("{th}°; expected [0, 90)"),
+            ));
+        }
+    }
+    let (lo, hi) = (
+        crate::colour::LAMBDA_MIN_NM as f64,
+        crate::colour::LAMBDA_MAX_NM as f64,
+    );
+    for &l in &args.lambda_nm {
+        in_range("wavelength", l, lo..=hi, " nm")?;
+    }
+    for &n in &args.fixed_terms {
+        if n > MAX_TERMS {
+            return Err(Error::invalid(
+                "fixed-terms",
+                format!("{n}; at most {MAX_TERMS} terms are supported"),
+            ));
+        }
+    }
+    if let Some(dh) = args.dh_um {
+        positive("dh-um", dh, " µm")?;
+        if args.heightfield.is_none() {
+            return Err(Error::invalid(
+                "arguments",
+                "--dh-um only applies with --heightfield",
+            ));
+        }
+    }
+    if !(1..=MAX_MAP_SIZE).contains(&args.map_size) {
+        return Err(Error::invalid(
+            "map-size",
+            format!("{}; expected 1..={MAX_MAP_SIZE} pixels", args.map_size),
+        ));
+    }
+    let dir = &args.out;
+    if dir.as_os_str().is_empty() {
+        return Err(Error::invalid("output", "empty directory path"));
+    }
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => {
+            let outputs: Vec<(&str, PathBuf)> = STABILITY_FILES
+                .iter()
+                .map(|f| ("-o", dir.join(f)))
+                .collect();
+            let inputs = args
+                .heightfield
+                .as_deref()
+                .map(heightfield_inputs)
+                .unwrap_or_default();
+            check_outputs(&inputs, &outputs)
+        }
+        Ok(_) => Err(Error::invalid(
+            "output",
+            format!("{}: not a directory", dir.display()),
+        )),
+        // Created after the run, with its parents: the nearest existing one must be a
+        // directory. A new directory holds no input.
+        Err(_) => {
+            let mut up = dir.parent();
+            while let Some(p) = up.filter(|p| !p.as_os_str().is_empty()) {
+                if let Ok(m) = std::fs::metadata(p) {
+                    if m.is_dir() {
+                        return Ok(());
+                    }
+                    return Err(Error::invalid(
+                        "output",
+                        format!("{}: {} is not a directory", dir.display(), p.display()),
+                    ));
+                }
+                up = p.parent();
+            }
+            Ok(())
+        }
+    }
+}
+
+/// `diffract view`: the screenshot must be a PNG that can be written and is none of the
+/// files the scene reads.
+pub fn view_args(args: &crate::view::ViewArgs, scene: &crate::scene::Scene) -> Result<()> {
+    table_args(&args.table)?;
+    if let Some(p) = &args.screenshot {
+        if p.extension().and_then(|e| e.to_str()) != Some("png") {
+            return Err(Error::invalid(
+                "screenshot",
+                format!("{}: must be a .png file", p.display()),
+            ));
+        }
+        let material = args.material.apply(scene.material.clone());
+        check_outputs(
+            &scene_inputs(args.scene.as_deref(), scene, &material.heightfield),
+            &[("--screenshot", p.clone())],
+        )?;
     }
     Ok(())
 }

@@ -3,7 +3,7 @@
 
 use std::process::ExitCode;
 
-use clap::{Parser, Subcommand};
+use clap::{CommandFactory, FromArgMatches, Parser, Subcommand};
 
 /// Diffraction colours of natural nanostructures (Stam 1999; Dhillon et al. 2014).
 #[derive(Parser)]
@@ -40,8 +40,124 @@ enum Command {
     View(diffract::view::ViewArgs),
 }
 
+/// The parser: every option that takes a value accepts a negative number (`--phi-i -30`,
+/// `--table-texel -1` reaches the range check instead of reading `-1` as a flag). An option
+/// of one floating-point value takes any value that starts with `-` (`-1e-3`, `-inf`), which
+/// clap's own test for negative numbers does not cover; its number parser then judges it.
+fn command() -> clap::Command {
+    use std::any::TypeId;
+    Cli::command().mut_subcommands(|sub| {
+        sub.mut_args(|a| {
+            if !a.get_action().takes_values() {
+                return a;
+            }
+            let id = a.get_value_parser().type_id();
+            let float = id == TypeId::of::<f64>() || id == TypeId::of::<f32>();
+            let single = a.get_num_args().is_none_or(|n| n.max_values() == 1);
+            if float && single {
+                a.allow_hyphen_values(true)
+            } else {
+                a.allow_negative_numbers(true)
+            }
+        })
+    })
+}
+
+/// An argument error as one line without the `error: ` prefix: clap's message, with its
+/// indented notes (a list of missing arguments, the possible values, a tip) joined on, and
+/// without the usage that follows.
+fn one_line(e: &clap::Error) -> String {
+    let text = strip_ansi(&e.render().to_string());
+    let mut msg = String::new();
+    // Within a list introduced by a line ending in ':' (the missing arguments).
+    let mut in_list = false;
+    for line in text.lines() {
+        let line = line.trim();
+        if line.starts_with("Usage:") || line.starts_with("For more information") {
+            break;
+        }
+        if line.is_empty() {
+            continue;
+        }
+        if msg.is_empty() {
+            msg = line
+                .strip_prefix("error:")
+                .unwrap_or(line)
+                .trim()
+                .to_string();
+            in_list = msg.ends_with(':');
+        } else if msg.ends_with(':') {
+            msg = format!("{msg} {line}");
+        } else if in_list && !line.starts_with("tip:") && !line.starts_with('[') {
+            msg = format!("{msg}, {line}");
+        } else {
+            msg = format!("{msg}; {line}");
+            in_list = false;
+        }
+    }
+    if msg.is_empty() {
+        "invalid arguments; see diffract --help".to_string()
+    } else {
+        msg
+    }
+}
+
+/// `s` without ANSI escape sequences (`ESC [ ... letter`).
+fn strip_ansi(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    let mut chars = s.chars();
+    while let Some(c) = chars.next() {
+        if c == '\u{1b}' {
+            if chars.next() == Some('[') {
+                for d in chars.by_ref() {
+                    if d.is_ascii_alphabetic() {
+                        break;
+                    }
+                }
+            }
+        } else {
+            out.push(c);
+        }
+    }
+    out
+}
+
+/// Parses the command line: `--help` and `--version` print and exit 0; any other problem
+/// is one `error:` line and exit status 1, like every other error of diffract.
+fn parse() -> Result<Cli, ExitCode> {
+    use clap::error::ErrorKind;
+    let parsed = command()
+        .try_get_matches()
+        .and_then(|m| Cli::from_arg_matches(&m));
+    match parsed {
+        Ok(cli) => Ok(cli),
+        Err(e) if matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) => {
+            let _ = e.print();
+            Err(ExitCode::SUCCESS)
+        }
+        Err(e) if e.kind() == ErrorKind::DisplayHelpOnMissingArgumentOrSubcommand => {
+            let names: Vec<String> = command()
+                .get_subcommands()
+                .map(|s| s.get_name().to_string())
+                .collect();
+            eprintln!(
+                "error: no command given; expected one of: {} (see diffract --help)",
+                names.join(", ")
+            );
+            Err(ExitCode::FAILURE)
+        }
+        Err(e) => {
+            eprintln!("error: {}", one_line(&e));
+            Err(ExitCode::FAILURE)
+        }
+    }
+}
+
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let cli = match parse() {
+        Ok(cli) => cli,
+        Err(code) => return code,
+    };
     diffract::fsutil::remove_temps_on_interrupt();
     let result = match &cli.command {
         Command::Render(a) => diffract::render::run(a),

@@ -472,6 +472,7 @@ pub struct StabilityArgs {
 
 /// Runs `diffract stability`.
 pub fn run(args: &StabilityArgs) -> Result<()> {
+    crate::guard::stability_args(args)?;
     let (field, name, period) = match &args.heightfield {
         Some(src) => (
             HeightField::load_source(src, args.dh_um, None)?,

@@ -182,10 +182,11 @@ fn best_of(r: &mut Renderer, scene: &Scene, m: &diffract::material::PreparedMate
 /// Per-vertex (thesis §1.5.1) against per-pixel flss: equal at the 31² pixels the vertices
 /// project onto (same ωi, ωr there; float32 and the 1e-5-pixel rounding of the projection
 /// only: 1e-3 of the peak), different between them (linear interpolation of a colour whose
-/// lobes are a few pixels wide: reported), and cheaper (289 vertex evaluations against 3969
-/// fragments; GPU time, best of 3).
+/// lobes are a few pixels wide: reported). The GPU times (best of 3) are printed, not
+/// asserted: on a shared machine a timing is no test; `diffract profile --per-vertex` and
+/// the benchmarks measure the cost.
 #[test]
-fn per_vertex_equals_per_pixel_at_the_vertices_and_is_cheaper() {
+fn per_vertex_equals_per_pixel_at_the_vertices() {
     let Some(mut r) = renderer() else { return };
     let scene = vertex_aligned_scene();
     let p = prepare(&scene.material);
@@ -231,10 +232,6 @@ fn per_vertex_equals_per_pixel_at_the_vertices_and_is_cheaper() {
     assert!(
         at_vertices <= 1e-3 * peak,
         "per-vertex differs at the vertices: {at_vertices:e} (peak {peak:e})"
-    );
-    assert!(
-        tv < tp,
-        "per-vertex {tv} ms is not cheaper than per-pixel {tp} ms"
     );
 }
 

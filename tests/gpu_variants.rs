@@ -201,10 +201,9 @@ fn spectral_maps_need_flss_and_frames_reuse_prepared_tables() {
         .render_brdf_map(&prepared, THETA, 0.0, SIZE, None)
         .unwrap();
     assert_eq!(a.rgb, b.rgb);
-    // The second frame reused the table: it reports the first build's time, and its wall
-    // time no longer contains it.
+    // The second frame reused the table: it reports the first build's time (a rebuild would
+    // measure its own).
     assert_eq!(a.variant.build_ms, b.variant.build_ms);
-    assert!(b.wall_ms < a.wall_ms, "{} vs {}", b.wall_ms, a.wall_ms);
     // `default` resolves to a real variant.
     r.set_variant(VariantKind::Default);
     assert_eq!(r.variant(), VariantKind::DEFAULT);

@@ -235,10 +235,9 @@ pub fn format_answers(queries: &[Query], answers: &[Answer]) -> String {
 pub fn run(args: &BrdfArgs) -> Result<()> {
     let material = args.material.apply(crate::material::Material::default());
     material.validate()?;
-    crate::guard::check_output(&args.out)?;
     let mut inputs = crate::guard::heightfield_inputs(&material.heightfield);
     inputs.push(("query CSV", args.queries.clone()));
-    crate::guard::refuse_overwrite(&inputs, &[("--out", args.out.clone())])?;
+    crate::fsutil::check_outputs(&inputs, &[("--out", args.out.clone())])?;
     let text =
         crate::fsutil::read_text_bounded(&args.queries, "query CSV", crate::fsutil::MAX_CSV_BYTES)?;
     let queries = parse_queries(&args.queries, &text)?;

@@ -98,13 +98,7 @@ impl HeightfieldArgs {
 
 /// Generates (or grows), saves and prints one summary line.
 pub fn run_heightfield(args: &HeightfieldArgs) -> Result<()> {
-    crate::guard::heightfield_args(&args.out)?;
-    if let Some(sample) = &args.from_sample {
-        crate::guard::refuse_overwrite(
-            &crate::guard::heightfield_inputs(sample),
-            &[("-o", args.out.clone())],
-        )?;
-    }
+    crate::guard::heightfield_args(&args.out, args.from_sample.as_deref())?;
     match (&args.kind, &args.from_sample) {
         (Some(_), None) => run_generate(args),
         (None, Some(sample)) => run_grow(args, sample),

@@ -34,7 +34,7 @@ use std::time::SystemTime;
 
 use super::num_complex::Complex64;
 use super::{reachable_band, Band, Expansion, Extrema, TermRequest, TermStack};
-use crate::fsutil::write_atomically;
+use crate::fsutil::write_replacing;
 use crate::heightfield::HeightField;
 use crate::{Error, Result};
 
@@ -240,7 +240,7 @@ fn encode(
 /// directory that is then renamed over `path`, so a crash or full disk never leaves a
 /// half-written cache (and an interrupt removes the temporary file, see `fsutil`).
 pub fn save(path: &Path, stack: &TermStack, key: u64, precision: Precision) -> Result<()> {
-    write_atomically(path, |w| encode(stack, key, precision, w, path))
+    write_replacing(path, |w| encode(stack, key, precision, w, path))
 }
 
 /// Little-endian reader over a stream that feeds the checksum; `None` at a short read.

@@ -171,14 +171,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
             ));
         }
     }
-    if let Some(p) = &args.screenshot {
-        if p.extension().and_then(|e| e.to_str()) != Some("png") {
-            return Err(Error::invalid(
-                "screenshot",
-                format!("{}: must be a .png file", p.display()),
-            ));
-        }
-    }
+    crate::guard::view_args(args, &scene)?;
     if args.frames == Some(0) {
         return Err(Error::invalid("frames", "0; expected at least 1"));
     }

@@ -1,5 +1,6 @@
 //! Shared helpers of the GPU tests: a validated renderer (or a loud skip when the machine
-//! has no Vulkan at all), the validation canary check, and materials for small fast cases.
+//! has no Vulkan at all, which fails instead under `DIFFRACT_REQUIRE_VULKAN=1`, as CI runs),
+//! the validation canary check, and materials for small fast cases.
 #![allow(dead_code)]
 
 pub mod golden;
@@ -16,9 +17,7 @@ use diffract::Error;
 pub fn renderer() -> Option<Renderer> {
     match Renderer::new(true) {
         Ok(r) => Some(r),
-        Err(Error::NoVulkan(msg))
-            if std::env::var("DIFFRACT_REQUIRE_VULKAN").is_ok_and(|v| v == "1") =>
-        {
+        Err(Error::NoVulkan(msg)) if vulkan_required() => {
             panic!("DIFFRACT_REQUIRE_VULKAN=1 but {msg}")
         }
         Err(Error::NoVulkan(msg)) => {
@@ -27,6 +26,37 @@ pub fn renderer() -> Option<Renderer> {
         }
         Err(e) => panic!("cannot create a validated renderer: {e}"),
     }
+}
+
+/// Whether every GPU test must run (`DIFFRACT_REQUIRE_VULKAN=1`, set by CI): a missing
+/// driver then fails the test instead of skipping it.
+pub fn vulkan_required() -> bool {
+    std::env::var("DIFFRACT_REQUIRE_VULKAN").is_ok_and(|v| v == "1")
+}
+
+/// For a test that runs the `diffract` binary: whether the run failed only because the
+/// machine has no Vulkan driver (its one error line is `error: Vulkan unavailable: ...`),
+/// so the test may skip with a notice. Under `DIFFRACT_REQUIRE_VULKAN=1` that panics
+/// instead. Any other failure, a real Vulkan error included, is `false`: the test reports it.
+pub fn binary_found_no_vulkan(o: &std::process::Output) -> bool {
+    if o.status.success() {
+        return false;
+    }
+    let err = String::from_utf8_lossy(&o.stderr);
+    if !err
+        .lines()
+        .any(|l| l.starts_with("error: Vulkan unavailable:"))
+    {
+        return false;
+    }
+    if vulkan_required() {
+        panic!(
+            "DIFFRACT_REQUIRE_VULKAN=1 but diffract found no Vulkan: {}",
+            err.trim()
+        );
+    }
+    eprintln!("SKIPPED: no Vulkan driver on this machine ({})", err.trim());
+    true
 }
 
 /// Fails if the validation layer reported anything.
