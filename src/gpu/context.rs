@@ -1,11 +1,12 @@
 //! The headless Vulkan device layer: loader, instance (with the Khronos validation layer and
 //! a debug messenger when asked), physical-device choice, one graphics queue, the
-//! gpu-allocator instance, object naming and one-shot command submission.
+//! gpu-allocator instance, the pipeline cache, object naming, idle waits (counted) and a
+//! one-shot submission for uploads. Frames in flight live in `frames.rs`.
 //!
-//! Headless is the default. Presentation is an optional extra for the viewer:
-//! [`Instance::with_surface_extensions`] adds the window system's surface extensions and
-//! [`Device::on_surface`] picks a queue family that can present to a given surface and
-//! enables `VK_KHR_swapchain`; the surface and swapchain themselves live in `swapchain.rs`.
+//! Headless is the default and this module knows no surface. Presentation is an optional
+//! extra for the viewer: [`Instance::with_surface_extensions`] adds the window system's
+//! surface extensions, and `swapchain.rs` builds a presenting device through
+//! [`Device::with_requirements`] (a queue family that presents, `VK_KHR_swapchain`).
 //!
 //! Ownership is a chain of `Arc`s so destruction order is enforced by the types: every
 //! resource holds an `Arc<Device>`, the device holds an `Arc<Instance>`, and each `Drop`
@@ -13,12 +14,14 @@
 
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::mem::ManuallyDrop;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex, MutexGuard, RwLock};
 
 use ash::vk;
 use gpu_allocator::vulkan::{Allocator, AllocatorCreateDesc};
 
+use super::pipeline_cache::{self, CacheIdentity, CacheLoad};
 use crate::{Error, Result};
 
 const VALIDATION_LAYER: &CStr = c"VK_LAYER_KHRONOS_validation";
@@ -336,8 +339,28 @@ pub struct Device {
     submit_lock: Mutex<()>,
     allocator: ManuallyDrop<Mutex<Allocator>>,
     debug: Option<ash::ext::debug_utils::Device>,
+    /// Used by every pipeline creation. Creation is internally synchronised; merging a file
+    /// into it is not (`vkMergePipelineCaches`: dstCache), hence the lock (read: create).
+    pipeline_cache: vk::PipelineCache,
+    pipeline_cache_lock: RwLock<()>,
+    /// Where the cache is saved when the device is dropped (none: in memory only).
+    pipeline_cache_file: Mutex<Option<PathBuf>>,
+    cache_identity: CacheIdentity,
+    /// `vkDeviceWaitIdle` calls so far (the frame path must make none).
+    idle_waits: AtomicUsize,
     /// Kept last: the instance must outlive the device.
     instance: Arc<Instance>,
+}
+
+/// What a device must offer beyond a graphics queue, for [`Device::with_requirements`]
+/// (presentation: a queue family that presents to a surface and `VK_KHR_swapchain`).
+pub struct Requirements<'a> {
+    /// Whether queue family `family` of `pd` may be the device's one queue family.
+    pub queue_family: &'a dyn Fn(vk::PhysicalDevice, u32) -> bool,
+    /// Device extensions to enable; devices without them are skipped.
+    pub extensions: &'a [&'a CStr],
+    /// The error when no device meets the requirements.
+    pub unmet: &'a dyn Fn() -> Error,
 }
 
 /// Whether physical device `pd` offers device extension `name`.
@@ -373,19 +396,13 @@ impl Device {
         Self::create(instance, None)
     }
 
-    /// Like [`Device::on`], but the graphics queue must also present to `surface`, and
-    /// `VK_KHR_swapchain` is enabled. No such device is [`Error::NoPresentation`].
-    pub fn on_surface(
-        instance: Arc<Instance>,
-        surface: &super::swapchain::Surface,
-    ) -> Result<Arc<Self>> {
-        Self::create(instance, Some(surface))
+    /// Like [`Device::on`], for a device that must meet `req` too (presentation: see
+    /// `Device::on_surface` in `swapchain.rs`).
+    pub fn with_requirements(instance: Arc<Instance>, req: &Requirements<'_>) -> Result<Arc<Self>> {
+        Self::create(instance, Some(req))
     }
 
-    fn create(
-        instance: Arc<Instance>,
-        present: Option<&super::swapchain::Surface>,
-    ) -> Result<Arc<Self>> {
+    fn create(instance: Arc<Instance>, req: Option<&Requirements<'_>>) -> Result<Arc<Self>> {
         let inst = &instance.raw;
         // SAFETY: inst is a live instance.
         let physicals = unsafe { inst.enumerate_physical_devices() }
@@ -401,11 +418,15 @@ impl Device {
             let families = unsafe { inst.get_physical_device_queue_family_properties(pd) };
             let Some(family) = families.iter().enumerate().position(|(i, f)| {
                 f.queue_flags.contains(vk::QueueFlags::GRAPHICS)
-                    && present.is_none_or(|s| s.supported_by(pd, i as u32))
+                    && req.is_none_or(|r| (r.queue_family)(pd, i as u32))
             }) else {
                 continue;
             };
-            if present.is_some() && !device_has_extension(inst, pd, ash::khr::swapchain::NAME) {
+            if req.is_some_and(|r| {
+                r.extensions
+                    .iter()
+                    .any(|e| !device_has_extension(inst, pd, e))
+            }) {
                 continue;
             }
             let rank = type_rank(props.device_type);
@@ -414,12 +435,8 @@ impl Device {
             }
         }
         let Some((_, physical, queue_family, props)) = best else {
-            if present.is_some() {
-                return Err(Error::NoPresentation(
-                    "no Vulkan device can present to this window (graphics queue with surface \
-                     support and VK_KHR_swapchain)"
-                        .into(),
-                ));
+            if let Some(r) = req {
+                return Err((r.unmet)());
             }
             return Err(Error::NoVulkan(
                 "no Vulkan 1.1 device with a graphics queue was found".into(),
@@ -441,17 +458,14 @@ impl Device {
         let queue_info = [vk::DeviceQueueCreateInfo::default()
             .queue_family_index(queue_family)
             .queue_priorities(&priorities)];
-        let swapchain_ext = [ash::khr::swapchain::NAME.as_ptr()];
-        let device_exts: &[*const c_char] = if present.is_some() {
-            &swapchain_ext
-        } else {
-            &[]
-        };
+        let device_exts: Vec<*const c_char> = req
+            .map(|r| r.extensions.iter().map(|e| e.as_ptr()).collect())
+            .unwrap_or_default();
         let create_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
-            .enabled_extension_names(device_exts);
+            .enabled_extension_names(&device_exts);
         // SAFETY: create_info and its arrays outlive the call; no features beyond Vulkan 1.0
-        // core are requested, and VK_KHR_swapchain (when asked) was checked to exist.
+        // core are requested, and the required extensions were checked to exist.
         let raw = unsafe { inst.create_device(physical, &create_info, None) }
             .map_err(Error::vk("vkCreateDevice"))?;
         // SAFETY: one queue of this family was requested above.
@@ -491,6 +505,27 @@ impl Device {
             }
         };
 
+        // SAFETY: live device; an empty cache (initial data is merged in later from a file,
+        // Device::load_pipeline_cache).
+        let pipeline_cache = match unsafe {
+            raw.create_pipeline_cache(&vk::PipelineCacheCreateInfo::default(), None)
+        } {
+            Ok(c) => c,
+            Err(e) => {
+                // SAFETY: only the pool and the allocator's blocks exist; freed in order.
+                unsafe { raw.destroy_command_pool(command_pool, None) };
+                drop(allocator);
+                // SAFETY: nothing else lives on the device.
+                unsafe { raw.destroy_device(None) };
+                return Err(Error::vk("vkCreatePipelineCache")(e));
+            }
+        };
+        let cache_identity = CacheIdentity {
+            vendor_id: props.vendor_id,
+            device_id: props.device_id,
+            driver_version: props.driver_version,
+            uuid: props.pipeline_cache_uuid,
+        };
         let debug = instance
             .debug_utils_enabled
             .then(|| ash::ext::debug_utils::Device::new(inst, &raw));
@@ -512,10 +547,16 @@ impl Device {
             submit_lock: Mutex::new(()),
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             debug,
+            pipeline_cache,
+            pipeline_cache_lock: RwLock::new(()),
+            pipeline_cache_file: Mutex::new(None),
+            cache_identity,
+            idle_waits: AtomicUsize::new(0),
             instance,
         };
         device.set_name(device.queue, "graphics queue");
         device.set_name(device.command_pool, "one-shot command pool");
+        device.set_name(device.pipeline_cache, "pipeline cache");
         Ok(Arc::new(device))
     }
 
@@ -612,8 +653,110 @@ impl Device {
         props.optimal_tiling_features.contains(features)
     }
 
+    /// `vkDeviceWaitIdle`, counted ([`Device::idle_waits`]). For teardown and error paths
+    /// only: frames in flight retire objects through `Frames::retire` instead.
+    pub fn wait_idle(&self) -> Result<()> {
+        let _queue = self.queue_lock();
+        self.wait_idle_locked()
+    }
+
+    /// [`Device::wait_idle`] for a caller that holds the queue lock.
+    fn wait_idle_locked(&self) -> Result<()> {
+        self.idle_waits.fetch_add(1, Ordering::SeqCst);
+        // SAFETY: live device; the queue is externally synchronised by the caller's lock.
+        unsafe { self.raw.device_wait_idle() }.map_err(Error::vk("vkDeviceWaitIdle"))
+    }
+
+    /// How many times [`Device::wait_idle`] ran on this device (tests check that the
+    /// viewer's frame path makes no idle wait).
+    pub fn idle_waits(&self) -> usize {
+        self.idle_waits.load(Ordering::SeqCst)
+    }
+
+    /// Runs `create` with the device's pipeline cache (every pipeline creation goes through
+    /// here).
+    pub(crate) fn with_pipeline_cache<R>(&self, create: impl FnOnce(vk::PipelineCache) -> R) -> R {
+        let _read = self
+            .pipeline_cache_lock
+            .read()
+            .unwrap_or_else(|p| p.into_inner());
+        create(self.pipeline_cache)
+    }
+
+    /// Merges the pipeline cache file of this GPU in `dir` (beside the term cache) into the
+    /// device's cache, and saves the cache there when the device is dropped. A missing,
+    /// damaged or foreign file is not an error ([`CacheLoad`] says what happened); only the
+    /// first directory given is used.
+    pub fn load_pipeline_cache(&self, dir: &Path) -> CacheLoad {
+        let path = pipeline_cache::cache_path(dir, &self.cache_identity);
+        {
+            let mut file = lock(&self.pipeline_cache_file);
+            if file.is_some() {
+                return CacheLoad::Ignored("a pipeline cache file is already in use".into());
+            }
+            *file = Some(path.clone());
+        }
+        let bytes = match crate::fsutil::read_bounded(
+            &path,
+            "pipeline cache",
+            pipeline_cache::MAX_CACHE_BYTES,
+        ) {
+            Ok(b) => b,
+            Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {
+                return CacheLoad::Missing
+            }
+            Err(e) => return CacheLoad::Ignored(e.to_string()),
+        };
+        let data = match pipeline_cache::decode(&self.cache_identity, &bytes) {
+            Ok(d) => d,
+            Err(why) => return CacheLoad::Ignored(why),
+        };
+        let info = vk::PipelineCacheCreateInfo::default().initial_data(data);
+        // SAFETY: live device; data passed both header checks (ours and Vulkan's).
+        let loaded = match unsafe { self.raw.create_pipeline_cache(&info, None) } {
+            Ok(c) => c,
+            Err(e) => return CacheLoad::Ignored(format!("vkCreatePipelineCache: {e}")),
+        };
+        let merged = {
+            let _write = self
+                .pipeline_cache_lock
+                .write()
+                .unwrap_or_else(|p| p.into_inner());
+            // SAFETY: the write lock synchronises dstCache; both caches are live.
+            unsafe {
+                self.raw
+                    .merge_pipeline_caches(self.pipeline_cache, &[loaded])
+            }
+        };
+        // SAFETY: the source cache is used by nothing else.
+        unsafe { self.raw.destroy_pipeline_cache(loaded, None) };
+        match merged {
+            Ok(()) => CacheLoad::Loaded(data.len()),
+            Err(e) => CacheLoad::Ignored(format!("vkMergePipelineCaches: {e}")),
+        }
+    }
+
+    /// Writes the pipeline cache to its file (atomically: a temporary file renamed into
+    /// place). `Ok(None)` without a file ([`Device::load_pipeline_cache`] not called).
+    pub fn save_pipeline_cache(&self) -> Result<Option<PathBuf>> {
+        let Some(path) = lock(&self.pipeline_cache_file).clone() else {
+            return Ok(None);
+        };
+        let data = self.with_pipeline_cache(|cache| {
+            // SAFETY: live cache of this device.
+            unsafe { self.raw.get_pipeline_cache_data(cache) }
+        });
+        let data = data.map_err(Error::vk("vkGetPipelineCacheData"))?;
+        if let Some(dir) = path.parent() {
+            std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+        }
+        crate::fsutil::write_atomic(&path, &pipeline_cache::encode(&self.cache_identity, &data))?;
+        Ok(Some(path))
+    }
+
     /// Records commands with `record`, submits them and waits for completion. Everything
-    /// the commands used may be destroyed once this returns.
+    /// the commands used may be destroyed once this returns. For one-off uploads; repeated
+    /// work (frames) goes through `Frames`.
     pub fn submit_once(
         &self,
         label: &str,
@@ -667,9 +810,9 @@ impl Device {
                     .map_err(Error::vk("vkWaitForFences"))
             });
         if result.is_err() {
-            // Make sure nothing is still running before the caller frees resources.
-            // SAFETY: live device; the error path is already being reported.
-            let _ = unsafe { self.raw.device_wait_idle() };
+            // Make sure nothing is still running before the caller frees resources; the
+            // error path is already being reported (submit_lock is the queue lock, held).
+            let _ = self.wait_idle_locked();
         }
         // SAFETY: the fence is signalled or the device is idle, so it is not in use.
         unsafe { self.raw.destroy_fence(fence, None) };
@@ -679,10 +822,14 @@ impl Device {
 
 impl Drop for Device {
     fn drop(&mut self) {
-        // SAFETY: every resource holds an Arc<Device>, so none is alive any more; waiting
-        // covers any work still queued.
+        // Every resource holds an Arc<Device>, so none is alive any more; waiting covers any
+        // work still queued.
+        let _ = self.wait_idle();
+        // A cache is an optimisation: failing to save it costs the next start a recompile.
+        let _ = self.save_pipeline_cache();
+        // SAFETY: the device is idle; nothing uses the pool or the cache.
         unsafe {
-            let _ = self.raw.device_wait_idle();
+            self.raw.destroy_pipeline_cache(self.pipeline_cache, None);
             self.raw.destroy_command_pool(self.command_pool, None);
         }
         {

@@ -1,7 +1,12 @@
-//! Everything `ash`: the headless device layer ([`context`]), memory objects ([`memory`]),
-//! texel storage formats ([`formats`]), layouts/descriptors/pipelines ([`pipeline`]), render
-//! targets ([`target`]), presentation ([`swapchain`], optional), GPU timestamps ([`timer`]), a
-//! reusable submission ([`submit`]) and the SPIR-V compiled by `build.rs`.
+//! Everything `ash`: the headless device layer ([`context`], which knows no surface), memory
+//! objects ([`memory`]), texel storage formats ([`formats`]), layouts/descriptors/pipelines
+//! ([`pipeline`]) and the on-disk pipeline cache ([`pipeline_cache`]), the one render-pass
+//! builder ([`render_pass`]), render targets ([`target`]), frames in flight with deferred
+//! release ([`frames`]), presentation ([`swapchain`], optional), GPU timestamps ([`timer`])
+//! and the SPIR-V compiled by `build.rs`.
+//!
+//! Imports run one way: `context` ← `memory`, `timer`, `pipeline`, `render_pass` ← `target`,
+//! `frames` ← `swapchain`.
 //!
 //! This module knows Vulkan, not physics: what the bindings and specialisation constants
 //! mean is decided by `render.rs` and `glsl/`. Every object is named (debug utils), owned by
@@ -11,9 +16,11 @@
 
 pub mod context;
 pub mod formats;
+pub mod frames;
 pub mod memory;
 pub mod pipeline;
-pub mod submit;
+pub mod pipeline_cache;
+pub mod render_pass;
 pub mod swapchain;
 pub mod target;
 pub mod timer;

@@ -341,12 +341,13 @@ impl Pipeline {
             .render_pass(desc.render_pass)
             .subpass(0);
         // SAFETY: all state structs outlive the call; modules, layout and render pass are
-        // live and compatible (subpass 0 has one colour and one depth attachment).
-        let raw = unsafe {
-            dev.raw
-                .create_graphics_pipelines(vk::PipelineCache::null(), &[info], None)
-        }
-        .map_err(|(_, e)| Error::vk("vkCreateGraphicsPipelines")(e))?[0];
+        // live and compatible (subpass 0 has one colour and one depth attachment); the cache
+        // is the device's.
+        let raw = dev
+            .with_pipeline_cache(|cache| unsafe {
+                dev.raw.create_graphics_pipelines(cache, &[info], None)
+            })
+            .map_err(|(_, e)| Error::vk("vkCreateGraphicsPipelines")(e))?[0];
         dev.set_name(raw, desc.name);
         Ok(Self {
             dev: dev.clone(),
@@ -357,7 +358,8 @@ impl Pipeline {
 
 impl Drop for Pipeline {
     fn drop(&mut self) {
-        // SAFETY: no pending GPU work uses the pipeline (submissions are waited on).
+        // SAFETY: no pending GPU work uses the pipeline (submissions are waited on, or the
+        // owner was retired through the frames' deferred release).
         unsafe { self.dev.raw.destroy_pipeline(self.raw, None) };
     }
 }

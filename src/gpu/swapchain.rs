@@ -1,11 +1,12 @@
-//! Presentation, the optional extra of the device layer: a window [`Surface`] and a
-//! [`Swapchain`] with its render pass (sRGB colour + D32 depth), image views, depth image and
-//! framebuffers. Each swapchain image is a [`FrameTarget`], so frame code draws into it
-//! exactly as into an offscreen target.
+//! Presentation, the optional extra of the device layer: a window [`Surface`], a device that
+//! presents to it ([`Device::on_surface`]) and a [`Swapchain`] with its render pass (sRGB
+//! colour + D32 depth), image views, depth image and framebuffers. Each swapchain image is a
+//! [`FrameTarget`], so a pass draws into it exactly as into an offscreen target.
 //!
-//! This module does not know about windows beyond raw handles, nor about frames in flight
-//! (the viewer owns those); it never waits on the GPU except in `Drop`/recreation, where the
-//! caller has already waited.
+//! Acquire and present return typed outcomes ([`Acquired`], [`Presented`]); a lost surface
+//! or device is an error ([`Error::SurfaceLost`], [`Error::DeviceLost`]). Recreation passes
+//! the old swapchain as `oldSwapchain` and hands it back, for the caller to retire through
+//! the frames' deferred release: nothing here waits on the GPU.
 
 use std::sync::Arc;
 
@@ -13,8 +14,10 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 use raw_window_handle::{RawDisplayHandle, RawWindowHandle};
 
-use super::context::{Device, Instance};
+use super::context::{Device, Instance, Requirements};
 use super::memory::{Buffer, Image, ImageDesc};
+use super::render_pass::RenderPass;
+pub use super::render_pass::DEPTH_FORMAT;
 use super::target::FrameTarget;
 use crate::{Error, Result};
 
@@ -63,6 +66,85 @@ impl Surface {
     }
 }
 
+impl Device {
+    /// Like [`Device::on`], but the graphics queue must also present to `surface`, and
+    /// `VK_KHR_swapchain` is enabled. No such device is [`Error::NoPresentation`].
+    pub fn on_surface(instance: Arc<Instance>, surface: &Surface) -> Result<Arc<Device>> {
+        Device::with_requirements(
+            instance,
+            &Requirements {
+                queue_family: &|pd, family| surface.supported_by(pd, family),
+                extensions: &[ash::khr::swapchain::NAME],
+                unmet: &|| {
+                    Error::NoPresentation(
+                        "no Vulkan device can present to this window (graphics queue with \
+                         surface support and VK_KHR_swapchain)"
+                            .into(),
+                    )
+                },
+            },
+        )
+    }
+}
+
+/// What `vkAcquireNextImageKHR` gave.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Acquired {
+    /// Image `index` is ours; `suboptimal`: it can be drawn and presented, but the
+    /// swapchain should be recreated after this frame.
+    Image { index: u32, suboptimal: bool },
+    /// `VK_ERROR_OUT_OF_DATE_KHR`: nothing was acquired (the semaphore stays unsignalled);
+    /// recreate the swapchain.
+    OutOfDate,
+}
+
+impl Acquired {
+    /// Sorts the results `vkAcquireNextImageKHR` can return (spec: SUCCESS, SUBOPTIMAL_KHR,
+    /// ERROR_OUT_OF_DATE_KHR, ERROR_SURFACE_LOST_KHR, ERROR_DEVICE_LOST, out of memory;
+    /// TIMEOUT and NOT_READY cannot happen with an infinite timeout). `ash` returns
+    /// SUBOPTIMAL_KHR as `Ok((index, true))`.
+    pub fn from_result(r: std::result::Result<(u32, bool), vk::Result>) -> Result<Self> {
+        match r {
+            Ok((index, suboptimal)) => Ok(Acquired::Image { index, suboptimal }),
+            Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => Ok(Acquired::OutOfDate),
+            Err(e) => Err(Error::vk("vkAcquireNextImageKHR")(e)),
+        }
+    }
+}
+
+/// What `vkQueuePresentKHR` gave.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Presented {
+    Ok,
+    /// Presented, but the swapchain no longer matches the surface: recreate it.
+    Suboptimal,
+    /// Not presented (the surface changed): recreate the swapchain.
+    OutOfDate,
+}
+
+impl Presented {
+    /// Sorts the results `vkQueuePresentKHR` can return (spec: SUCCESS, SUBOPTIMAL_KHR,
+    /// ERROR_OUT_OF_DATE_KHR, ERROR_SURFACE_LOST_KHR, ERROR_DEVICE_LOST, out of memory).
+    /// `ash` returns SUBOPTIMAL_KHR as `Ok(true)`.
+    pub fn from_result(r: std::result::Result<bool, vk::Result>) -> Result<Self> {
+        match r {
+            Ok(false) => Ok(Presented::Ok),
+            Ok(true) => Ok(Presented::Suboptimal),
+            Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => Ok(Presented::OutOfDate),
+            Err(e) => Err(Error::vk("vkQueuePresentKHR")(e)),
+        }
+    }
+}
+
+/// What [`Swapchain::recreate`] did.
+pub enum Recreated {
+    /// The surface has zero area (a minimised window): the swapchain was kept; skip frames.
+    Minimised,
+    /// Replaced; the old swapchain (with its views, depth image, framebuffers and
+    /// semaphores) may still be used by frames in flight: retire it.
+    Replaced(Swapchain),
+}
+
 impl Drop for Surface {
     fn drop(&mut self) {
         // SAFETY: every swapchain of this surface holds a borrow-free handle only while the
@@ -89,20 +171,16 @@ pub struct Swapchain {
     pub format: vk::Format,
     pub extent: vk::Extent2D,
     pub present_mode: vk::PresentModeKHR,
-    /// Independent of the extent: survives recreation while the format stays the same, so
-    /// pipelines built for it stay valid.
-    pub render_pass: vk::RenderPass,
+    /// Independent of the extent: shared with the next swapchain while the format stays the
+    /// same, so pipelines built for it stay valid.
+    render_pass: Arc<RenderPass>,
     images: Vec<vk::Image>,
     views: Vec<vk::ImageView>,
     framebuffers: Vec<vk::Framebuffer>,
-    /// One per image: signalled by the frame's submission, waited on by the present. Per
-    /// image, not per frame in flight: the present engine may hold a semaphore until the
-    /// image is acquired again.
-    pub render_done: Vec<vk::Semaphore>,
+    /// One per image: signalled by the frame's submission, waited on by the present.
+    render_done: Vec<vk::Semaphore>,
     depth: Option<Image>,
 }
-
-pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
 
 impl Swapchain {
     /// A swapchain of `surface` sized `want` (used when the surface leaves the extent to the
@@ -112,6 +190,18 @@ impl Swapchain {
         surface: &Surface,
         want: vk::Extent2D,
         vsync: Vsync,
+    ) -> Result<Option<Self>> {
+        Self::create(dev, surface, want, vsync, None)
+    }
+
+    /// [`Swapchain::new`], replacing `old` (passed as `oldSwapchain`, whose render pass is
+    /// reused when the format is the same).
+    fn create(
+        dev: &Arc<Device>,
+        surface: &Surface,
+        want: vk::Extent2D,
+        vsync: Vsync,
+        old: Option<&Swapchain>,
     ) -> Result<Option<Self>> {
         let pd = dev.physical();
         // SAFETY: pd and the surface belong to the same live instance.
@@ -205,12 +295,33 @@ impl Swapchain {
             .pre_transform(caps.current_transform)
             .composite_alpha(composite)
             .present_mode(present_mode)
-            .clipped(true);
+            .clipped(true)
+            .old_swapchain(old.map_or(vk::SwapchainKHR::null(), |o| o.raw));
         // SAFETY: the device was created with VK_KHR_swapchain on a queue family that
-        // presents to this surface (Device::on_surface); the values come from the caps.
+        // presents to this surface (Device::on_surface); the values come from the caps; the
+        // old swapchain (if any) belongs to the same surface and is not yet retired.
         let raw = unsafe { loader.create_swapchain(&info, None) }
             .map_err(Error::vk("vkCreateSwapchainKHR"))?;
         dev.set_name(raw, "swapchain");
+        let render_pass = match old {
+            Some(o) if o.format == format.format => o.render_pass.clone(),
+            _ => {
+                let pass = RenderPass::new(
+                    dev,
+                    "swapchain render pass",
+                    format.format,
+                    vk::ImageLayout::PRESENT_SRC_KHR,
+                );
+                match pass {
+                    Ok(p) => Arc::new(p),
+                    Err(e) => {
+                        // SAFETY: just created, never used.
+                        unsafe { loader.destroy_swapchain(raw, None) };
+                        return Err(e);
+                    }
+                }
+            }
+        };
         let mut sc = Swapchain {
             dev: dev.clone(),
             loader,
@@ -218,14 +329,13 @@ impl Swapchain {
             format: format.format,
             extent,
             present_mode,
-            render_pass: vk::RenderPass::null(),
+            render_pass,
             images: Vec::new(),
             views: Vec::new(),
             framebuffers: Vec::new(),
             render_done: Vec::new(),
             depth: None,
         };
-        sc.render_pass = create_render_pass(dev, sc.format)?;
         sc.build_images()?;
         Ok(Some(sc))
     }
@@ -267,18 +377,12 @@ impl Swapchain {
                 .map_err(Error::vk("vkCreateImageView"))?;
             self.views.push(view);
             dev.set_name(view, &format!("swapchain view {i}"));
-            let attachments = [view, depth.view];
-            let fb = vk::FramebufferCreateInfo::default()
-                .render_pass(self.render_pass)
-                .attachments(&attachments)
-                .width(self.extent.width)
-                .height(self.extent.height)
-                .layers(1);
-            // SAFETY: the views match the render pass's formats and the extent.
-            let fb = unsafe { dev.raw().create_framebuffer(&fb, None) }
-                .map_err(Error::vk("vkCreateFramebuffer"))?;
+            let fb = self.render_pass.framebuffer(
+                &format!("swapchain framebuffer {i}"),
+                [view, depth.view],
+                self.extent,
+            )?;
             self.framebuffers.push(fb);
-            dev.set_name(fb, &format!("swapchain framebuffer {i}"));
             // SAFETY: live device.
             let sem = unsafe {
                 dev.raw()
@@ -292,10 +396,11 @@ impl Swapchain {
         Ok(())
     }
 
-    /// Destroys the per-image objects (the device must be idle for them).
+    /// Destroys the per-image objects (no pending work may use them).
     fn destroy_images(&mut self) {
         let raw = self.dev.raw();
-        // SAFETY: callers wait for the device to be idle first, so no submission uses these.
+        // SAFETY: a swapchain is dropped only once no frame in flight uses it (retired through
+        // the frames' deferred release, or after an idle wait at teardown).
         unsafe {
             for fb in self.framebuffers.drain(..) {
                 raw.destroy_framebuffer(fb, None);
@@ -311,51 +416,56 @@ impl Swapchain {
         self.images.clear();
     }
 
-    /// Replaces the swapchain after a resize or OUT_OF_DATE/SUBOPTIMAL. The caller waits for
-    /// the device to be idle first. `Ok(false)` when the surface has zero area (minimised):
-    /// the old swapchain is kept and frames should be skipped.
+    /// Replaces the swapchain after a resize or OUT_OF_DATE/SUBOPTIMAL, passing the current
+    /// one as `oldSwapchain`. No wait: the old swapchain comes back in
+    /// [`Recreated::Replaced`] for the caller to retire until the frames that used it are
+    /// done.
     pub fn recreate(
         &mut self,
         surface: &Surface,
         want: vk::Extent2D,
         vsync: Vsync,
-    ) -> Result<bool> {
-        let Some(mut new) = Swapchain::new(&self.dev, surface, want, vsync)? else {
-            return Ok(false);
+    ) -> Result<Recreated> {
+        let Some(new) = Swapchain::create(&self.dev, surface, want, vsync, Some(self))? else {
+            return Ok(Recreated::Minimised);
         };
-        std::mem::swap(self, &mut new);
-        // Keep the render pass pipelines were built with while the format is unchanged (the
-        // new one is compatible, so the new framebuffers work with it).
-        if self.format == new.format {
-            std::mem::swap(&mut self.render_pass, &mut new.render_pass);
-        }
-        // `new` is now the old swapchain and is dropped here; the device is idle.
-        Ok(true)
+        Ok(Recreated::Replaced(std::mem::replace(self, new)))
+    }
+
+    /// The render pass pipelines drawing into this swapchain are built for.
+    pub fn render_pass(&self) -> vk::RenderPass {
+        self.render_pass.raw
     }
 
     /// The frame-code view of image `index`.
     pub fn frame_target(&self, index: u32) -> FrameTarget {
         FrameTarget {
-            render_pass: self.render_pass,
+            render_pass: self.render_pass.raw,
             framebuffer: self.framebuffers[index as usize],
             extent: self.extent,
         }
     }
 
-    /// `vkAcquireNextImageKHR`: the image index and whether the swapchain is suboptimal.
-    /// `Err(ERROR_OUT_OF_DATE_KHR)` means recreate.
-    pub fn acquire(&self, signal: vk::Semaphore) -> std::result::Result<(u32, bool), vk::Result> {
+    /// `vkAcquireNextImageKHR` signalling `signal`.
+    pub fn acquire(&self, signal: vk::Semaphore) -> Result<Acquired> {
         // SAFETY: signal is unsignalled with no pending operation (the frame's fence was
-        // waited on before reuse), as VUID-vkAcquireNextImageKHR-semaphore-01286 requires.
-        unsafe {
+        // waited on before reuse, and an OUT_OF_DATE acquire leaves it unsignalled), as
+        // VUID-vkAcquireNextImageKHR-semaphore-01286 requires.
+        Acquired::from_result(unsafe {
             self.loader
                 .acquire_next_image(self.raw, u64::MAX, signal, vk::Fence::null())
-        }
+        })
     }
 
-    /// Queues image `index` for presentation after `render_done[index]`. `Ok(true)` when the
-    /// swapchain is suboptimal; `Err(ERROR_OUT_OF_DATE_KHR)` means recreate.
-    pub fn present(&self, index: u32) -> std::result::Result<bool, vk::Result> {
+    /// The semaphore a frame drawing into image `index` signals and its present waits on.
+    /// One per image, not per frame in flight: the present engine may hold a semaphore
+    /// until the image is acquired again.
+    pub fn render_done(&self, index: u32) -> vk::Semaphore {
+        self.render_done[index as usize]
+    }
+
+    /// Queues image `index` for presentation after `render_done(index)`.
+    pub fn present(&self, index: u32) -> Result<Presented> {
         let waits = [self.render_done[index as usize]];
         let swapchains = [self.raw];
         let indices = [index];
@@ -366,7 +476,7 @@ impl Swapchain {
         let _queue = self.dev.queue_lock();
         // SAFETY: index was acquired and a submission that signals waits[0] was queued; the
         // queue is externally synchronised by the lock.
-        unsafe { self.loader.queue_present(self.dev.queue(), &info) }
+        Presented::from_result(unsafe { self.loader.queue_present(self.dev.queue(), &info) })
     }
 
     /// Records, after a frame's render pass left image `index` in PRESENT_SRC_KHR, a copy of
@@ -484,87 +594,68 @@ impl Swapchain {
 impl Drop for Swapchain {
     fn drop(&mut self) {
         self.destroy_images();
-        // SAFETY: owners wait for the device to be idle before dropping a swapchain, so no
-        // submission or present uses it; the render pass's framebuffers are gone above.
-        unsafe {
-            self.loader.destroy_swapchain(self.raw, None);
-            self.dev.raw().destroy_render_pass(self.render_pass, None);
-        }
+        // SAFETY: as destroy_images: no frame in flight uses it. The render pass (shared
+        // with a newer swapchain of the same format) drops with its last owner.
+        unsafe { self.loader.destroy_swapchain(self.raw, None) };
     }
 }
 
-/// The swapchain render pass: colour cleared and left in PRESENT_SRC_KHR, depth cleared.
-fn create_render_pass(dev: &Arc<Device>, format: vk::Format) -> Result<vk::RenderPass> {
-    let attachments = [
-        vk::AttachmentDescription::default()
-            .format(format)
-            .samples(vk::SampleCountFlags::TYPE_1)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::STORE)
-            .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
-            .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
-            .initial_layout(vk::ImageLayout::UNDEFINED)
-            .final_layout(vk::ImageLayout::PRESENT_SRC_KHR),
-        vk::AttachmentDescription::default()
-            .format(DEPTH_FORMAT)
-            .samples(vk::SampleCountFlags::TYPE_1)
-            .load_op(vk::AttachmentLoadOp::CLEAR)
-            .store_op(vk::AttachmentStoreOp::DONT_CARE)
-            .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
-            .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
-            .initial_layout(vk::ImageLayout::UNDEFINED)
-            .final_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL),
-    ];
-    let colour_ref = [vk::AttachmentReference {
-        attachment: 0,
-        layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-    }];
-    let depth_ref = vk::AttachmentReference {
-        attachment: 1,
-        layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
-    };
-    let subpass = [vk::SubpassDescription::default()
-        .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-        .color_attachments(&colour_ref)
-        .depth_stencil_attachment(&depth_ref)];
-    // In: the acquire semaphore is waited at COLOR_ATTACHMENT_OUTPUT, so the layout
-    // transition must come after that stage; the depth image is shared by the frames in
-    // flight, so the previous frame's depth clear and writes finish before this frame's.
-    // Out: a screenshot copy (TRANSFER) after the final transition to PRESENT_SRC_KHR.
-    let dependencies = [
-        vk::SubpassDependency::default()
-            .src_subpass(vk::SUBPASS_EXTERNAL)
-            .dst_subpass(0)
-            .src_stage_mask(
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
-                    | vk::PipelineStageFlags::EARLY_FRAGMENT_TESTS
-                    | vk::PipelineStageFlags::LATE_FRAGMENT_TESTS,
-            )
-            .dst_stage_mask(
-                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
-                    | vk::PipelineStageFlags::EARLY_FRAGMENT_TESTS,
-            )
-            .src_access_mask(vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE)
-            .dst_access_mask(
-                vk::AccessFlags::COLOR_ATTACHMENT_WRITE
-                    | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE
-                    | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_READ,
-            ),
-        vk::SubpassDependency::default()
-            .src_subpass(0)
-            .dst_subpass(vk::SUBPASS_EXTERNAL)
-            .src_stage_mask(vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT)
-            .dst_stage_mask(vk::PipelineStageFlags::TRANSFER)
-            .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-            .dst_access_mask(vk::AccessFlags::TRANSFER_READ),
-    ];
-    let info = vk::RenderPassCreateInfo::default()
-        .attachments(&attachments)
-        .subpasses(&subpass)
-        .dependencies(&dependencies);
-    // SAFETY: live device; the descriptions reference valid attachment indices.
-    let rp = unsafe { dev.raw().create_render_pass(&info, None) }
-        .map_err(Error::vk("vkCreateRenderPass"))?;
-    dev.set_name(rp, "swapchain render pass");
-    Ok(rp)
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn acquire_results_are_sorted() {
+        assert_eq!(
+            Acquired::from_result(Ok((2, false))).unwrap(),
+            Acquired::Image {
+                index: 2,
+                suboptimal: false
+            }
+        );
+        assert_eq!(
+            Acquired::from_result(Ok((0, true))).unwrap(),
+            Acquired::Image {
+                index: 0,
+                suboptimal: true
+            }
+        );
+        assert_eq!(
+            Acquired::from_result(Err(vk::Result::ERROR_OUT_OF_DATE_KHR)).unwrap(),
+            Acquired::OutOfDate
+        );
+        assert!(matches!(
+            Acquired::from_result(Err(vk::Result::ERROR_SURFACE_LOST_KHR)),
+            Err(Error::SurfaceLost { .. })
+        ));
+        assert!(matches!(
+            Acquired::from_result(Err(vk::Result::ERROR_DEVICE_LOST)),
+            Err(Error::DeviceLost { .. })
+        ));
+        assert!(matches!(
+            Acquired::from_result(Err(vk::Result::ERROR_OUT_OF_DEVICE_MEMORY)),
+            Err(Error::OutOfMemory { device: true, .. })
+        ));
+    }
+
+    #[test]
+    fn present_results_are_sorted() {
+        assert_eq!(Presented::from_result(Ok(false)).unwrap(), Presented::Ok);
+        assert_eq!(
+            Presented::from_result(Ok(true)).unwrap(),
+            Presented::Suboptimal
+        );
+        assert_eq!(
+            Presented::from_result(Err(vk::Result::ERROR_OUT_OF_DATE_KHR)).unwrap(),
+            Presented::OutOfDate
+        );
+        assert!(matches!(
+            Presented::from_result(Err(vk::Result::ERROR_SURFACE_LOST_KHR)),
+            Err(Error::SurfaceLost { .. })
+        ));
+        assert!(matches!(
+            Presented::from_result(Err(vk::Result::ERROR_DEVICE_LOST)),
+            Err(Error::DeviceLost { .. })
+        ));
+    }
 }

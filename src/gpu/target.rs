@@ -10,6 +10,7 @@ use gpu_allocator::MemoryLocation;
 
 use super::context::Device;
 use super::memory::{Buffer, Image, ImageDesc};
+use super::render_pass::{RenderPass, DEPTH_FORMAT};
 use crate::{Error, Result};
 
 /// What a frame is recorded against.
@@ -24,18 +25,18 @@ pub struct FrameTarget {
 pub struct OffscreenTarget {
     // Field order is drop order: framebuffer users first, images after.
     dev: Arc<Device>,
-    pub render_pass: vk::RenderPass,
     pub framebuffer: vk::Framebuffer,
+    pass: RenderPass,
     pub extent: vk::Extent2D,
     readback: Buffer,
-    depth: Image,
+    _depth: Image,
     pub colour: Image,
 }
 
 impl OffscreenTarget {
     /// Linear float colour: HDR values survive to the EXR writer.
     pub const COLOUR_FORMAT: vk::Format = vk::Format::R32G32B32A32_SFLOAT;
-    pub const DEPTH_FORMAT: vk::Format = vk::Format::D32_SFLOAT;
+    pub const DEPTH_FORMAT: vk::Format = DEPTH_FORMAT;
 
     pub fn new(dev: &Arc<Device>, width: u32, height: u32) -> Result<Self> {
         let max = dev.info.max_image_dimension_2d;
@@ -95,106 +96,37 @@ impl OffscreenTarget {
             vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuToCpu,
         )?;
-        let mut target = OffscreenTarget {
+        let pass = RenderPass::new(
+            dev,
+            "offscreen render pass",
+            Self::COLOUR_FORMAT,
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+        )?;
+        let framebuffer = pass.framebuffer(
+            "offscreen framebuffer",
+            [colour.view, depth.view],
+            vk::Extent2D { width, height },
+        )?;
+        Ok(OffscreenTarget {
             dev: dev.clone(),
-            render_pass: vk::RenderPass::null(),
-            framebuffer: vk::Framebuffer::null(),
+            framebuffer,
+            pass,
             extent: vk::Extent2D { width, height },
             readback,
-            depth,
+            _depth: depth,
             colour,
-        };
+        })
+    }
 
-        let attachments = [
-            vk::AttachmentDescription::default()
-                .format(Self::COLOUR_FORMAT)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
-                .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
-                .initial_layout(vk::ImageLayout::UNDEFINED)
-                .final_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL),
-            vk::AttachmentDescription::default()
-                .format(Self::DEPTH_FORMAT)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::DONT_CARE)
-                .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
-                .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
-                .initial_layout(vk::ImageLayout::UNDEFINED)
-                .final_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL),
-        ];
-        let colour_ref = [vk::AttachmentReference {
-            attachment: 0,
-            layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-        }];
-        let depth_ref = vk::AttachmentReference {
-            attachment: 1,
-            layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
-        };
-        let subpass = [vk::SubpassDescription::default()
-            .pipeline_bind_point(vk::PipelineBindPoint::GRAPHICS)
-            .color_attachments(&colour_ref)
-            .depth_stencil_attachment(&depth_ref)];
-        // In: earlier use of the images (a previous frame) finishes before the clears.
-        // Out: colour writes are visible to the readback copy after the final transition.
-        let dependencies = [
-            vk::SubpassDependency::default()
-                .src_subpass(vk::SUBPASS_EXTERNAL)
-                .dst_subpass(0)
-                .src_stage_mask(
-                    vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
-                        | vk::PipelineStageFlags::LATE_FRAGMENT_TESTS
-                        | vk::PipelineStageFlags::TRANSFER,
-                )
-                .dst_stage_mask(
-                    vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
-                        | vk::PipelineStageFlags::EARLY_FRAGMENT_TESTS,
-                )
-                .src_access_mask(
-                    vk::AccessFlags::COLOR_ATTACHMENT_WRITE
-                        | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE,
-                )
-                .dst_access_mask(
-                    vk::AccessFlags::COLOR_ATTACHMENT_WRITE
-                        | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_WRITE
-                        | vk::AccessFlags::DEPTH_STENCIL_ATTACHMENT_READ,
-                ),
-            vk::SubpassDependency::default()
-                .src_subpass(0)
-                .dst_subpass(vk::SUBPASS_EXTERNAL)
-                .src_stage_mask(vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT)
-                .dst_stage_mask(vk::PipelineStageFlags::TRANSFER)
-                .src_access_mask(vk::AccessFlags::COLOR_ATTACHMENT_WRITE)
-                .dst_access_mask(vk::AccessFlags::TRANSFER_READ),
-        ];
-        let rp_info = vk::RenderPassCreateInfo::default()
-            .attachments(&attachments)
-            .subpasses(&subpass)
-            .dependencies(&dependencies);
-        // SAFETY: live device; the descriptions reference valid attachment indices.
-        target.render_pass = unsafe { dev.raw.create_render_pass(&rp_info, None) }
-            .map_err(Error::vk("vkCreateRenderPass"))?;
-        dev.set_name(target.render_pass, "offscreen render pass");
-        let views = [target.colour.view, target.depth.view];
-        let fb_info = vk::FramebufferCreateInfo::default()
-            .render_pass(target.render_pass)
-            .attachments(&views)
-            .width(width)
-            .height(height)
-            .layers(1);
-        // SAFETY: the views match the render pass's attachment formats and the extent.
-        target.framebuffer = unsafe { dev.raw.create_framebuffer(&fb_info, None) }
-            .map_err(Error::vk("vkCreateFramebuffer"))?;
-        dev.set_name(target.framebuffer, "offscreen framebuffer");
-        Ok(target)
+    /// The render pass pipelines for this target are built for.
+    pub fn render_pass(&self) -> vk::RenderPass {
+        self.pass.raw
     }
 
     /// The frame-code view of this target.
     pub fn frame(&self) -> FrameTarget {
         FrameTarget {
-            render_pass: self.render_pass,
+            render_pass: self.pass.raw,
             framebuffer: self.framebuffer,
             extent: self.extent,
         }
@@ -264,15 +196,8 @@ impl OffscreenTarget {
 
 impl Drop for OffscreenTarget {
     fn drop(&mut self) {
-        // SAFETY: submissions are waited on, so nothing uses these; framebuffer before the
-        // render pass and before the image views it references (the images drop after).
-        unsafe {
-            if self.framebuffer != vk::Framebuffer::null() {
-                self.dev.raw.destroy_framebuffer(self.framebuffer, None);
-            }
-            if self.render_pass != vk::RenderPass::null() {
-                self.dev.raw.destroy_render_pass(self.render_pass, None);
-            }
-        }
+        // SAFETY: submissions are waited on, so nothing uses it; the framebuffer goes before
+        // the render pass and the image views it references (fields, dropped after).
+        unsafe { self.dev.raw.destroy_framebuffer(self.framebuffer, None) };
     }
 }

@@ -24,13 +24,12 @@ pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 
 use crate::brdf;
 use crate::brdf::table::Region;
+use crate::gpu::frames::Frames;
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
 use crate::gpu::pipeline::{
     Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
 };
-use crate::gpu::submit::Submitter;
 use crate::gpu::target::OffscreenTarget;
-use crate::gpu::timer::GpuTimer;
 use crate::gpu::{shaders, Device, StorageFormat};
 use crate::material::PreparedMaterial;
 use crate::scene::Scene;
@@ -176,15 +175,14 @@ struct MapKey {
     colour: Vec<[f32; 4]>,
 }
 
-/// The last BRDF map's objects: pass (pipeline, descriptor set, buffers), offscreen target,
-/// timestamp pool, command buffer and fence. Creating and destroying them for every map cost
-/// time (most of lavapipe's 135 ms a 16² frame went to the pipeline) and, with the
+/// The last BRDF map's objects: pass (pipeline, descriptor set, buffers), offscreen target
+/// and its frame (command buffer, fence, timestamps). Creating and destroying them for every
+/// map cost time (most of lavapipe's 135 ms a 16² frame went to the pipeline) and, with the
 /// validation layer on, ~11 KB of its bookkeeping a frame (README: soak).
 struct MapPass {
     key: MapKey,
-    submitter: Submitter,
+    frames: Frames,
     pass: ScenePass,
-    timer: Option<GpuTimer>,
     target: OffscreenTarget,
 }
 
@@ -305,8 +303,12 @@ impl Renderer {
         self.table = table;
     }
 
-    /// Where the table variants cache their sampled tables (none: always build).
+    /// Where the table variants cache their sampled tables (none: always build). The
+    /// device's pipeline cache is read from and saved to the same directory.
     pub fn set_cache_dir(&mut self, dir: Option<std::path::PathBuf>) {
+        if let Some(d) = &dir {
+            self.dev.load_pipeline_cache(d);
+        }
         self.cache_dir = dir;
     }
 
@@ -441,25 +443,18 @@ impl Renderer {
                     None,
                     [0.0; 4],
                     None,
-                    target.render_pass,
+                    target.render_pass(),
                 )?;
-                let timer = GpuTimer::new(&self.dev, "brdf map timestamps")?;
                 MapPass {
                     key,
-                    submitter: Submitter::new(&self.dev, "brdf map frame")?,
+                    frames: Frames::single(&self.dev, "brdf map frame")?,
                     pass,
-                    timer,
                     target,
                 }
             }
         };
         map.pass.params = params;
-        let mut frame = self.draw(
-            &map.pass,
-            &map.target,
-            map.timer.as_ref(),
-            Some(&map.submitter),
-        )?;
+        let mut frame = self.draw(&map.pass, &map.target, &mut map.frames)?;
         self.map = Some(map);
         frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(frame)
@@ -494,11 +489,11 @@ impl Renderer {
             inputs,
             prepared,
             options,
-            target.render_pass,
+            target.render_pass(),
             out.aspect(),
         )?;
-        let timer = GpuTimer::new(&self.dev, "frame timestamps")?;
-        let mut frame = self.draw(&pass, &target, timer.as_ref(), None)?;
+        let mut frames = Frames::single(&self.dev, "diffraction frame")?;
+        let mut frame = self.draw(&pass, &target, &mut frames)?;
         frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
         Ok(frame)
     }
@@ -1049,35 +1044,20 @@ impl Renderer {
         })
     }
 
-    /// Records `pass` into the offscreen `target` between timestamps (when the queue has
-    /// them), submits (through `submitter`, else a one-shot command buffer), waits and reads
-    /// the linear result back.
+    /// Records `pass` into the offscreen `target` as a frame of `frames` (timed when the
+    /// queue has timestamps), submits, waits and reads the linear result back.
     fn draw(
         &self,
         pass: &ScenePass,
         target: &OffscreenTarget,
-        timer: Option<&GpuTimer>,
-        submitter: Option<&Submitter>,
+        frames: &mut Frames,
     ) -> Result<Frame> {
-        let record = |cb: vk::CommandBuffer| -> Result<()> {
-            if let Some(t) = timer {
-                t.record_start(cb);
-            }
-            pass.record(cb, &target.frame());
-            if let Some(t) = timer {
-                t.record_end(cb);
-            }
-            target.record_readback(cb);
-            Ok(())
-        };
-        match submitter {
-            Some(s) => s.submit_and_wait("diffraction frame", record)?,
-            None => self.dev.submit_once("diffraction frame", record)?,
-        }
-        let gpu_ms = match timer {
-            Some(t) => Some(t.elapsed_ms()?),
-            None => None,
-        };
+        let cb = frames.begin()?.cb;
+        pass.record(cb, &target.frame());
+        frames.end_timing();
+        target.record_readback(cb);
+        frames.submit(&[], &[])?;
+        let gpu_ms = frames.wait()?;
         let rgb = target
             .read_rgba()?
             .into_iter()

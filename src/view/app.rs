@@ -1,7 +1,10 @@
-//! The winit application: window, Vulkan objects of presentation, frame pacing (two frames
-//! in flight, each with its command buffer, fence, acquire semaphore and timestamp pair),
-//! the layout of the mesh beside its BRDF map, the title's statistics, screenshots, hot
-//! reload and the hidden `--at` test hook. What an input means is [`super::input`]'s.
+//! The winit application: window and controls. Each redraw asks the frame layer
+//! ([`Frames`]) for the next frame in flight, acquires a swapchain image, records the
+//! renderer's passes into it, submits and presents. Rebuilt passes and replaced swapchains
+//! are retired through the layer's deferred release: the frame path never waits for the
+//! device to be idle. Also the layout of the mesh beside its BRDF map, the title's
+//! statistics, screenshots, hot reload and the hidden `--at` test hook. What an input means
+//! is [`super::input`]'s.
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -19,9 +22,9 @@ use winit::window::{Window, WindowId};
 use super::input::{tangent_frame_at_view, Controls, Effect, ViewState, HELP};
 use super::reload::ShaderReload;
 use super::ScriptAction;
+use crate::gpu::frames::Frames;
 use crate::gpu::memory::Buffer;
-use crate::gpu::swapchain::{Surface, Swapchain, Vsync};
-use crate::gpu::timer::GpuTimer;
+use crate::gpu::swapchain::{Acquired, Presented, Recreated, Surface, Swapchain, Vsync};
 use crate::gpu::{Device, Instance, StorageFormat};
 use crate::material::PreparedMaterial;
 use crate::mesh::Mesh;
@@ -184,22 +187,11 @@ impl ApplicationHandler for App {
     }
 }
 
-/// One frame in flight.
-struct FrameSlot {
-    cb: vk::CommandBuffer,
-    /// Signalled when the frame's submission completed (created signalled).
-    fence: vk::Fence,
-    acquired: vk::Semaphore,
-    timer: Option<GpuTimer>,
-    /// Whether the timer holds a submitted frame's timestamps.
-    timed: bool,
-}
-
-/// Everything that lives while the window is open. Field order is drop order: the pass and
-/// the swapchain before the renderer's device, the surface before the window.
+/// Everything that lives while the window is open. Field order is drop order: the frames
+/// (with the passes and swapchains retired into them), the pass and the swapchain before the
+/// surface, the surface before the window.
 struct Viewer {
-    slots: Vec<FrameSlot>,
-    pool: vk::CommandPool,
+    frames: Frames,
     pass: Option<ScenePass>,
     /// The BRDF map beside the mesh (while `controls.map`).
     map_pass: Option<ScenePass>,
@@ -216,7 +208,6 @@ struct Viewer {
     fake_minimised: u32,
     /// The last recreation saw a zero extent (printed once).
     minimised: bool,
-    current: usize,
     frames_done: u32,
     needs_recreate: bool,
     view_changed: bool,
@@ -236,6 +227,16 @@ struct TitleStats {
     frames: u32,
     gpu_ms_sum: f64,
     gpu_samples: u32,
+}
+
+impl TitleStats {
+    /// One frame's GPU time, into the title's numbers and the run's `totals`.
+    fn add_gpu(&mut self, ms: f64, totals: &mut (Option<Instant>, u32, f64, u32)) {
+        self.gpu_ms_sum += ms;
+        self.gpu_samples += 1;
+        totals.2 += ms;
+        totals.3 += 1;
+    }
 }
 
 impl Viewer {
@@ -276,21 +277,13 @@ impl Viewer {
         renderer.set_cache_dir(settings.cache_dir.clone());
         renderer.set_region_margin(REGION_MARGIN);
         renderer.set_leave_out(true);
-
-        let pool_info = vk::CommandPoolCreateInfo::default()
-            .queue_family_index(dev.queue_family())
-            .flags(vk::CommandPoolCreateFlags::RESET_COMMAND_BUFFER);
-        // SAFETY: live device, valid family index.
-        let pool = unsafe { dev.raw().create_command_pool(&pool_info, None) }
-            .map_err(Error::vk("vkCreateCommandPool"))?;
-        dev.set_name(pool, "viewer command pool");
+        let frames = Frames::new(&dev, "viewer frame", FRAMES_IN_FLIGHT, true)?;
         let mut controls = Controls::new(ViewState::from_scene(scene), settings.variant);
         controls.per_vertex = settings.per_vertex;
         controls.map = settings.map;
         controls.state.map_exposure = settings.map_exposure;
         let mut viewer = Viewer {
-            slots: Vec::new(),
-            pool,
+            frames,
             pass: None,
             map_pass: None,
             swapchain: None,
@@ -302,7 +295,6 @@ impl Viewer {
             script: settings.script.clone(),
             fake_minimised: 0,
             minimised: false,
-            current: 0,
             frames_done: 0,
             needs_recreate: false,
             view_changed: false,
@@ -319,44 +311,6 @@ impl Viewer {
             last_reload_check: Instant::now(),
             window,
         };
-        let alloc = vk::CommandBufferAllocateInfo::default()
-            .command_pool(pool)
-            .level(vk::CommandBufferLevel::PRIMARY)
-            .command_buffer_count(FRAMES_IN_FLIGHT as u32);
-        // SAFETY: the pool belongs to this device and is used only by this thread.
-        let cbs = unsafe { dev.raw().allocate_command_buffers(&alloc) }
-            .map_err(Error::vk("vkAllocateCommandBuffers"))?;
-        for (i, cb) in cbs.into_iter().enumerate() {
-            dev.set_name(cb, &format!("frame {i}"));
-            let fence_info = vk::FenceCreateInfo::default().flags(vk::FenceCreateFlags::SIGNALED);
-            // SAFETY: live device.
-            let fence = unsafe { dev.raw().create_fence(&fence_info, None) }
-                .map_err(Error::vk("vkCreateFence"))?;
-            dev.set_name(fence, &format!("frame {i} done"));
-            // SAFETY: live device.
-            let acquired = unsafe {
-                dev.raw()
-                    .create_semaphore(&vk::SemaphoreCreateInfo::default(), None)
-            };
-            let acquired = match acquired {
-                Ok(s) => s,
-                Err(e) => {
-                    // SAFETY: the fence was never submitted.
-                    unsafe { dev.raw().destroy_fence(fence, None) };
-                    return Err(Error::vk("vkCreateSemaphore")(e));
-                }
-            };
-            dev.set_name(acquired, &format!("frame {i} image acquired"));
-            let timer = GpuTimer::new(&dev, &format!("frame {i} timestamps"));
-            viewer.slots.push(FrameSlot {
-                cb,
-                fence,
-                acquired,
-                timer: None,
-                timed: false,
-            });
-            viewer.slots[i].timer = timer?;
-        }
         if let Some(dir) = &settings.watch {
             let mut reload = ShaderReload::new(dir)?;
             // The watched sources may differ from the built-in SPIR-V: start from them.
@@ -376,16 +330,9 @@ impl Viewer {
         self.renderer.device()
     }
 
-    fn wait_idle(&self) {
-        let _q = self.dev().queue_lock();
-        // SAFETY: live device; the queue is externally synchronised by the lock. A failure
-        // (device lost) surfaces at the next submission.
-        let _ = unsafe { self.dev().raw().device_wait_idle() };
-    }
-
-    /// (Re)creates the swapchain for the window's size. `Ok(false)`: minimised, skip frames.
+    /// (Re)creates the swapchain for the window's size; the old one is retired until the
+    /// frames that used it are done. `Ok(false)`: minimised, skip frames.
     fn recreate_swapchain(&mut self, vsync: Vsync) -> Result<bool> {
-        self.wait_idle();
         let size = self.window.inner_size();
         let mut want = vk::Extent2D {
             width: size.width,
@@ -404,14 +351,17 @@ impl Viewer {
         }
         let old = self.swapchain.as_ref().map(|sc| sc.extent);
         let ok = match &mut self.swapchain {
-            Some(sc) => {
-                let format = sc.format;
-                let ok = sc.recreate(&self.surface, want, vsync)?;
-                if sc.format != format {
-                    self.rebuild = true;
+            Some(sc) => match sc.recreate(&self.surface, want, vsync)? {
+                Recreated::Minimised => false,
+                Recreated::Replaced(old) => {
+                    // A new format means a new render pass: the pipelines are rebuilt.
+                    if old.format != sc.format {
+                        self.rebuild = true;
+                    }
+                    self.frames.retire(old);
+                    true
                 }
-                ok
-            }
+            },
             None => match Swapchain::new(self.dev(), &self.surface, want, vsync)? {
                 Some(sc) => {
                     self.swapchain = Some(sc);
@@ -448,7 +398,7 @@ impl Viewer {
             return Ok(());
         };
         let aspect = sc.extent.width as f32 / sc.extent.height as f32;
-        let render_pass = sc.render_pass;
+        let render_pass = sc.render_pass();
         let state = &self.controls.state;
         let view = state.apply(scene);
         let options = PassOptions {
@@ -456,7 +406,6 @@ impl Viewer {
             shadowing: state.shadowing,
             texture_blending: state.texture,
         };
-        self.wait_idle();
         let start = Instant::now();
         let built = self
             .renderer
@@ -472,7 +421,10 @@ impl Viewer {
                     s.build_ms,
                     s.gpu_bytes as f64 / 1e6
                 );
-                self.pass = Some(pass);
+                // Frames in flight may still draw with the old pass.
+                if let Some(old) = self.pass.replace(pass) {
+                    self.frames.retire(old);
+                }
             }
             Err(e) if self.pass.is_some() => {
                 eprintln!("error: {e} (keeping the previous pipeline)");
@@ -564,32 +516,23 @@ impl Viewer {
         };
         self.view_changed = false;
 
-        let dev = self.renderer.device().clone();
-        let raw = dev.raw();
-        let slot = &mut self.slots[self.current];
-        // SAFETY: the fence belongs to this device.
-        unsafe { raw.wait_for_fences(&[slot.fence], true, u64::MAX) }
-            .map_err(Error::vk("vkWaitForFences"))?;
-        if slot.timed {
-            if let Some(t) = &slot.timer {
-                let ms = t.elapsed_ms()?;
-                self.stats.gpu_ms_sum += ms;
-                self.stats.gpu_samples += 1;
-                self.totals.2 += ms;
-                self.totals.3 += 1;
-            }
+        let frame = self.frames.begin()?;
+        if let Some(ms) = frame.previous_gpu_ms {
+            self.stats.add_gpu(ms, &mut self.totals);
         }
         let sc = self.swapchain.as_ref().expect("checked above");
-        let index = match sc.acquire(slot.acquired) {
-            Ok((i, _suboptimal)) => i,
-            Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => {
+        let index = match sc.acquire(frame.image_acquired)? {
+            Acquired::Image { index, suboptimal } => {
+                // Drawn and presented all the same; the swapchain is replaced afterwards.
+                self.needs_recreate |= suboptimal;
+                index
+            }
+            Acquired::OutOfDate => {
+                // The frame begun above is begun again next time.
                 self.needs_recreate = true;
                 return Ok(false);
             }
-            Err(e) => return Err(Error::vk("vkAcquireNextImageKHR")(e)),
         };
-        // SAFETY: the fence is signalled (waited above) and not in use by a pending submit.
-        unsafe { raw.reset_fences(&[slot.fence]) }.map_err(Error::vk("vkResetFences"))?;
         let last = settings.frames.is_some_and(|n| self.frames_done + 1 >= n);
         let shot = if last {
             settings.screenshot.clone()
@@ -600,67 +543,38 @@ impl Viewer {
             Some(_) => Some(sc.readback_buffer()?),
             None => None,
         };
-        // SAFETY: the previous submission of cb completed (its fence was waited on); the
-        // pool was created with RESET_COMMAND_BUFFER.
-        unsafe {
-            raw.reset_command_buffer(slot.cb, vk::CommandBufferResetFlags::empty())
-                .map_err(Error::vk("vkResetCommandBuffer"))?;
-            raw.begin_command_buffer(
-                slot.cb,
-                &vk::CommandBufferBeginInfo::default()
-                    .flags(vk::CommandBufferUsageFlags::ONE_TIME_SUBMIT),
-            )
-            .map_err(Error::vk("vkBeginCommandBuffer"))?;
-        }
-        if let Some(t) = &slot.timer {
-            t.record_start(slot.cb);
-        }
         let target = sc.frame_target(index);
         match map {
             Some((map, map_rect)) => {
-                ScenePass::record_views(slot.cb, &target, &[(pass, mesh_rect), (map, map_rect)])
+                ScenePass::record_views(frame.cb, &target, &[(pass, mesh_rect), (map, map_rect)])
             }
-            None => pass.record(slot.cb, &target),
+            None => pass.record(frame.cb, &target),
         }
-        if let Some(t) = &slot.timer {
-            t.record_end(slot.cb);
-        }
+        self.frames.end_timing();
         if let Some(buf) = &readback {
-            sc.record_copy(slot.cb, index, buf);
+            sc.record_copy(frame.cb, index, buf);
         }
-        // SAFETY: cb is recording.
-        unsafe { raw.end_command_buffer(slot.cb) }.map_err(Error::vk("vkEndCommandBuffer"))?;
-        let waits = [slot.acquired];
-        let stages = [vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT];
-        let cbs = [slot.cb];
-        let signals = [sc.render_done[index as usize]];
-        let submit = [vk::SubmitInfo::default()
-            .wait_semaphores(&waits)
-            .wait_dst_stage_mask(&stages)
-            .command_buffers(&cbs)
-            .signal_semaphores(&signals)];
-        {
-            let _q = dev.queue_lock();
-            // SAFETY: cb is executable; the acquire semaphore has a pending signal from
-            // vkAcquireNextImageKHR; the fence is unsignalled; the queue is locked.
-            unsafe { raw.queue_submit(dev.queue(), &submit, slot.fence) }
-                .map_err(Error::vk("vkQueueSubmit"))?;
-        }
-        slot.timed = true;
-        match sc.present(index) {
-            Ok(false) => {}
-            Ok(true) | Err(vk::Result::ERROR_OUT_OF_DATE_KHR) => self.needs_recreate = true,
-            Err(e) => return Err(Error::vk("vkQueuePresentKHR")(e)),
+        self.frames.submit(
+            &[(
+                frame.image_acquired,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT,
+            )],
+            &[sc.render_done(index)],
+        )?;
+        match sc.present(index)? {
+            Presented::Ok => {}
+            Presented::Suboptimal | Presented::OutOfDate => self.needs_recreate = true,
         }
         if let (Some(path), Some(buf)) = (&shot, &readback) {
-            // SAFETY: the fence belongs to this device; the submission above signals it.
-            unsafe { raw.wait_for_fences(&[slot.fence], true, u64::MAX) }
-                .map_err(Error::vk("vkWaitForFences"))?;
+            // Waits for this frame only (its fence), not for the device.
+            if let Some(ms) = self.frames.wait()? {
+                self.stats.add_gpu(ms, &mut self.totals);
+            }
             save_screenshot(sc, buf, path)?;
             println!("screenshot → {}", path.display());
         }
+        // Only made for a screenshot, whose frame was waited for above.
         drop(readback);
-        self.current = (self.current + 1) % FRAMES_IN_FLIGHT;
         self.frames_done += 1;
         match self.totals.0 {
             None => self.totals.0 = Some(Instant::now()),
@@ -698,6 +612,14 @@ impl Viewer {
             self.swapchain
                 .as_ref()
                 .map_or(vk::PresentModeKHR::FIFO, |s| s.present_mode),
+        );
+        // Counted by the device: the frame path (rebuilds, resizes included) makes none.
+        println!(
+            "frame pacing: {} frames in flight, {} submitted, {} objects retired, {} device idle waits",
+            self.frames.count(),
+            self.frames.submitted(),
+            self.frames.retired_total(),
+            self.dev().idle_waits()
         );
     }
 
@@ -746,8 +668,9 @@ impl Viewer {
                 println!("BRDF map {}", if self.controls.map { "on" } else { "off" });
                 if !self.controls.map {
                     // Frames in flight may still read the map's objects.
-                    self.wait_idle();
-                    self.map_pass = None;
+                    if let Some(old) = self.map_pass.take() {
+                        self.frames.retire(old);
+                    }
                 }
                 self.view_changed = true;
             }
@@ -827,7 +750,7 @@ impl Viewer {
         let Some(sc) = &self.swapchain else {
             return;
         };
-        let render_pass = sc.render_pass;
+        let render_pass = sc.render_pass();
         let side = layout(sc.extent, true).1.map_or(1, |r| r.extent.width);
         let (theta, phi) = self.map_angles();
         let wi = crate::brdf::direction(theta, phi);
@@ -839,7 +762,6 @@ impl Viewer {
             texture_blending: false,
         };
         let exposure = state.map_exposure;
-        self.wait_idle();
         let start = Instant::now();
         let map = MapView {
             wi,
@@ -856,7 +778,9 @@ impl Viewer {
                     pass.stats().name,
                     start.elapsed().as_secs_f64() * 1e3
                 );
-                self.map_pass = Some(pass);
+                if let Some(old) = self.map_pass.replace(pass) {
+                    self.frames.retire(old);
+                }
             }
             Err(e) if self.map_pass.is_some() => {
                 eprintln!("error: BRDF map: {e} (keeping the previous map pipeline)");
@@ -920,22 +844,10 @@ fn save_screenshot(sc: &Swapchain, buf: &Buffer, path: &std::path::Path) -> Resu
 
 impl Drop for Viewer {
     fn drop(&mut self) {
-        self.wait_idle();
-        let raw = self.renderer.device().raw();
-        // SAFETY: the device is idle, so no submission uses the slots' objects; the command
-        // buffers are freed with their pool.
-        unsafe {
-            for s in &self.slots {
-                raw.destroy_fence(s.fence, None);
-                raw.destroy_semaphore(s.acquired, None);
-            }
-            raw.destroy_command_pool(self.pool, None);
-        }
-        // Timers, pass and swapchain drop next (fields), then the device, the surface and
-        // the window.
-        for s in &mut self.slots {
-            s.timer = None;
-        }
+        // Teardown, not the frame path: the swapchain's present operations have no fence,
+        // so one idle wait covers them before the fields (frames with their release lists,
+        // passes, swapchain, surface) are destroyed.
+        let _ = self.dev().wait_idle();
     }
 }
 
