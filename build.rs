@@ -1,4 +1,4 @@
-//! Compiles every `glsl/*.vert` and `glsl/*.frag` to SPIR-V in `OUT_DIR` with shaderc, so the
+//! Compiles every `glsl/*.vert`, `*.frag` and `*.comp` to SPIR-V in `OUT_DIR` with shaderc, so the
 //! binary embeds shaders that were checked at build time. `#include "x.glsl"` resolves to
 //! `glsl/x.glsl`. A GLSL error fails the build and prints `file:line: message`.
 //!
@@ -31,6 +31,7 @@ fn main() {
         let kind = match path.extension().and_then(|e| e.to_str()) {
             Some("vert") => shaderc::ShaderKind::Vertex,
             Some("frag") => shaderc::ShaderKind::Fragment,
+            Some("comp") => shaderc::ShaderKind::Compute,
             _ => continue, // *.glsl are includes, compiled as part of the stages.
         };
         match compile(&compiler, &glsl_dir, path, kind, &out_dir) {

@@ -523,7 +523,10 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             build_ms: v.build_ms,
             gpu_bytes: v.gpu_bytes,
             fetches: v.fetches,
-            detail: v.name.clone(),
+            detail: match &v.table_build {
+                Some(built) => format!("{}, table {built}", v.name),
+                None => v.name.clone(),
+            },
             mesh_gpu_ms,
             conditioning,
             vs_reference: error_stats(&gpu_xyz, &refs),

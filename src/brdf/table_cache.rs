@@ -152,8 +152,28 @@ pub fn sample_g_cached_kept(
     dir: Option<&Path>,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
+    let build = || sample_g_kept(hf, coherence_um, spec, w_nodes, keep, progress);
+    sample_g_cached_by(hf, coherence_um, spec, w_nodes, keep, dir, None, &build).map(|(s, _)| s)
+}
+
+/// [`sample_g_cached_kept`] with the samples made by `build` on a miss (the CPU build, or
+/// the device build), and `tag` mixed into the key: builds whose samples differ from the
+/// CPU f64 build by more than the file's float32 rounding (a float32 device build) name
+/// themselves there and are cached apart; `None` shares the CPU build's files. Returns the
+/// samples and whether they were loaded from the cache.
+#[allow(clippy::too_many_arguments)]
+pub fn sample_g_cached_by(
+    hf: &HeightField,
+    coherence_um: f64,
+    spec: &TableSpec,
+    w_nodes: &[f64],
+    keep: Option<&[usize]>,
+    dir: Option<&Path>,
+    tag: Option<&str>,
+    build: &dyn Fn() -> Result<Slices>,
+) -> Result<(Slices, bool)> {
     let Some(dir) = dir else {
-        return sample_g_kept(hf, coherence_um, spec, w_nodes, keep, progress);
+        return Ok((build()?, false));
     };
     let (nu, nv) = spec.validate()?;
     let max = cache::cache_max_bytes()?;
@@ -170,6 +190,16 @@ pub fn sample_g_cached_kept(
             h.finish()
         }
     };
+    let key = match tag {
+        None => key,
+        Some(t) => {
+            let mut h = Fnv1a::new();
+            h.u64(key);
+            h.bytes(b"built by");
+            h.bytes(t.as_bytes());
+            h.finish()
+        }
+    };
     let path = dir.join(format!("gtable-{key:016x}.bin"));
     // A valid file has exactly this many bytes: read no more than that.
     let expected = (44 + w_nodes.len() * 8 + nu * nv * w_nodes.len() * 12 + 8) as u64;
@@ -181,7 +211,7 @@ pub fn sample_g_cached_kept(
                     .append(true)
                     .open(&path)
                     .and_then(|f| f.set_modified(std::time::SystemTime::now()));
-                return Ok(s);
+                return Ok((s, true));
             }
             Ok(_) => eprintln!(
                 "warning: table cache {}: grid does not match; rebuilding",
@@ -192,7 +222,7 @@ pub fn sample_g_cached_kept(
         Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {}
         Err(e) => eprintln!("warning: {e}; rebuilding"),
     }
-    let s = sample_g_kept(hf, coherence_um, spec, w_nodes, keep, progress)?;
+    let s = build()?;
     let bytes = encode(&s, key);
     if bytes.len() as u64 > max {
         eprintln!(
@@ -200,7 +230,7 @@ pub fn sample_g_cached_kept(
             bytes.len() >> 20,
             max >> 20
         );
-        return Ok(s);
+        return Ok((s, false));
     }
     let saved = std::fs::create_dir_all(dir)
         .map_err(|e| Error::io(dir, e))
@@ -209,7 +239,7 @@ pub fn sample_g_cached_kept(
     if let Err(e) = saved {
         eprintln!("warning: could not write the table cache: {e}");
     }
-    Ok(s)
+    Ok((s, false))
 }
 
 #[cfg(test)]

@@ -324,6 +324,8 @@ pub struct DeviceInfo {
     pub max_image_dimension_3d: u32,
     /// Largest number of image array layers.
     pub max_image_array_layers: u32,
+    /// Whether `shaderFloat64` is supported (and then enabled): float64 in shaders.
+    pub shader_float64: bool,
 }
 
 /// A logical device with one graphics queue, a command pool and the memory allocator.
@@ -461,11 +463,18 @@ impl Device {
         let device_exts: Vec<*const c_char> = req
             .map(|r| r.extensions.iter().map(|e| e.as_ptr()).collect())
             .unwrap_or_default();
+        // SAFETY: physical is a valid handle of this instance.
+        let supported = unsafe { inst.get_physical_device_features(physical) };
+        // float64 in compute shaders (the device table build) where the device has it.
+        let features = vk::PhysicalDeviceFeatures::default()
+            .shader_float64(supported.shader_float64 == vk::TRUE);
         let create_info = vk::DeviceCreateInfo::default()
             .queue_create_infos(&queue_info)
-            .enabled_extension_names(&device_exts);
-        // SAFETY: create_info and its arrays outlive the call; no features beyond Vulkan 1.0
-        // core are requested, and the required extensions were checked to exist.
+            .enabled_extension_names(&device_exts)
+            .enabled_features(&features);
+        // SAFETY: create_info and its arrays outlive the call; the only feature requested
+        // (shaderFloat64) was checked to be supported, and the required extensions were
+        // checked to exist.
         let raw = unsafe { inst.create_device(physical, &create_info, None) }
             .map_err(Error::vk("vkCreateDevice"))?;
         // SAFETY: one queue of this family was requested above.
@@ -542,6 +551,7 @@ impl Device {
                 max_image_dimension_2d: props.limits.max_image_dimension2_d,
                 max_image_dimension_3d: props.limits.max_image_dimension3_d,
                 max_image_array_layers: props.limits.max_image_array_layers,
+                shader_float64: supported.shader_float64 == vk::TRUE,
             },
             command_pool,
             submit_lock: Mutex::new(()),

@@ -14,6 +14,7 @@
 //! explicitly.
 #![warn(unsafe_op_in_unsafe_fn)]
 
+pub mod compute;
 pub mod context;
 pub mod formats;
 pub mod frames;

@@ -3,6 +3,7 @@
 
 use std::path::PathBuf;
 
+use super::table_build::TableBuild;
 use super::variant::{TableFormat, TableOptions, VariantKind};
 use super::{Frame, Renderer, SceneInputs};
 use crate::brdf::truncation::{Precision, Reach};
@@ -29,6 +30,10 @@ pub struct TableArgs {
     /// Table variants: texel format.
     #[arg(long, value_enum, default_value_t = TableFormat::Rgba32f)]
     pub table_format: TableFormat,
+    /// Table variants: where to build the table (auto: the device when it is a GPU, the
+    /// CPU when Vulkan itself runs on the CPU, e.g. lavapipe).
+    #[arg(long, value_enum, default_value_t = TableBuild::Auto)]
+    pub table_build: TableBuild,
 }
 
 impl TableArgs {
@@ -39,6 +44,7 @@ impl TableArgs {
             step_nm: self.table_step_nm,
             budget_bytes: self.table_budget_mb.saturating_mul(1 << 20),
             format: self.table_format,
+            build: self.table_build,
         }
     }
 }
@@ -242,6 +248,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         None => args.out.display().to_string(),
     };
     let v = &frame.variant;
+    if let Some(built) = &v.table_build {
+        println!(
+            "table: {}, {built}, {:.1} MB",
+            v.name,
+            v.gpu_bytes as f64 / 1e6
+        );
+    }
     println!(
         "{}: {what} {}×{} → {written}: variant {}: GPU {gpu} ms, wall {:.1} ms (build {:.1} ms, {:.1} MB, {} fetches/pixel)",
         renderer.device_name(),

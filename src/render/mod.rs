@@ -11,6 +11,7 @@
 mod command;
 mod frame;
 mod pass;
+pub mod table_build;
 pub mod variant;
 
 use std::sync::Arc;

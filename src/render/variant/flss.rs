@@ -162,6 +162,7 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
             build_ms: start.elapsed().as_secs_f64() * 1e3,
             gpu_bytes: bytes(&band),
             fetches: selection.keep.len() * (t + 1) * taps,
+            table_build: None,
         },
         spec: [
             t as u32,

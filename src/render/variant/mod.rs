@@ -298,6 +298,8 @@ pub struct TableOptions {
     /// GPU memory a table may take; the `(u, v)` spacing is coarsened to fit (and said so).
     pub budget_bytes: usize,
     pub format: TableFormat,
+    /// Where `G` is sampled: CPU or device (`--table-build`).
+    pub build: crate::render::table_build::TableBuild,
 }
 
 impl Default for TableOptions {
@@ -308,6 +310,7 @@ impl Default for TableOptions {
             step_nm: 1,
             budget_bytes: 512 << 20,
             format: TableFormat::Rgba32f,
+            build: Default::default(),
         }
     }
 }
@@ -413,6 +416,9 @@ pub struct VariantStats {
     pub gpu_bytes: usize,
     /// Texel fetches per pixel.
     pub fetches: usize,
+    /// Table variants: where the table was built and in how long, or that it came from
+    /// the cache.
+    pub table_build: Option<String>,
 }
 
 /// What a variant is prepared for.

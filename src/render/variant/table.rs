@@ -11,7 +11,6 @@ use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{DrawSetup, PreparedVariant, TableFormat, VariantKind, VariantStats, SPEC_COUNT};
 use crate::brdf::table::{GTable, Region, Slices, TableSpec};
-use crate::brdf::table_cache::sample_g_cached_kept;
 use crate::colour::ColourTable;
 use crate::gpu::formats::f32_to_f16;
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
@@ -81,7 +80,9 @@ pub(crate) fn prepare<T: GTable + 'static>(
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let p = setup.prepared;
-    let samples = sample_g_cached_kept(
+    let (samples, built) = crate::render::table_build::sample_g_built(
+        dev,
+        setup.table.build,
         &p.heightfield,
         p.material.coherence_um,
         &spec,
@@ -93,6 +94,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let table = assemble(spec.region, samples);
     bar.finish_and_clear();
     let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
+    gpu.stats.table_build = Some(built.to_string());
     // The table's size does not depend on the wavelengths: the saving is build time.
     gpu.left_out = Some(LeftOut {
         wavelengths: Some(wavelengths),
@@ -237,6 +239,7 @@ impl TableGpu {
                 build_ms: start.elapsed().as_secs_f64() * 1e3,
                 gpu_bytes: bytes.len(),
                 fetches,
+                table_build: None,
             },
             terms: planes.len() as u32,
             info,
