@@ -129,6 +129,7 @@ impl PreparedVariant for CoverageGpu {
             build_ms: 0.0,
             gpu_bytes: std::mem::size_of::<RegionUbo>(),
             fetches: 0,
+            table_build: None,
         }
     }
 }
