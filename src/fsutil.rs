@@ -358,3 +358,55 @@ pub fn read_text_bounded(path: &Path, what: &str, limit: u64) -> Result<String> 
     }
     Ok(text)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmp(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("diffract-fsutil-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[test]
+    fn a_link_to_a_file_keeps_the_link_and_replaces_its_target() {
+        let d = tmp("link");
+        let target = d.join("real.csv");
+        std::fs::write(&target, b"old").unwrap();
+        let link = d.join("out.csv");
+        std::os::unix::fs::symlink("real.csv", &link).unwrap();
+        write_atomic(&link, b"new").unwrap();
+        assert!(std::fs::symlink_metadata(&link)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        // write_replacing (the cache's) replaces the link itself.
+        write_replacing(&link, |w| {
+            w.write_all(b"own").map_err(|e| Error::io(&link, e))
+        })
+        .unwrap();
+        assert!(std::fs::symlink_metadata(&link).unwrap().is_file());
+        assert_eq!(std::fs::read(&target).unwrap(), b"new");
+        let _ = std::fs::remove_dir_all(&d);
+    }
+
+    #[test]
+    fn outputs_are_checked_against_inputs_and_each_other() {
+        let d = tmp("policy");
+        let input = d.join("hf.png");
+        std::fs::write(&input, b"png").unwrap();
+        std::os::unix::fs::symlink("hf.png", d.join("alias.png")).unwrap();
+        let inputs = [("height field", input.clone())];
+        let e = check_outputs(&inputs, &[("--plot", d.join("alias.png"))]).unwrap_err();
+        assert!(e.to_string().contains("is the height field"), "{e}");
+        let e =
+            check_outputs(&[], &[("--csv", d.join("a")), ("--plot", d.join("./a"))]).unwrap_err();
+        assert!(e.to_string().contains("--plot and --csv are both"), "{e}");
+        assert!(check_outputs(&inputs, &[("--csv", PathBuf::from("/dev/null"))]).is_ok());
+        assert!(check_outputs(&inputs, &[("--csv", d.clone())]).is_err());
+        let _ = std::fs::remove_dir_all(&d);
+    }
+}

@@ -260,6 +260,8 @@ fn precompute_beyond_the_memory_limit_is_refused_before_any_work() {
 /// Runs `cmd` to the end and returns its peak RSS (kB) with its output. The peak is the
 /// child's own `ru_maxrss`, which `wait4` reports for exactly that process (no other test's
 /// children are counted, and no external tool is needed).
+// The child is reaped by `wait4` below, which clippy does not see.
+#[allow(clippy::zombie_processes)]
 fn peak_kb(cmd: &mut Command) -> (u64, std::process::Output) {
     use std::io::Read;
     use std::os::unix::process::ExitStatusExt;
