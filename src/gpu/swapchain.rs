@@ -142,7 +142,7 @@ pub enum Recreated {
     Minimised,
     /// Replaced; the old swapchain (with its views, depth image, framebuffers and
     /// semaphores) may still be used by frames in flight: retire it.
-    Replaced(Swapchain),
+    Replaced(Box<Swapchain>),
 }
 
 impl Drop for Surface {
@@ -429,7 +429,7 @@ impl Swapchain {
         let Some(new) = Swapchain::create(&self.dev, surface, want, vsync, Some(self))? else {
             return Ok(Recreated::Minimised);
         };
-        Ok(Recreated::Replaced(std::mem::replace(self, new)))
+        Ok(Recreated::Replaced(Box::new(std::mem::replace(self, new))))
     }
 
     /// The render pass pipelines drawing into this swapchain are built for.
