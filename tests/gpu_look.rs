@@ -11,7 +11,7 @@ mod gpu_util;
 use std::path::Path;
 
 use diffract::image_io;
-use diffract::render::{Frame, TableOptions, VariantKind};
+use diffract::render::{Picture, TableOptions, VariantKind};
 use diffract::scene::Scene;
 use gpu_util::golden::check_golden;
 use gpu_util::*;
@@ -27,7 +27,7 @@ fn default_scene() -> Scene {
 /// `scene` at `size`², supersampled `ss`×, resolved as `diffract render` writes a PNG, by a
 /// renderer of its own (each `diffract render` is one process) whose table comes from the
 /// disk cache `cache` after the first build.
-fn render_at(scene: &Scene, size: u32, ss: u32, cache: &Path) -> Option<Frame> {
+fn render_at(scene: &Scene, size: u32, ss: u32, cache: &Path) -> Option<Picture> {
     let mut r = renderer()?;
     // What `diffract render` draws with (a renderer starts on flss).
     r.set_variant(VariantKind::Default);
@@ -58,7 +58,7 @@ fn render_at(scene: &Scene, size: u32, ss: u32, cache: &Path) -> Option<Frame> {
 
 /// Mean and p99 ΔE2000 between `frame` (512²) and `fine` (1024²) box-filtered to 512², over
 /// the pixels where either shows the snake (not the resolved background).
-fn aliasing(scene: &Scene, frame: &Frame, fine: &Frame) -> (f64, f64, usize) {
+fn aliasing(scene: &Scene, frame: &Picture, fine: &Picture) -> (f64, f64, usize) {
     let (_, _, down) = image_io::box_downsample(fine.width, fine.height, &fine.rgb, 2).unwrap();
     let out = &scene.output;
     let mut bg = vec![out.background];

@@ -10,7 +10,7 @@ use std::path::Path;
 use diffract::brdf::pq::{self, Form};
 use diffract::heightfield::HeightField;
 use diffract::material::{Material, Terms};
-use diffract::render::{Frame, Renderer, VariantKind};
+use diffract::render::{Picture, Renderer, VariantKind};
 use diffract::scene::Scene;
 use gpu_util::*;
 
@@ -165,8 +165,8 @@ background = [0.1, 0.2, 0.3]
     Scene::from_toml_str(&text, Path::new("aligned.toml")).expect("scene")
 }
 
-fn best_of(r: &mut Renderer, scene: &Scene, m: &diffract::material::PreparedMaterial) -> Frame {
-    let mut best: Option<Frame> = None;
+fn best_of(r: &mut Renderer, scene: &Scene, m: &diffract::material::PreparedMaterial) -> Picture {
+    let mut best: Option<Picture> = None;
     for _ in 0..3 {
         let f = r.render_scene(scene, m).expect("render");
         if best

@@ -9,7 +9,7 @@ use std::path::{Path, PathBuf};
 use diffract::brdf;
 use diffract::colour::xyz_to_linear_srgb;
 use diffract::image_io;
-use diffract::render::{Frame, Renderer};
+use diffract::render::{Picture, Renderer};
 use diffract::scene::Scene;
 use gpu_util::*;
 
@@ -24,7 +24,7 @@ fn default_scene_64() -> Scene {
     scene
 }
 
-fn render(r: &mut Renderer, scene: &Scene) -> Frame {
+fn render(r: &mut Renderer, scene: &Scene) -> Picture {
     let p = prepare(&scene.material);
     r.render_scene(scene, &p).expect("render scene")
 }

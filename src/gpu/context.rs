@@ -335,9 +335,11 @@ pub struct Device {
     pub(crate) queue: vk::Queue,
     pub(crate) queue_family: u32,
     pub info: DeviceInfo,
+    /// The one-shot pool of `submit_once`, externally synchronised by its lock.
     command_pool: vk::CommandPool,
-    /// The command pool and the queue must be externally synchronised (Vulkan spec, "Threading
-    /// Behavior"); `Device` is shared through `Arc`, so submissions take this lock.
+    one_shot_pool_lock: Mutex<()>,
+    /// The queue must be externally synchronised (Vulkan spec, "Threading Behavior");
+    /// `Device` is shared through `Arc`, so submissions and presents take this lock.
     submit_lock: Mutex<()>,
     allocator: ManuallyDrop<Mutex<Allocator>>,
     debug: Option<ash::ext::debug_utils::Device>,
@@ -554,6 +556,7 @@ impl Device {
                 shader_float64: supported.shader_float64 == vk::TRUE,
             },
             command_pool,
+            one_shot_pool_lock: Mutex::new(()),
             submit_lock: Mutex::new(()),
             allocator: ManuallyDrop::new(Mutex::new(allocator)),
             debug,
@@ -667,13 +670,8 @@ impl Device {
     /// only: frames in flight retire objects through `Frames::retire` instead.
     pub fn wait_idle(&self) -> Result<()> {
         let _queue = self.queue_lock();
-        self.wait_idle_locked()
-    }
-
-    /// [`Device::wait_idle`] for a caller that holds the queue lock.
-    fn wait_idle_locked(&self) -> Result<()> {
         self.idle_waits.fetch_add(1, Ordering::SeqCst);
-        // SAFETY: live device; the queue is externally synchronised by the caller's lock.
+        // SAFETY: live device; the queue is externally synchronised by the lock.
         unsafe { self.raw.device_wait_idle() }.map_err(Error::vk("vkDeviceWaitIdle"))
     }
 
@@ -772,21 +770,32 @@ impl Device {
         label: &str,
         record: impl FnOnce(vk::CommandBuffer) -> Result<()>,
     ) -> Result<()> {
-        let _guard = lock(&self.submit_lock);
-        let alloc_info = vk::CommandBufferAllocateInfo::default()
-            .command_pool(self.command_pool)
-            .level(vk::CommandBufferLevel::PRIMARY)
-            .command_buffer_count(1);
-        // SAFETY: the pool belongs to this device and is used only under submit_lock.
-        let cb = unsafe { self.raw.allocate_command_buffers(&alloc_info) }
-            .map_err(Error::vk("vkAllocateCommandBuffers"))?[0];
-        let result = self.record_and_wait(cb, label, record);
-        // SAFETY: the submission finished (or was never made), so cb is not pending.
+        let cb = {
+            let _pool = lock(&self.one_shot_pool_lock);
+            let alloc_info = vk::CommandBufferAllocateInfo::default()
+                .command_pool(self.command_pool)
+                .level(vk::CommandBufferLevel::PRIMARY)
+                .command_buffer_count(1);
+            // SAFETY: the pool belongs to this device and is used only under its lock.
+            let cb = unsafe { self.raw.allocate_command_buffers(&alloc_info) }
+                .map_err(Error::vk("vkAllocateCommandBuffers"))?[0];
+            if let Err(e) = self.record_once(cb, label, record) {
+                // SAFETY: never submitted; the pool is locked.
+                unsafe { self.raw.free_command_buffers(self.command_pool, &[cb]) };
+                return Err(e);
+            }
+            cb
+        };
+        let result = self.submit_and_wait(cb, label);
+        let _pool = lock(&self.one_shot_pool_lock);
+        // SAFETY: the submission finished (or was never made, or the device idled), so cb
+        // is not pending; the pool is locked.
         unsafe { self.raw.free_command_buffers(self.command_pool, &[cb]) };
         result
     }
 
-    fn record_and_wait(
+    /// Records `cb` (the one-shot pool's lock held by the caller).
+    fn record_once(
         &self,
         cb: vk::CommandBuffer,
         label: &str,
@@ -802,27 +811,33 @@ impl Device {
         record(cb)?;
         self.end_label(cb);
         // SAFETY: cb is recording.
-        unsafe { self.raw.end_command_buffer(cb) }.map_err(Error::vk("vkEndCommandBuffer"))?;
+        unsafe { self.raw.end_command_buffer(cb) }.map_err(Error::vk("vkEndCommandBuffer"))
+    }
 
+    /// Submits the recorded `cb` and waits for it. The queue is locked only for the
+    /// submission, so frames of other threads go on while an upload runs.
+    fn submit_and_wait(&self, cb: vk::CommandBuffer, label: &str) -> Result<()> {
         // SAFETY: live device.
         let fence = unsafe { self.raw.create_fence(&vk::FenceCreateInfo::default(), None) }
             .map_err(Error::vk("vkCreateFence"))?;
         self.set_name(fence, label);
         let cbs = [cb];
         let submit = [vk::SubmitInfo::default().command_buffers(&cbs)];
-        // SAFETY: cb is executable; the queue is used only under submit_lock (held by the
-        // caller, submit_once) and the fence is unsignalled.
-        let result = unsafe { self.raw.queue_submit(self.queue, &submit, fence) }
-            .map_err(Error::vk("vkQueueSubmit"))
-            .and_then(|()| {
-                // SAFETY: the fence was submitted above.
-                unsafe { self.raw.wait_for_fences(&[fence], true, u64::MAX) }
-                    .map_err(Error::vk("vkWaitForFences"))
-            });
+        let submitted = {
+            let _queue = self.queue_lock();
+            // SAFETY: cb is executable; the queue is locked; the fence is unsignalled.
+            unsafe { self.raw.queue_submit(self.queue, &submit, fence) }
+                .map_err(Error::vk("vkQueueSubmit"))
+        };
+        let result = submitted.and_then(|()| {
+            // SAFETY: the fence was submitted above.
+            unsafe { self.raw.wait_for_fences(&[fence], true, u64::MAX) }
+                .map_err(Error::vk("vkWaitForFences"))
+        });
         if result.is_err() {
             // Make sure nothing is still running before the caller frees resources; the
-            // error path is already being reported (submit_lock is the queue lock, held).
-            let _ = self.wait_idle_locked();
+            // error path is already being reported.
+            let _ = self.wait_idle();
         }
         // SAFETY: the fence is signalled or the device is idle, so it is not in use.
         unsafe { self.raw.destroy_fence(fence, None) };

@@ -156,7 +156,8 @@ impl Buffer {
 
 impl Drop for Buffer {
     fn drop(&mut self) {
-        // SAFETY: users finish GPU work (submit_once waits) before dropping resources.
+        // SAFETY: no pending GPU work uses the buffer: users wait for their submissions, or
+        // retire the owner through the frames' deferred release.
         unsafe { self.dev.raw.destroy_buffer(self.raw, None) };
         free(&self.dev, self.allocation.take());
     }
@@ -369,7 +370,8 @@ impl Image {
 
 impl Drop for Image {
     fn drop(&mut self) {
-        // SAFETY: GPU work using the image finished (submit_once waits); view before image.
+        // SAFETY: GPU work using the image finished (waited for, or the owner was retired
+        // through the frames' deferred release); view before image.
         unsafe {
             if self.view != vk::ImageView::null() {
                 self.dev.raw.destroy_image_view(self.view, None);

@@ -5,8 +5,9 @@
 //! release ([`frames`]), presentation ([`swapchain`], optional), GPU timestamps ([`timer`])
 //! and the SPIR-V compiled by `build.rs`.
 //!
-//! Imports run one way: `context` ← `memory`, `timer`, `pipeline`, `render_pass` ← `target`,
-//! `frames` ← `swapchain`.
+//! Imports run one way, from the presentation end down to the device: `swapchain` → `target`
+//! → `render_pass`, `memory` → `context` → `pipeline_cache`; `frames` → `timer` → `context`
+//! (docs/architecture.md lists them all).
 //!
 //! This module knows Vulkan, not physics: what the bindings and specialisation constants
 //! mean is decided by `render.rs` and `glsl/`. Every object is named (debug utils), owned by

@@ -1,7 +1,7 @@
 //! Presentation, the optional extra of the device layer: a window [`Surface`], a device that
 //! presents to it ([`Device::on_surface`]) and a [`Swapchain`] with its render pass (sRGB
 //! colour + D32 depth), image views, depth image and framebuffers. Each swapchain image is a
-//! [`FrameTarget`], so a pass draws into it exactly as into an offscreen target.
+//! [`Target`], so a pass draws into it exactly as into an offscreen target.
 //!
 //! Acquire and present return typed outcomes ([`Acquired`], [`Presented`]); a lost surface
 //! or device is an error ([`Error::SurfaceLost`], [`Error::DeviceLost`]). Recreation passes
@@ -18,7 +18,7 @@ use super::context::{Device, Instance, Requirements};
 use super::memory::{Buffer, Image, ImageDesc};
 use super::render_pass::RenderPass;
 pub use super::render_pass::DEPTH_FORMAT;
-use super::target::FrameTarget;
+use super::target::Target;
 use crate::{Error, Result};
 
 /// A `VkSurfaceKHR` for one window. The window must outlive it (the owner drops the surface
@@ -142,7 +142,7 @@ pub enum Recreated {
     Minimised,
     /// Replaced; the old swapchain (with its views, depth image, framebuffers and
     /// semaphores) may still be used by frames in flight: retire it.
-    Replaced(Swapchain),
+    Replaced(Box<Swapchain>),
 }
 
 impl Drop for Surface {
@@ -429,7 +429,7 @@ impl Swapchain {
         let Some(new) = Swapchain::create(&self.dev, surface, want, vsync, Some(self))? else {
             return Ok(Recreated::Minimised);
         };
-        Ok(Recreated::Replaced(std::mem::replace(self, new)))
+        Ok(Recreated::Replaced(Box::new(std::mem::replace(self, new))))
     }
 
     /// The render pass pipelines drawing into this swapchain are built for.
@@ -437,9 +437,9 @@ impl Swapchain {
         self.render_pass.raw
     }
 
-    /// The frame-code view of image `index`.
-    pub fn frame_target(&self, index: u32) -> FrameTarget {
-        FrameTarget {
+    /// Image `index` as passes see it.
+    pub fn target(&self, index: u32) -> Target {
+        Target {
             render_pass: self.render_pass.raw,
             framebuffer: self.framebuffers[index as usize],
             extent: self.extent,

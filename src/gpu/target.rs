@@ -1,4 +1,4 @@
-//! Render targets. A [`FrameTarget`] is what frame code draws into (render pass,
+//! Render targets. A [`Target`] is what a pass is recorded into (render pass,
 //! framebuffer, extent): it does not know whether the image behind it is offscreen or a
 //! swapchain image. [`OffscreenTarget`] is the headless one: an RGBA32F colour image (linear
 //! values, no clamping), a D32 depth image, and a host-visible readback buffer.
@@ -13,9 +13,9 @@ use super::memory::{Buffer, Image, ImageDesc};
 use super::render_pass::{RenderPass, DEPTH_FORMAT};
 use crate::{Error, Result};
 
-/// What a frame is recorded against.
+/// What a pass is recorded into.
 #[derive(Debug, Clone, Copy)]
-pub struct FrameTarget {
+pub struct Target {
     pub render_pass: vk::RenderPass,
     pub framebuffer: vk::Framebuffer,
     pub extent: vk::Extent2D,
@@ -123,9 +123,9 @@ impl OffscreenTarget {
         self.pass.raw
     }
 
-    /// The frame-code view of this target.
-    pub fn frame(&self) -> FrameTarget {
-        FrameTarget {
+    /// This target as passes see it.
+    pub fn target(&self) -> Target {
+        Target {
             render_pass: self.pass.raw,
             framebuffer: self.framebuffer,
             extent: self.extent,

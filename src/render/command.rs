@@ -5,7 +5,7 @@ use std::path::PathBuf;
 
 use super::table_build::TableBuild;
 use super::variant::{TableFormat, TableOptions, VariantKind};
-use super::{Frame, Renderer, SceneInputs};
+use super::{Picture, Renderer, SceneInputs};
 use crate::brdf::truncation::{Precision, Reach};
 use crate::gpu::StorageFormat;
 use crate::material::MaterialArgs;
@@ -282,7 +282,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 
 /// Writes a BRDF map: an EXR holds the raw channels (XYZ or ρ); a PNG shows XYZ as sRGB
 /// (or ρ as grey). `--png` with an EXR output adds the PNG beside it.
-fn write_map(args: &RenderArgs, frame: &Frame) -> Result<()> {
+fn write_map(args: &RenderArgs, frame: &Picture) -> Result<()> {
     let exposure = args.exposure.unwrap_or(1.0);
     let viewable = || -> Vec<[f32; 3]> {
         if args.lambda_nm.is_some() {
@@ -329,7 +329,7 @@ fn render_resolved(
     inputs: &SceneInputs,
     prepared: &crate::material::PreparedMaterial,
     out_path: &std::path::Path,
-) -> Result<Frame> {
+) -> Result<Picture> {
     let tone = !matches!(
         crate::image_io::output_format(out_path)?,
         crate::image_io::OutputFormat::Exr

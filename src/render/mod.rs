@@ -1,16 +1,16 @@
 //! Frames of the diffraction shaders: turns a prepared material (and a scene) into GPU
 //! inputs — the variant's resources ([`variant`]), the colour table, the `Params` uniform
-//! block, the specialisation constants — records one frame into a target ([`frame`]), and
+//! block, the specialisation constants — records a pass into a target ([`record`]), and
 //! reads the linear result back. The `diffract render` command lives in [`command`].
 //!
 //! This is where physics meets `gpu`: the layouts here mirror `glsl/interface.glsl`. The
 //! renderer knows variants only through their interface; frame recording takes a
-//! [`FrameTarget`](crate::gpu::target::FrameTarget) and does not know whether it draws
+//! [`Target`](crate::gpu::target::Target) and does not know whether it draws
 //! offscreen or into a window.
 
 mod command;
-mod frame;
 mod pass;
+mod record;
 pub mod table_build;
 pub mod variant;
 
@@ -35,8 +35,8 @@ use crate::gpu::{shaders, Device, StorageFormat};
 use crate::material::PreparedMaterial;
 use crate::scene::Scene;
 use crate::{Error, Result};
-use frame::{mesh_vertex_layout, Transforms};
 use pass::MeshBuffers;
+use record::{mesh_vertex_layout, Transforms};
 use variant::{DrawSetup, PreparedVariant, SPEC_COUNT};
 
 /// Capacity of the shader's per-term decode table (`MAX_TERMS` in interface.glsl).
@@ -48,9 +48,10 @@ pub const DEFAULT_MAP_SIZE: u32 = 256;
 /// `render --brdf-map` light angle without `--theta-i` (degrees).
 pub const DEFAULT_MAP_THETA_I: f64 = 30.0;
 
-/// One rendered image, linear values, row-major from the top row.
+/// One rendered picture read back from an offscreen target: linear values, row-major from
+/// the top row, with the GPU and wall time it took.
 #[derive(Debug, Clone)]
-pub struct Frame {
+pub struct Picture {
     pub width: u32,
     pub height: u32,
     /// Linear sRGB (scenes), XYZ (BRDF maps) or `ρ_λ` in all channels (spectral maps).
@@ -64,7 +65,7 @@ pub struct Frame {
     pub variant: VariantStats,
 }
 
-impl Frame {
+impl Picture {
     /// Pixel `(x, y)`, `y` from the top.
     pub fn at(&self, x: u32, y: u32) -> [f32; 3] {
         self.rgb[(y * self.width + x) as usize]
@@ -392,7 +393,7 @@ impl Renderer {
         phi_i_deg: f64,
         size: u32,
         lambda_nm: Option<f64>,
-    ) -> Result<Frame> {
+    ) -> Result<Picture> {
         let start = Instant::now();
         check_map_args(theta_i_deg, phi_i_deg, size, lambda_nm)?;
         let wi = brdf::direction(theta_i_deg, phi_i_deg);
@@ -465,7 +466,7 @@ impl Renderer {
     /// `prepared` as the material (callers prepare `scene.material`, possibly overridden).
     /// Pixels are linear sRGB already multiplied by the light intensity, `cosθi` and the
     /// scene's exposure; uncovered pixels hold the background colour as given.
-    pub fn render_scene(&mut self, scene: &Scene, prepared: &PreparedMaterial) -> Result<Frame> {
+    pub fn render_scene(&mut self, scene: &Scene, prepared: &PreparedMaterial) -> Result<Picture> {
         let inputs = SceneInputs::load(scene, true)?;
         self.render_scene_with(scene, &inputs, prepared)
     }
@@ -476,7 +477,7 @@ impl Renderer {
         scene: &Scene,
         inputs: &SceneInputs,
         prepared: &PreparedMaterial,
-    ) -> Result<Frame> {
+    ) -> Result<Picture> {
         let start = Instant::now();
         let out = &scene.output;
         let options = PassOptions {
@@ -511,7 +512,7 @@ impl Renderer {
         inputs: Option<&SceneInputs>,
         prepared: &PreparedMaterial,
         tone: bool,
-    ) -> Result<Frame> {
+    ) -> Result<Picture> {
         let out = &scene.output;
         let (rw, rh) = out.render_size();
         let mut big = scene.clone();
@@ -1052,9 +1053,9 @@ impl Renderer {
         pass: &ScenePass,
         target: &OffscreenTarget,
         frames: &mut Frames,
-    ) -> Result<Frame> {
+    ) -> Result<Picture> {
         let cb = frames.begin()?.cb;
-        pass.record(cb, &target.frame());
+        pass.record(cb, &target.target());
         frames.end_timing();
         target.record_readback(cb);
         frames.submit(&[], &[])?;
@@ -1064,7 +1065,7 @@ impl Renderer {
             .into_iter()
             .map(|p| [p[0], p[1], p[2]])
             .collect();
-        Ok(Frame {
+        Ok(Picture {
             width: target.extent.width,
             height: target.extent.height,
             rgb,

@@ -1,6 +1,6 @@
-//! A [`ScenePass`]: the objects one kind of frame needs (pipeline layout, descriptor set,
+//! A [`ScenePass`]: the objects one kind of picture needs (pipeline layout, descriptor set,
 //! pipeline for one render pass, uniform and mesh buffers), built once and recorded into any
-//! [`FrameTarget`] — the offscreen target of `render` or a swapchain image of the viewer.
+//! [`Target`] — the offscreen target of `render` or a swapchain image of the viewer.
 //! Camera, light and exposure change through [`ScenePass::set_view`] without rebuilding.
 //!
 //! The uniform block is written with `vkCmdUpdateBuffer` inside each recorded frame, so
@@ -10,12 +10,12 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::frame::{begin_frame, end_frame, record_draw, record_frame, Geometry, Transforms};
+use super::record::{begin_pass, end_pass, record_draw, record_pass, Geometry, Transforms};
 use super::variant::{PreparedVariant, VariantStats};
 use super::ParamsUbo;
 use crate::gpu::memory::{bytes_of, Buffer, Image};
 use crate::gpu::pipeline::{DescriptorSet, Pipeline, PipelineLayout, ShaderModule};
-use crate::gpu::target::FrameTarget;
+use crate::gpu::target::Target;
 use crate::gpu::Device;
 use crate::scene::{Camera, Light};
 
@@ -44,7 +44,7 @@ pub(crate) struct MeshBuffers {
     pub index_count: u32,
 }
 
-/// One frame's objects, built once, recordable into any target with a compatible render
+/// One picture's objects, built once, recordable into any target with a compatible render
 /// pass. Field order is drop order: the pipeline and set before the resources they use.
 pub struct ScenePass {
     pub(crate) pipeline: Pipeline,
@@ -92,12 +92,12 @@ impl ScenePass {
         self.params.lighting[1] = exposure;
     }
 
-    /// Records the frame into `target`: the uniform update (ordered after earlier frames'
+    /// Records the pass into `target`: the uniform update (ordered after earlier frames'
     /// reads and before this frame's), then clear, bind, draw. `target`'s render pass must be
     /// compatible with the one the pass was built for.
-    pub fn record(&self, cb: vk::CommandBuffer, target: &FrameTarget) {
+    pub fn record(&self, cb: vk::CommandBuffer, target: &Target) {
         self.record_uniforms(cb);
-        record_frame(
+        record_pass(
             &self.dev,
             cb,
             target,
@@ -109,13 +109,13 @@ impl ScenePass {
         );
     }
 
-    /// Records several passes into one frame of `target`, each confined to its rectangle
+    /// Records several passes into one render pass of `target`, each confined to its rectangle
     /// (the viewer's mesh beside its BRDF map): every pass's uniform update, then one render
     /// pass cleared to the first pass's clear colour, then the draws in order. As
     /// [`ScenePass::record`], it does not know whether `target` is a swapchain image.
     pub fn record_views(
         cb: vk::CommandBuffer,
-        target: &FrameTarget,
+        target: &Target,
         views: &[(&ScenePass, vk::Rect2D)],
     ) {
         let Some((first, _)) = views.first() else {
@@ -124,7 +124,7 @@ impl ScenePass {
         for (pass, _) in views {
             pass.record_uniforms(cb);
         }
-        begin_frame(&first.dev, cb, target, first.clear);
+        begin_pass(&first.dev, cb, target, first.clear);
         for (pass, rect) in views {
             record_draw(
                 &pass.dev,
@@ -136,7 +136,7 @@ impl ScenePass {
                 *rect,
             );
         }
-        end_frame(&first.dev, cb);
+        end_pass(&first.dev, cb);
     }
 
     fn geometry(&self) -> Geometry<'_> {

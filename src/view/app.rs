@@ -543,7 +543,7 @@ impl Viewer {
             Some(_) => Some(sc.readback_buffer()?),
             None => None,
         };
-        let target = sc.frame_target(index);
+        let target = sc.target(index);
         match map {
             Some((map, map_rect)) => {
                 ScenePass::record_views(frame.cb, &target, &[(pass, mesh_rect), (map, map_rect)])

@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 use diffract::colour::linear_to_srgb8;
 use diffract::image_io;
-use diffract::render::Frame;
+use diffract::render::Picture;
 
 /// Mean CIEDE2000 over all pixels.
 pub const MAX_MEAN_DELTA_E: f64 = 0.5;
@@ -44,7 +44,7 @@ pub fn output_dir() -> PathBuf {
     d
 }
 
-pub fn check_golden(name: &str, frame: &Frame) {
+pub fn check_golden(name: &str, frame: &Picture) {
     let golden = golden_dir().join(format!("{name}.png"));
     if std::env::var("DIFFRACT_UPDATE_GOLDEN").is_ok_and(|v| v == "1") {
         std::fs::create_dir_all(golden_dir()).unwrap();

@@ -1,11 +1,11 @@
-//! Recording one frame: clear, bind, draw into a [`FrameTarget`]. Knows nothing about
+//! Recording a pass: clear, bind, draw into a [`Target`]. Knows nothing about
 //! where the target's image lives (offscreen or a swapchain) nor which variant is bound.
 
 use ash::vk;
 
 use crate::gpu::memory::{Buffer, Pod};
 use crate::gpu::pipeline::{DescriptorSet, Pipeline, PipelineLayout, VertexLayout};
-use crate::gpu::target::FrameTarget;
+use crate::gpu::target::Target;
 use crate::gpu::Device;
 use crate::mesh::Vertex;
 
@@ -49,13 +49,13 @@ pub(crate) fn mesh_vertex_layout() -> VertexLayout {
     }
 }
 
-/// Records one frame into `target`: clear, bind, draw. Knows nothing about where the
+/// Records one pass into `target`: clear, bind, draw. Knows nothing about where the
 /// target's image lives (offscreen or swapchain).
 #[allow(clippy::too_many_arguments)]
-pub(crate) fn record_frame(
+pub(crate) fn record_pass(
     dev: &Device,
     cb: vk::CommandBuffer,
-    target: &FrameTarget,
+    target: &Target,
     pipeline: &Pipeline,
     layout: &PipelineLayout,
     set: &DescriptorSet,
@@ -66,19 +66,14 @@ pub(crate) fn record_frame(
         offset: vk::Offset2D { x: 0, y: 0 },
         extent: target.extent,
     };
-    begin_frame(dev, cb, target, clear);
+    begin_pass(dev, cb, target, clear);
     record_draw(dev, cb, pipeline, layout, set, geometry, whole);
-    end_frame(dev, cb);
+    end_pass(dev, cb);
 }
 
 /// Begins `target`'s render pass over the whole target, clearing colour to `clear` and
-/// depth to 1. Draws follow with [`record_draw`], then [`end_frame`].
-pub(crate) fn begin_frame(
-    dev: &Device,
-    cb: vk::CommandBuffer,
-    target: &FrameTarget,
-    clear: [f32; 4],
-) {
+/// depth to 1. Draws follow with [`record_draw`], then [`end_pass`].
+pub(crate) fn begin_pass(dev: &Device, cb: vk::CommandBuffer, target: &Target, clear: [f32; 4]) {
     let clears = [
         vk::ClearValue {
             color: vk::ClearColorValue { float32: clear },
@@ -108,7 +103,7 @@ pub(crate) fn begin_frame(
     };
 }
 
-/// One draw inside the render pass begun by [`begin_frame`], confined to `rect` of the
+/// One draw inside the render pass begun by [`begin_pass`], confined to `rect` of the
 /// target (viewport and scissor).
 pub(crate) fn record_draw(
     dev: &Device,
@@ -128,7 +123,7 @@ pub(crate) fn record_draw(
         min_depth: 0.0,
         max_depth: 1.0,
     };
-    // SAFETY: cb is inside a render pass (begin_frame); every bound object is live until the
+    // SAFETY: cb is inside a render pass (begin_pass); every bound object is live until the
     // submission completes (the caller waits), and the pipeline was built for a compatible
     // render pass and this layout (viewport and scissor are dynamic state).
     unsafe {
@@ -166,9 +161,9 @@ pub(crate) fn record_draw(
     }
 }
 
-/// Ends the render pass begun by [`begin_frame`].
-pub(crate) fn end_frame(dev: &Device, cb: vk::CommandBuffer) {
-    // SAFETY: cb is inside the render pass begun by begin_frame.
+/// Ends the render pass begun by [`begin_pass`].
+pub(crate) fn end_pass(dev: &Device, cb: vk::CommandBuffer) {
+    // SAFETY: cb is inside the render pass begun by begin_pass.
     unsafe { dev.raw().cmd_end_render_pass(cb) };
     dev.end_label(cb);
 }
