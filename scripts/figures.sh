@@ -25,7 +25,7 @@ registry=(
     "eval_grating_measured_elaphe|cheap|grating-equation figure on the measured crop (~30 s)"
     "viewer_snake|cheap|viewer screenshot, default scene, 256² (~1 min)"
     "viewer_map|cheap|viewer screenshot with the BRDF map, 256×128 (~1 min)"
-    "stability_matrix|slow|stability heat map, full matrix with the GPU (~4-25 min)"
+    "stability_matrix|slow|stability heat map, full matrix with the GPU (~4-30 min)"
     # Each map first builds the default table variant's table at 1 nm (~10 min under load),
     # unless the scratch cache already holds one for its field, light and region.
     "brdf_map_elaphe_60deg|slow|BRDF map, Elaphe-like grating, θi = 60°, 384² (~10 min)"
