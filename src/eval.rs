@@ -226,6 +226,11 @@ const PLOT_ROWS: usize = 360;
 
 /// Writes the thesis-style evaluation figure of `r` (see [`EvalArgs::plot`]).
 pub fn write_plot(r: &GratingReport, path: &std::path::Path) -> Result<()> {
+    write_plot_of(r, &format!("θi = {}°", r.theta_i_deg), path)
+}
+
+/// [`write_plot`] with `subject` (the field and the light) in the title.
+pub fn write_plot_of(r: &GratingReport, subject: &str, path: &std::path::Path) -> Result<()> {
     let n_theta = r.thetas_deg.len();
     let (t0, t1) = (r.thetas_deg[0], r.thetas_deg[n_theta - 1]);
     let rows = PLOT_ROWS.min(n_theta);
@@ -253,6 +258,8 @@ pub fn write_plot(r: &GratingReport, path: &std::path::Path) -> Result<()> {
             .map(|s| (s.lambda_nm, s.theta_r_deg))
             .collect(),
         colour: (255, 255, 255),
+        label: "peak found at each λ".into(),
+        markers: true,
     };
     // The side of specular the peaks lie on: si + sin θr = ±λ/d.
     let side = r
@@ -278,18 +285,38 @@ pub fn write_plot(r: &GratingReport, path: &std::path::Path) -> Result<()> {
             })
             .collect(),
         colour: (0, 220, 0),
+        label: format!("grating equation, d = {:.1} nm", r.mean_nm),
+        markers: false,
     };
+    let x_step = crate::plot::nice_step(l1 - l0, 8);
     crate::plot::write_heat_map(
         path,
-        &crate::plot::Heat {
+        &crate::plot::HeatMap {
+            title: format!(
+                "Grating equation: {subject}, mean period {:.1} nm",
+                r.mean_nm
+            ),
             values: &values,
             x: (l0, l1),
             y: (t0, t1),
+            x_axis: crate::plot::Axis {
+                label: "wavelength λ (nm)".into(),
+                ticks: crate::plot::ticks_every(l0, l1, x_step, ""),
+                ..Default::default()
+            },
+            y_axis: crate::plot::Axis {
+                label: "signed θr (°), negative on the specular side".into(),
+                ticks: crate::plot::ticks_every(t0, t1, 30.0, "°"),
+                ..Default::default()
+            },
             log: true,
+            scale_label: "log₁₀ ρ (sr⁻¹)".into(),
+            scale_limits: (None, None),
+            scale_marks: Vec::new(),
+            missing_label: None,
+            curves: vec![grating, peaks],
+            size: (1000, 640),
         },
-        &[grating, peaks],
-        640,
-        480,
     )
 }
 
@@ -317,7 +344,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let r = grating_equation(&p, args.theta_i, args.azimuth, &lambdas, args.step_deg)?;
     drop(spin);
     if let Some(path) = &args.plot {
-        write_plot(&r, path)?;
+        let subject = format!(
+            "{}, θi = {}°, azimuth {}°",
+            crate::plot::source_name(&material.heightfield),
+            args.theta_i,
+            args.azimuth
+        );
+        write_plot_of(&r, &subject, path)?;
         eprintln!("plot → {}", path.display());
     }
     if args.verbose {

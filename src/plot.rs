@@ -1,13 +1,15 @@
 //! PNG plots (plotters' bitmap backend): the profiler's error-versus-time plot, and the heat
 //! maps with curves of the experiments (grating equation, stability matrix). Text is drawn
 //! with the DejaVu Sans font shipped in `assets/fonts/` (Bitstream Vera licence beside it),
-//! registered once, so plotting needs no system font library; the heat maps draw none.
+//! registered once, so plotting needs no system font library. Every plot has a title,
+//! labelled axes with ticks, and a legend or colour bar for what its colours and marks mean.
 
 use std::path::Path;
 use std::sync::Once;
 
 use image::ImageEncoder;
 use plotters::prelude::*;
+use plotters::style::text_anchor::{HPos, Pos, VPos};
 
 use crate::{Error, Result};
 
@@ -49,6 +51,46 @@ pub fn pareto_front(points: &[Point]) -> Vec<usize> {
 
 fn plot_error(e: impl std::fmt::Display) -> Error {
     Error::invalid("plot", e.to_string())
+}
+
+/// How a height-field source is named in a figure: `builtin:…` as given, a file by its name
+/// alone, so no directory of the machine that drew the figure ends up in it.
+pub fn source_name(source: &str) -> String {
+    if source.starts_with("builtin:") {
+        return source.to_string();
+    }
+    Path::new(source)
+        .file_name()
+        .map_or_else(|| source.to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+/// A number as a tick label: no trailing `.0`, powers of ten beyond 10⁴ and below 10⁻³ as
+/// `1e5`, `2e-4`.
+pub fn format_tick(v: f64) -> String {
+    let a = v.abs();
+    let s = if a == 0.0 || !a.is_finite() {
+        "0".to_string()
+    } else if !(1e-3..1e5).contains(&a) {
+        format!("{v:.0e}")
+    } else {
+        let digits = (-(a.log10() + 1e-9).floor()).max(0.0) as usize;
+        format!("{v:.digits$}")
+    };
+    s.replace('-', "−")
+}
+
+/// A log axis's tick label: only 1, 2 and 5 times a power of ten are written, so the dense
+/// ticks within one decade do not overlap.
+fn log_tick(v: f64) -> String {
+    if !(v.is_finite() && v > 0.0) {
+        return String::new();
+    }
+    let m = v / 10f64.powf((v.log10() + 1e-9).floor());
+    if [1.0, 2.0, 5.0].iter().any(|k| (m - k).abs() < 1e-6 * k) {
+        format_tick(v)
+    } else {
+        String::new()
+    }
 }
 
 /// Writes a log–log plot of `error` against `time_ms`, the Pareto front joined by a line
@@ -95,6 +137,8 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
             .configure_mesh()
             .x_desc("GPU time per frame (ms)")
             .y_desc(y_label)
+            .x_label_formatter(&|v| log_tick(*v))
+            .y_label_formatter(&|v| log_tick(*v))
             .label_style(("sans-serif", 15))
             .draw()
             .map_err(plot_error)?;
@@ -125,11 +169,10 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
                 .draw_series(std::iter::once(Circle::new(at, 5, style)))
                 .map_err(plot_error)?;
             chart
-                .draw_series(std::iter::once(Text::new(
-                    p.label.clone(),
-                    at,
-                    ("sans-serif", 14).into_font(),
-                )))
+                .draw_series(std::iter::once(
+                    EmptyElement::at(at)
+                        + Text::new(p.label.clone(), (8, -18), ("sans-serif", 14).into_font()),
+                ))
                 .map_err(plot_error)?;
         }
         chart
@@ -144,20 +187,56 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
     write_png(path, &buf, width, height)
 }
 
-/// A grid of values: `values[row][col]`, row 0 at the bottom (`y0`), column 0 at `x0`.
-pub struct Heat<'a> {
-    pub values: &'a [Vec<f64>],
-    /// Data range of the columns (`x0`, `x1`) and rows (`y0`, `y1`), cell edges.
-    pub x: (f64, f64),
-    pub y: (f64, f64),
-    /// Colour by `log10` (values ≤ 0 and non-finite values are drawn grey).
-    pub log: bool,
+/// Labels along one axis of a heat map, in data coordinates.
+#[derive(Debug, Clone, Default)]
+pub struct Axis {
+    /// The axis title, drawn outermost.
+    pub label: String,
+    /// Tick marks and their labels at data positions.
+    pub ticks: Vec<(f64, String)>,
+    /// Rows of group labels beyond the ticks, innermost first: each a span `(from, to)` of
+    /// data coordinates and its label, drawn beside a bracket over the span.
+    pub groups: Vec<Vec<(f64, f64, String)>>,
+    /// Data positions of white lines drawn across the map (e.g. between groups).
+    pub rules: Vec<f64>,
 }
 
-/// A polyline in data coordinates; `NaN` points split it.
+/// A heat map with its title, axes and colour bar: `values[row][col]`, row 0 at the bottom
+/// (`y.0`), column 0 at `x.0`.
+pub struct HeatMap<'a> {
+    pub title: String,
+    pub values: &'a [Vec<f64>],
+    /// Data range of the columns (`x.0`, `x.1`) and rows (`y.0`, `y.1`), cell edges.
+    pub x: (f64, f64),
+    pub y: (f64, f64),
+    pub x_axis: Axis,
+    pub y_axis: Axis,
+    /// Colour by `log10` (values ≤ 0 and non-finite values are drawn grey).
+    pub log: bool,
+    /// Title of the colour bar (its scale is the coloured quantity: `log10` of the values
+    /// when `log`).
+    pub scale_label: String,
+    /// Limits of the colour scale (in its units: `log10` when `log`); values beyond take
+    /// the end colour and the bar's end label reads `≤`/`≥`. `None`: the data's extent.
+    pub scale_limits: (Option<f64>, Option<f64>),
+    /// Values marked across the colour bar (scale units) with their labels.
+    pub scale_marks: Vec<(f64, String)>,
+    /// Legend entry for the grey cells, where they mean something (e.g. "refused").
+    pub missing_label: Option<String>,
+    /// Overlays, listed in a legend.
+    pub curves: Vec<Curve>,
+    /// Image size in pixels.
+    pub size: (u32, u32),
+}
+
+/// An overlay in data coordinates; `NaN` points split a line.
 pub struct Curve {
     pub points: Vec<(f64, f64)>,
     pub colour: (u8, u8, u8),
+    /// Legend text.
+    pub label: String,
+    /// Draw each point as a dot (outlined in black) instead of joining them.
+    pub markers: bool,
 }
 
 /// A dark-to-bright ramp (black, blue, magenta, orange, pale yellow) for `t ∈ [0, 1]`.
@@ -182,72 +261,431 @@ pub fn ramp(t: f64) -> (u8, u8, u8) {
     (c(0), c(1), c(2))
 }
 
-/// Writes `heat` with `curves` over it as a `width × height` RGB PNG.
-pub fn write_heat_map(
-    path: &Path,
-    heat: &Heat,
-    curves: &[Curve],
-    width: u32,
-    height: u32,
-) -> Result<()> {
-    let rows = heat.values.len();
-    let cols = heat.values.first().map_or(0, Vec::len);
-    if rows == 0 || cols == 0 || heat.values.iter().any(|r| r.len() != cols) {
+/// Grey of cells without a value.
+const MISSING: RGBColor = RGBColor(150, 150, 150);
+const TICK: i32 = 5;
+
+fn text(size: u32) -> TextStyle<'static> {
+    TextStyle::from(("sans-serif", size).into_font()).color(&BLACK)
+}
+
+/// A round step (1, 2 or 5 × 10ⁿ) giving about `count` ticks over `span`.
+pub fn nice_step(span: f64, count: usize) -> f64 {
+    let raw = (span / count.max(1) as f64).abs();
+    if !(raw.is_finite() && raw > 0.0) {
+        return 1.0;
+    }
+    let mag = 10f64.powf(raw.log10().floor());
+    [1.0, 2.0, 5.0, 10.0]
+        .into_iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw * (1.0 - 1e-9))
+        .unwrap_or(10.0 * mag)
+}
+
+/// Ticks at the multiples of `step` in `[lo, hi]`, labelled with the digits the step needs
+/// and `unit` appended.
+pub fn ticks_every(lo: f64, hi: f64, step: f64, unit: &str) -> Vec<(f64, String)> {
+    let decimals = (-step.log10().floor()).max(0.0) as usize;
+    let first = (lo / step - 1e-9).ceil() as i64;
+    let last = (hi / step + 1e-9).floor() as i64;
+    (first..=last)
+        .map(|k| {
+            let v = k as f64 * step;
+            let s = format!("{:.*}", decimals, if v == 0.0 { 0.0 } else { v });
+            (v, format!("{}{unit}", s.replace('-', "−")))
+        })
+        .collect()
+}
+
+/// Writes `map` as an RGB PNG: the title on top, the cells with the overlays and their
+/// legend, ticks and group labels on both axes, and a colour bar with its scale on the right.
+pub fn write_heat_map(path: &Path, map: &HeatMap) -> Result<()> {
+    register_font();
+    let rows = map.values.len();
+    let cols = map.values.first().map_or(0, Vec::len);
+    if rows == 0 || cols == 0 || map.values.iter().any(|r| r.len() != cols) {
         return Err(Error::invalid("plot", "empty or ragged grid"));
     }
-    let map = |v: f64| if heat.log { v.log10() } else { v };
-    let finite: Vec<f64> = heat
+    let (width, height) = map.size;
+    if width < 200 || height < 150 {
+        return Err(Error::invalid(
+            "plot",
+            format!("{width}×{height} is too small for a labelled heat map (200×150 at least)"),
+        ));
+    }
+    let scale = |v: f64| if map.log { v.log10() } else { v };
+    let shown = |v: f64| v.is_finite() && (!map.log || v > 0.0);
+    let finite: Vec<f64> = map
         .values
         .iter()
         .flatten()
-        .filter(|v| v.is_finite() && (!heat.log || **v > 0.0))
-        .map(|&v| map(v))
+        .filter(|v| shown(**v))
+        .map(|&v| scale(v))
         .collect();
-    let lo = finite.iter().copied().fold(f64::INFINITY, f64::min);
-    let hi = finite.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let span = if hi > lo { hi - lo } else { 1.0 };
+    let (mut lo, mut hi) = finite
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+            (a.min(v), b.max(v))
+        });
+    if !(lo.is_finite() && hi.is_finite()) {
+        (lo, hi) = (0.0, 1.0);
+    }
+    let (data_lo, data_hi) = (lo, hi);
+    if let Some(min) = map.scale_limits.0 {
+        lo = min;
+        hi = hi.max(min);
+    }
+    if let Some(max) = map.scale_limits.1 {
+        hi = max;
+        lo = lo.min(max);
+    }
+    if hi <= lo {
+        (lo, hi) = (lo - 0.5, hi + 0.5);
+    }
+    let span = hi - lo;
+    let bar_step = nice_step(span, 6);
+    let mut bar_ticks = ticks_every(lo, hi, bar_step, "");
+    // Say where the scale cuts the data off.
+    for (end, cut, sign) in [(lo, data_lo < lo, "≤ "), (hi, data_hi > hi, "≥ ")] {
+        if cut {
+            let near = |t: &(f64, String)| (t.0 - end).abs() < 1e-6 * bar_step;
+            match bar_ticks.iter_mut().find(|t| near(t)) {
+                Some(t) => t.1 = format!("{sign}{}", t.1),
+                None => bar_ticks.push((end, format!("{sign}{}", format_tick(end)))),
+            }
+        }
+    }
+
     let mut buf = vec![0u8; (width * height * 3) as usize];
-    let draw_err = |e: String| Error::invalid("plot", e);
     {
         let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
-        root.fill(&WHITE).map_err(|e| draw_err(e.to_string()))?;
+        root.fill(&WHITE).map_err(plot_error)?;
+        let (desc, tick, group) = (text(15), text(13), text(13));
+        let size_of = |s: &str, style: &TextStyle| {
+            root.estimate_text_size(s, style)
+                .map(|(w, h)| (w as i32, h as i32))
+                .map_err(plot_error)
+        };
+        // The title's font shrinks (to 12 px at least) until it fits the width.
+        let mut title = text(20);
+        for px in (12..=20).rev() {
+            title = text(px);
+            if size_of(&map.title, &title)?.0 <= width as i32 - 20 {
+                break;
+            }
+        }
+        let widest = |labels: &[&str], style: &TextStyle| -> Result<i32> {
+            let mut w = 0;
+            for s in labels {
+                w = w.max(size_of(s, style)?.0);
+            }
+            Ok(w)
+        };
+        let line_h = size_of("Ag", &tick)?.1;
+        let desc_h = size_of("Ag", &desc)?.1;
+
+        // Margins around the cells.
+        let top = 12 + size_of(&map.title, &title)?.1 + 14;
+        let y_tick_w = widest(
+            &map.y_axis
+                .ticks
+                .iter()
+                .map(|t| t.1.as_str())
+                .collect::<Vec<_>>(),
+            &tick,
+        )?;
+        let y_group_w: Vec<i32> = map
+            .y_axis
+            .groups
+            .iter()
+            .map(|level| {
+                widest(
+                    &level.iter().map(|g| g.2.as_str()).collect::<Vec<_>>(),
+                    &group,
+                )
+            })
+            .collect::<Result<_>>()?;
+        let left =
+            10 + desc_h + 10 + y_group_w.iter().map(|w| w + 16).sum::<i32>() + y_tick_w + TICK + 6;
+        let bottom =
+            TICK + 4 + line_h + map.x_axis.groups.len() as i32 * (line_h + 12) + 10 + desc_h + 10;
+        let bar_label_w = widest(
+            &bar_ticks
+                .iter()
+                .map(|t| t.1.as_str())
+                .chain(map.missing_label.as_deref())
+                .chain(map.scale_marks.iter().map(|m| m.1.as_str()))
+                .collect::<Vec<_>>(),
+            &tick,
+        )?;
+        let bar_w = 22;
+        let right = 26 + bar_w + TICK + 4 + bar_label_w + 12 + desc_h + 10;
+        let (w, h) = (width as i32, height as i32);
+        if left + right + cols as i32 > w || top + bottom + rows as i32 > h {
+            return Err(Error::invalid(
+                "plot",
+                format!("{width}×{height} leaves no room for the {cols}×{rows} cells"),
+            ));
+        }
+
+        root.draw_text(
+            &map.title,
+            &title.pos(Pos::new(HPos::Center, VPos::Top)),
+            (w / 2, 12),
+        )
+        .map_err(plot_error)?;
+
         let mut chart = ChartBuilder::on(&root)
-            .margin(8)
-            .build_cartesian_2d(heat.x.0..heat.x.1, heat.y.0..heat.y.1)
-            .map_err(|e| draw_err(e.to_string()))?;
-        let dx = (heat.x.1 - heat.x.0) / cols as f64;
-        let dy = (heat.y.1 - heat.y.0) / rows as f64;
-        let cells = heat.values.iter().enumerate().flat_map(|(r, row)| {
+            .margin_top(top)
+            .margin_bottom(bottom)
+            .margin_left(left)
+            .margin_right(right)
+            .build_cartesian_2d(map.x.0..map.x.1, map.y.0..map.y.1)
+            .map_err(plot_error)?;
+        let dx = (map.x.1 - map.x.0) / cols as f64;
+        let dy = (map.y.1 - map.y.0) / rows as f64;
+        let cells = map.values.iter().enumerate().flat_map(|(r, row)| {
             row.iter().enumerate().map(move |(c, &v)| {
-                let colour = if v.is_finite() && (!heat.log || v > 0.0) {
-                    let (r, g, b) = ramp((map(v) - lo) / span);
+                let colour = if shown(v) {
+                    let (r, g, b) = ramp((scale(v) - lo) / span);
                     RGBColor(r, g, b)
                 } else {
-                    RGBColor(128, 128, 128)
+                    MISSING
                 };
-                let x = heat.x.0 + c as f64 * dx;
-                let y = heat.y.0 + r as f64 * dy;
+                let x = map.x.0 + c as f64 * dx;
+                let y = map.y.0 + r as f64 * dy;
                 Rectangle::new([(x, y), (x + dx, y + dy)], colour.filled())
             })
         });
-        chart
-            .draw_series(cells)
-            .map_err(|e| draw_err(e.to_string()))?;
-        for curve in curves {
+        chart.draw_series(cells).map_err(plot_error)?;
+        let rule = WHITE.stroke_width(2);
+        for &x in &map.x_axis.rules {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(x, map.y.0), (x, map.y.1)],
+                    rule,
+                )))
+                .map_err(plot_error)?;
+        }
+        for &y in &map.y_axis.rules {
+            chart
+                .draw_series(std::iter::once(PathElement::new(
+                    vec![(map.x.0, y), (map.x.1, y)],
+                    rule,
+                )))
+                .map_err(plot_error)?;
+        }
+        for curve in &map.curves {
             let (r, g, b) = curve.colour;
-            let style = RGBColor(r, g, b).stroke_width(2);
-            for piece in curve
-                .points
-                .split(|p| !(p.0.is_finite() && p.1.is_finite()))
-            {
-                if piece.len() > 1 {
-                    chart
-                        .draw_series(LineSeries::new(piece.iter().copied(), style))
-                        .map_err(|e| draw_err(e.to_string()))?;
+            let colour = RGBColor(r, g, b);
+            if curve.markers {
+                let points: Vec<(f64, f64)> = curve
+                    .points
+                    .iter()
+                    .copied()
+                    .filter(|p| p.0.is_finite() && p.1.is_finite())
+                    .collect();
+                chart
+                    .draw_series(points.iter().map(|&p| Circle::new(p, 5, BLACK.filled())))
+                    .map_err(plot_error)?;
+                let anno = chart
+                    .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
+                    .map_err(plot_error)?;
+                if !points.is_empty() && !curve.label.is_empty() {
+                    anno.label(curve.label.clone()).legend(move |(x, y)| {
+                        EmptyElement::at((x + 10, y))
+                            + Circle::new((0, 0), 5, BLACK.filled())
+                            + Circle::new((0, 0), 3, colour.filled())
+                    });
+                }
+            } else {
+                let mut labelled = curve.label.is_empty();
+                for piece in curve
+                    .points
+                    .split(|p| !(p.0.is_finite() && p.1.is_finite()))
+                    .filter(|piece| piece.len() > 1)
+                {
+                    let anno = chart
+                        .draw_series(LineSeries::new(
+                            piece.iter().copied(),
+                            colour.stroke_width(2),
+                        ))
+                        .map_err(plot_error)?;
+                    if !labelled {
+                        labelled = true;
+                        anno.label(curve.label.clone()).legend(move |(x, y)| {
+                            PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
+                        });
+                    }
                 }
             }
         }
-        root.present().map_err(|e| draw_err(e.to_string()))?;
+        if map.curves.iter().any(|c| !c.label.is_empty()) {
+            chart
+                .configure_series_labels()
+                .position(SeriesLabelPosition::UpperRight)
+                .border_style(BLACK)
+                .background_style(WHITE.mix(0.85))
+                .label_font(text(14))
+                .draw()
+                .map_err(plot_error)?;
+        }
+
+        // Frame, ticks and group labels, in pixels.
+        let (x0, y0) = chart.backend_coord(&(map.x.0, map.y.0));
+        let (x1, y1) = chart.backend_coord(&(map.x.1, map.y.1));
+        let px = |x: f64| chart.backend_coord(&(x, map.y.0)).0;
+        let py = |y: f64| chart.backend_coord(&(map.x.0, y)).1;
+        let ink = BLACK.stroke_width(1);
+        let line = |a: (i32, i32), b: (i32, i32)| {
+            root.draw(&PathElement::new(vec![a, b], ink))
+                .map_err(plot_error)
+        };
+        root.draw(&Rectangle::new([(x0, y1), (x1, y0)], ink))
+            .map_err(plot_error)?;
+        for (x, label) in &map.x_axis.ticks {
+            let p = px(*x);
+            line((p, y0), (p, y0 + TICK))?;
+            root.draw_text(
+                label,
+                &tick.pos(Pos::new(HPos::Center, VPos::Top)),
+                (p, y0 + TICK + 3),
+            )
+            .map_err(plot_error)?;
+        }
+        for (level, spans) in map.x_axis.groups.iter().enumerate() {
+            let y = y0 + TICK + 4 + line_h + 6 + level as i32 * (line_h + 12);
+            for (a, b, label) in spans {
+                let (a, b) = (px(*a) + 3, px(*b) - 3);
+                line((a, y - 4), (a, y))?;
+                line((a, y), (b, y))?;
+                line((b, y - 4), (b, y))?;
+                root.draw_text(
+                    label,
+                    &group.pos(Pos::new(HPos::Center, VPos::Top)),
+                    ((a + b) / 2, y + 2),
+                )
+                .map_err(plot_error)?;
+            }
+        }
+        for (y, label) in &map.y_axis.ticks {
+            let p = py(*y);
+            line((x0 - TICK, p), (x0, p))?;
+            root.draw_text(
+                label,
+                &tick.pos(Pos::new(HPos::Right, VPos::Center)),
+                (x0 - TICK - 3, p),
+            )
+            .map_err(plot_error)?;
+        }
+        let mut x = x0 - TICK - 6 - y_tick_w - 6;
+        for (spans, gw) in map.y_axis.groups.iter().zip(&y_group_w) {
+            for (a, b, label) in spans {
+                let (a, b) = (py(*a) - 3, py(*b) + 3);
+                line((x + 4, a), (x, a))?;
+                line((x, a), (x, b))?;
+                line((x + 4, b), (x, b))?;
+                root.draw_text(
+                    label,
+                    &group.pos(Pos::new(HPos::Right, VPos::Center)),
+                    (x - 5, (a + b) / 2),
+                )
+                .map_err(plot_error)?;
+            }
+            x -= gw + 16;
+        }
+        root.draw_text(
+            &map.x_axis.label,
+            &desc.pos(Pos::new(HPos::Center, VPos::Bottom)),
+            ((x0 + x1) / 2, h - 10),
+        )
+        .map_err(plot_error)?;
+        root.draw_text(
+            &map.y_axis.label,
+            &desc
+                .transform(FontTransform::Rotate270)
+                .pos(Pos::new(HPos::Center, VPos::Top)),
+            (10, (y0 + y1) / 2),
+        )
+        .map_err(plot_error)?;
+
+        // The colour bar.
+        let bx0 = x1 + 26;
+        let bx1 = bx0 + bar_w;
+        let mut bar = ChartBuilder::on(&root)
+            .margin_top(top)
+            .margin_bottom(bottom)
+            .margin_left(bx0)
+            .margin_right(w - bx1)
+            .build_cartesian_2d(0.0..1.0, lo..hi)
+            .map_err(plot_error)?;
+        const STEPS: usize = 128;
+        bar.draw_series((0..STEPS).map(|i| {
+            let (r, g, b) = ramp((i as f64 + 0.5) / STEPS as f64);
+            let v = |k: usize| lo + span * k as f64 / STEPS as f64;
+            Rectangle::new([(0.0, v(i)), (1.0, v(i + 1))], RGBColor(r, g, b).filled())
+        }))
+        .map_err(plot_error)?;
+        root.draw(&Rectangle::new([(bx0, y1), (bx1, y0)], ink))
+            .map_err(plot_error)?;
+        let marks: Vec<(i32, &String)> = map
+            .scale_marks
+            .iter()
+            .filter(|m| m.0 >= lo && m.0 <= hi)
+            .map(|(v, label)| (bar.backend_coord(&(1.0, *v)).1, label))
+            .collect();
+        for (v, label) in &bar_ticks {
+            let p = bar.backend_coord(&(1.0, *v)).1;
+            line((bx1, p), (bx1 + TICK, p))?;
+            // A mark's label wins over a tick label it would overlap.
+            if marks.iter().all(|m| (m.0 - p).abs() >= line_h) {
+                root.draw_text(
+                    label,
+                    &tick.pos(Pos::new(HPos::Left, VPos::Center)),
+                    (bx1 + TICK + 4, p),
+                )
+                .map_err(plot_error)?;
+            }
+        }
+        for (p, label) in marks {
+            root.draw(&Rectangle::new(
+                [(bx0 - 4, p - 1), (bx1 + TICK, p + 1)],
+                BLACK.filled(),
+            ))
+            .map_err(plot_error)?;
+            root.draw_text(
+                label,
+                &tick.pos(Pos::new(HPos::Left, VPos::Center)),
+                (bx1 + TICK + 4, p),
+            )
+            .map_err(plot_error)?;
+        }
+        root.draw_text(
+            &map.scale_label,
+            &desc
+                .transform(FontTransform::Rotate90)
+                .pos(Pos::new(HPos::Center, VPos::Top)),
+            (w - 10, (y0 + y1) / 2),
+        )
+        .map_err(plot_error)?;
+        if let Some(label) = &map.missing_label {
+            let y = y0 + TICK + 6;
+            root.draw(&Rectangle::new(
+                [(bx0, y), (bx1, y + line_h)],
+                MISSING.filled(),
+            ))
+            .map_err(plot_error)?;
+            root.draw(&Rectangle::new([(bx0, y), (bx1, y + line_h)], ink))
+                .map_err(plot_error)?;
+            root.draw_text(
+                label,
+                &tick.pos(Pos::new(HPos::Left, VPos::Center)),
+                (bx1 + TICK + 4, y + line_h / 2),
+            )
+            .map_err(plot_error)?;
+        }
+        root.present().map_err(plot_error)?;
     }
     write_png(path, &buf, width, height)
 }
@@ -301,36 +739,199 @@ mod heat_tests {
         assert_eq!(ramp(f64::NAN), ramp(0.0));
     }
 
-    #[test]
-    fn writes_a_png_of_the_requested_size() {
+    fn scratch(name: &str) -> std::path::PathBuf {
         let dir = std::env::temp_dir().join(format!("diffract-plot-{}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
-        let p = dir.join("h.png");
-        let values = vec![vec![1.0, 10.0, 100.0], vec![0.0, f64::NAN, 1e3]];
+        dir.join(name)
+    }
+
+    /// Pixels of `img` inside `x0..x1 × y0..y1` dark enough to be text or lines.
+    fn ink(img: &image::RgbImage, (x0, x1): (u32, u32), (y0, y1): (u32, u32)) -> usize {
+        (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let p = img.get_pixel(x, y).0;
+                p.iter().map(|&c| c as u32).sum::<u32>() < 3 * 100
+            })
+            .count()
+    }
+
+    /// A 3 × 4 map with every kind of label, or none.
+    fn sample(labelled: bool) -> image::RgbImage {
+        let values = vec![
+            vec![1.0, 10.0, 100.0],
+            vec![0.0, f64::NAN, 1e3],
+            vec![2.0, 20.0, 200.0],
+            vec![5.0, 50.0, 500.0],
+        ];
+        let text = |s: &str| {
+            if labelled {
+                s.to_string()
+            } else {
+                String::new()
+            }
+        };
+        let axis = |n: usize, unit: &str| crate::plot::Axis {
+            label: text("axis"),
+            ticks: if labelled {
+                (0..n)
+                    .map(|i| (i as f64 + 0.5, format!("{i}{unit}")))
+                    .collect()
+            } else {
+                Vec::new()
+            },
+            groups: if labelled {
+                vec![vec![
+                    (0.0, 2.0, "first".into()),
+                    (2.0, n as f64, "rest".into()),
+                ]]
+            } else {
+                Vec::new()
+            },
+            rules: vec![2.0],
+        };
+        let p = scratch(if labelled { "labelled.png" } else { "bare.png" });
         write_heat_map(
             &p,
-            &Heat {
+            &HeatMap {
+                title: text("A heat map"),
                 values: &values,
                 x: (0.0, 3.0),
-                y: (0.0, 2.0),
+                y: (0.0, 4.0),
+                x_axis: axis(3, " nm"),
+                y_axis: axis(4, "°"),
                 log: true,
-            },
-            &[Curve {
-                points: vec![
-                    (0.0, 0.0),
-                    (1.0, 1.0),
-                    (f64::NAN, 0.0),
-                    (2.0, 1.0),
-                    (3.0, 2.0),
+                scale_label: text("log10 value"),
+                scale_limits: (None, Some(2.5)),
+                scale_marks: vec![(1.0, text("mark"))],
+                missing_label: labelled.then(|| "refused".to_string()),
+                curves: vec![
+                    Curve {
+                        points: vec![(0.0, 0.0), (1.0, 1.0), (f64::NAN, 0.0), (2.0, 1.0)],
+                        colour: (0, 255, 0),
+                        label: text("line"),
+                        markers: false,
+                    },
+                    Curve {
+                        points: vec![(0.5, 3.5), (2.5, 0.5)],
+                        colour: (255, 255, 255),
+                        label: text("dots"),
+                        markers: true,
+                    },
                 ],
-                colour: (0, 255, 0),
-            }],
-            60,
-            40,
+                size: (480, 360),
+            },
         )
         .unwrap();
-        let img = image::open(&p).unwrap();
-        assert_eq!((img.width(), img.height()), (60, 40));
-        std::fs::remove_dir_all(&dir).ok();
+        image::open(&p).unwrap().to_rgb8()
+    }
+
+    #[test]
+    fn heat_map_has_title_axes_labels_and_colour_bar() {
+        let img = sample(true);
+        assert_eq!(img.dimensions(), (480, 360));
+        let bare = sample(false);
+        // Bands outside the cells: the title on top, the y labels on the left, the x labels
+        // at the bottom, the colour bar's title at the right edge.
+        let bands = [
+            ("title", (0, 480), (0, 28)),
+            ("y labels", (0, 36), (40, 300)),
+            ("x labels", (60, 380), (330, 360)),
+            ("scale title", (455, 480), (40, 300)),
+        ];
+        for (name, x, y) in bands {
+            let (with, without) = (ink(&img, x, y), ink(&bare, x, y));
+            println!("{name}: {with} ink pixels labelled, {without} bare");
+            assert!(with > 40, "{name}: {with} ink pixels");
+            assert_eq!(without, 0, "{name}: the bare map drew text there");
+        }
+        // The colour bar runs from the ramp's dark end to its bright end.
+        let bar: Vec<_> = (0..360)
+            .flat_map(|y| (360..440).map(move |x| (x, y)))
+            .map(|(x, y)| img.get_pixel(x, y).0)
+            .collect();
+        assert!(bar
+            .iter()
+            .any(|p| *p == [253, 252, 191] || p[0] > 240 && p[2] > 150));
+        assert!(bar.iter().any(|p| p[2] > 100 && p[0] < 60 && p[1] < 30));
+        // Grey cells for the missing values, and the legend's swatch.
+        let grey = img.pixels().filter(|p| p.0 == [150, 150, 150]).count();
+        assert!(grey > 100, "{grey} grey pixels");
+        std::fs::remove_dir_all(scratch("x").parent().unwrap()).ok();
+    }
+
+    #[test]
+    fn heat_map_refuses_bad_grids_and_tiny_images() {
+        let p = scratch("bad.png");
+        let map = |values: &[Vec<f64>], size| {
+            write_heat_map(
+                &p,
+                &HeatMap {
+                    title: String::new(),
+                    values,
+                    x: (0.0, 1.0),
+                    y: (0.0, 1.0),
+                    x_axis: Axis::default(),
+                    y_axis: Axis::default(),
+                    log: false,
+                    scale_label: String::new(),
+                    scale_limits: (None, None),
+                    scale_marks: Vec::new(),
+                    missing_label: None,
+                    curves: Vec::new(),
+                    size,
+                },
+            )
+        };
+        assert!(map(&[], (400, 300)).is_err());
+        assert!(map(&[vec![1.0, 2.0], vec![1.0]], (400, 300)).is_err());
+        assert!(map(&[vec![1.0]], (100, 80)).is_err());
+        assert!(map(&[vec![1.0]], (400, 300)).is_ok());
+    }
+
+    #[test]
+    fn error_plot_has_labelled_axes() {
+        let p = scratch("error.png");
+        let point = |label: &str, t, e| Point {
+            label: label.into(),
+            time_ms: t,
+            error: e,
+        };
+        error_vs_time(
+            &p,
+            "title",
+            "error",
+            &[
+                point("a", 3.0, 0.1),
+                point("b", 30.0, 0.01),
+                point("c", 3000.0, 0.2),
+            ],
+        )
+        .unwrap();
+        let img = image::open(&p).unwrap().to_rgb8();
+        assert_eq!(img.dimensions(), (1000, 700));
+        assert!(ink(&img, (0, 1000), (0, 40)) > 50, "title");
+        assert!(ink(&img, (0, 95), (80, 620)) > 50, "y ticks and label");
+        assert!(ink(&img, (100, 1000), (640, 700)) > 50, "x ticks and label");
+    }
+
+    #[test]
+    fn tick_labels_and_source_names() {
+        assert_eq!(source_name("/work/main/assets/elaphe.png"), "elaphe.png");
+        assert_eq!(source_name("builtin:elaphe-grown"), "builtin:elaphe-grown");
+        assert_eq!(format_tick(2000.0), "2000");
+        assert_eq!(format_tick(0.05), "0.05");
+        assert_eq!(format_tick(1e-4), "1e−4");
+        assert_eq!(log_tick(300.0), "");
+        assert_eq!(log_tick(500.0), "500");
+        assert_eq!(nice_step(300.0, 8), 50.0);
+        assert_eq!(nice_step(13.7, 6), 5.0);
+        let t = ticks_every(-90.0, 90.0, 30.0, "°");
+        assert_eq!(t.len(), 7);
+        assert_eq!(t[0].1, "−90°");
+        assert_eq!(t[3].1, "0°");
+        let t = ticks_every(-15.7, -2.1, 2.0, "");
+        assert_eq!(t.first().unwrap().1, "−14");
+        assert_eq!(t.last().unwrap().1, "−4");
     }
 }

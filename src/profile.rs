@@ -823,7 +823,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
             path,
             &format!(
                 "diffract profile: {} at θi = {}°, {}² map, {}",
-                setup.base.heightfield,
+                crate::plot::source_name(&setup.base.heightfield),
                 setup.theta_i_deg,
                 setup.size,
                 renderer.device_name()

@@ -759,8 +759,8 @@ fn entry(group: &[&Cell]) -> String {
 }
 
 /// The heat map: one row per (h_max, θi) — h_max rising upwards, θi rising within each —
-/// one column per (configuration, λ) in the markdown's order; colour = log10 error,
-/// grey = refused.
+/// one column per (configuration, λ) in the markdown's order, labelled in groups
+/// (expansion, terms, evaluator, λ); colour = log10 error, grey = refused.
 pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
     let cfg = configs(spec);
     let cols = cfg.len() * spec.lambdas_nm.len();
@@ -780,16 +780,100 @@ pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
         let col = ci * spec.lambdas_nm.len() + li;
         values[row][col] = c.error.map_or(f64::NAN, |e| e.max(1e-16));
     }
+    // Column groups, innermost first: evaluator, terms, expansion; each spans the
+    // configurations that share it (configs() nests expansion > terms > evaluator).
+    let n_l = spec.lambdas_nm.len() as f64;
+    let span = |inner: usize, index: usize| {
+        let width = inner as f64 * n_l;
+        (index as f64 * width, (index + 1) as f64 * width)
+    };
+    let (n_ev, n_t) = (spec.evaluators.len(), spec.terms_modes.len());
+    let evaluators = (0..cfg.len())
+        .map(|i| {
+            let (a, b) = span(1, i);
+            let name = match cfg[i].2 {
+                Evaluator::Model => "f64 model",
+                Evaluator::Gpu => "GPU f32",
+            };
+            (a, b, name.to_string())
+        })
+        .collect();
+    let terms = (0..cfg.len() / n_ev)
+        .map(|i| {
+            let (a, b) = span(n_ev, i);
+            let name = match cfg[i * n_ev].1 {
+                Terms::Auto => "auto terms".to_string(),
+                Terms::Fixed(t) => format!("T = {t}"),
+            };
+            (a, b, name)
+        })
+        .collect();
+    let expansions = (0..cfg.len() / (n_ev * n_t))
+        .map(|i| {
+            let (a, b) = span(n_ev * n_t, i);
+            let name = match cfg[i * n_ev * n_t].0 {
+                Expansion::Taylor => "Taylor",
+                Expansion::Chebyshev => "Chebyshev",
+            };
+            (a, b, name.to_string())
+        })
+        .collect();
+    let x_ticks = (0..cols)
+        .map(|c| {
+            let l = spec.lambdas_nm[c % spec.lambdas_nm.len()];
+            (c as f64 + 0.5, format!("{l}"))
+        })
+        .collect();
+    let n_th = spec.theta_i_deg.len();
+    let y_ticks = (0..rows)
+        .map(|r| {
+            let t = spec.theta_i_deg[r % n_th];
+            (r as f64 + 0.5, format!("{t}°"))
+        })
+        .collect();
+    let heights = (0..spec.h_max_um.len())
+        .map(|i| {
+            let h = spec.h_max_um[i];
+            let (a, b) = ((i * n_th) as f64, ((i + 1) * n_th) as f64);
+            (a, b, format!("{h} µm"))
+        })
+        .collect();
+    let between = |group: f64, count: usize| (1..count).map(|i| i as f64 * group).collect();
+    let title = format!(
+        "Stability: error against the f64 reference, {} (tolerance {:.0e})",
+        crate::plot::source_name(&spec.field_name),
+        spec.tolerance
+    );
     crate::plot::write_heat_map(
         path,
-        &crate::plot::Heat {
+        &crate::plot::HeatMap {
+            title,
             values: &values,
             x: (0.0, cols as f64),
             y: (0.0, rows as f64),
+            x_axis: crate::plot::Axis {
+                label: "λ (nm), by evaluator, terms and expansion".into(),
+                ticks: x_ticks,
+                groups: vec![evaluators, terms, expansions],
+                rules: between(n_l, cfg.len()),
+            },
+            y_axis: crate::plot::Axis {
+                label: "h_max (peak to valley), θi within each".into(),
+                ticks: y_ticks,
+                groups: vec![heights],
+                rules: between(n_th as f64, spec.h_max_um.len()),
+            },
             log: true,
+            scale_label: "log₁₀ max |ρ − ρ_ref| / C".into(),
+            // Errors of the size of the mirror's peak and beyond are all simply wrong.
+            scale_limits: (None, Some(0.0)),
+            scale_marks: vec![(spec.tolerance.log10(), "tolerance".into())],
+            missing_label: Some("refused".into()),
+            curves: Vec::new(),
+            size: (
+                (cols as u32 * 30 + 330).clamp(700, 1400),
+                (rows as u32 * 18 + 230).clamp(450, 1100),
+            ),
         },
-        &[],
-        (cols as u32 * 24).max(200),
-        (rows as u32 * 16).max(200),
     )
 }
