@@ -516,13 +516,14 @@ pub fn sample_g_device(
             );
             Ok(())
         })?;
+        // The device stores the slice u-major; Slices are v-major.
         let values = precision.read(readback.mapped()?);
-        data.push(
-            values
-                .chunks_exact(3)
-                .map(|c| [c[0], c[1], c[2]])
-                .collect::<Vec<[f64; 3]>>(),
-        );
+        let mut slice = vec![[0.0f64; 3]; nu * nv];
+        for (node, c) in values.chunks_exact(3).enumerate() {
+            let (i, j) = (node / nv, node % nv);
+            slice[j * nu + i] = [c[0], c[1], c[2]];
+        }
+        data.push(slice);
         for _ in 0..lambdas {
             progress();
         }
