@@ -92,18 +92,21 @@ impl Precision {
 /// the odd prime factors in increasing order (a large prime is one stage of that radix).
 pub fn radices(n: usize) -> Vec<usize> {
     let mut out = Vec::new();
+    if n == 0 {
+        return out;
+    }
     let mut m = n;
-    while m % 4 == 0 {
+    while m.is_multiple_of(4) {
         out.push(4);
         m /= 4;
     }
-    if m % 2 == 0 {
+    if m.is_multiple_of(2) {
         out.push(2);
         m /= 2;
     }
     let mut p = 3;
     while p * p <= m {
-        while m % p == 0 {
+        while m.is_multiple_of(p) {
             out.push(p);
             m /= p;
         }
