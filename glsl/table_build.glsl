@@ -79,7 +79,7 @@ layout(std430, set = 0, binding = 7) readonly buffer LookupX { REAL qx[]; };
 layout(std430, set = 0, binding = 8) readonly buffer LookupY { REAL qy[]; };
 layout(std430, set = 0, binding = 9) buffer Taps { REAL taps[]; };
 layout(std430, set = 0, binding = 10) buffer XPass { CPLX xpass[]; };
-// The slice being built: XYZ per node, row-major in (v, u).
+// The slice being built: XYZ per node, (i·NV + j)·3 for u node i, v node j.
 layout(std430, set = 0, binding = 11) buffer Acc { REAL acc[]; };
 // σ of the window along x and y (texels), 1/(NX·NY).
 layout(std430, set = 0, binding = 12) readonly buffer Consts { REAL consts[]; };
@@ -250,11 +250,13 @@ void tapsPass(uint id) {
     }
 }
 
+// Consecutive invocations take consecutive rows, so their reads of the gathered columns
+// are contiguous; the result is stored per (job, u node) along the rows.
 void windowXPass(uint id) {
-    int i = int(id % uint(NU));
-    uint t = id / uint(NU);
-    int rho = int(t % uint(RMAX));
-    int b = int(t / uint(RMAX));
+    int rho = int(id % uint(RMAX));
+    uint t = id / uint(RMAX);
+    int i = int(t % uint(NU));
+    int b = int(t / uint(NU));
     int lam = pc.lamBase + b;
     int cx0 = jobInt[lam * 4];
     int cy0 = jobInt[lam * 4 + 2];
@@ -270,12 +272,14 @@ void windowXPass(uint id) {
         CPLX z = loadField(pc.src, base + uint((a + d - cx0) * NY + fy));
         sum += z * taps[tapBase + uint(d)];
     }
-    xpass[uint(b * RMAX + rho) * uint(NU) + uint(i)] = sum;
+    xpass[uint(b * NU + i) * uint(RMAX) + uint(rho)] = sum;
 }
 
+// Consecutive invocations take consecutive v nodes (contiguous reads of the x pass); the
+// slice is stored u-major, (i·NV + j)·3, and reordered on the host.
 void windowYPass(uint id) {
-    int i = int(id % uint(NU));
-    int j = int(id / uint(NU));
+    int j = int(id % uint(NV));
+    int i = int(id / uint(NV));
     REAL norm = consts[2];
     REAL x = acc[3u * id];
     REAL y = acc[3u * id + 1u];
@@ -287,7 +291,7 @@ void windowYPass(uint id) {
         uint tapBase = uint(b * TAPS_PER_JOB + NU * TAPS_X + j * TAPS_Y + RY);
         CPLX p = CPLX(0);
         for (int d = -RY; d <= RY; d++) {
-            p += xpass[uint(b * RMAX + a + d - cy0) * uint(NU) + uint(i)] * taps[tapBase + uint(d)];
+            p += xpass[uint(b * NU + i) * uint(RMAX) + uint(a + d - cy0)] * taps[tapBase + uint(d)];
         }
         p *= norm;
         REAL power = p.x * p.x + p.y * p.y;

@@ -227,3 +227,70 @@ fn float32_device_table_stays_within_its_bound() {
     assert!(err < F32_TOLERANCE, "{err:.3e}");
     finish(dev);
 }
+
+/// `render --table-build` builds where it is told and says so on its `table:` line; the
+/// two builds give the same picture.
+#[test]
+fn render_says_where_the_table_was_built() {
+    if device().is_none() {
+        return;
+    }
+    let dir = std::env::temp_dir().join(format!("diffract-table-build-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let mut pictures = Vec::new();
+    for (build, want) in [
+        ("cpu", "built on CPU (f64) in "),
+        ("device", "built on device ("),
+    ] {
+        let out = dir.join(format!("{build}.png"));
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+            .args([
+                "render",
+                "--brdf-map",
+                "--size",
+                "16",
+                "--theta-i",
+                "40",
+                "--heightfield",
+                "builtin:blazed",
+                "--table-texel",
+                "0.05",
+                "--table-step-nm",
+                "40",
+                "--no-cache",
+                "--table-build",
+                build,
+                "-o",
+            ])
+            .arg(&out)
+            .env("DIFFRACT_VALIDATION", "1")
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success(),
+            "{build}: {stdout}{}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with("table: chebyshev-w"))
+            .unwrap_or_else(|| panic!("no table line: {stdout}"));
+        assert!(line.contains(want) && line.ends_with(" MB"), "{line}");
+        pictures.push(image::open(&out).unwrap().to_rgb8());
+    }
+    // The tables agree to float32 rounding, so the 8-bit pictures are the same.
+    let differ = pictures[0]
+        .pixels()
+        .zip(pictures[1].pixels())
+        .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 1))
+        .count();
+    assert_eq!(differ, 0);
+    let bad = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+        .args(["render", "--table-build", "gpu"])
+        .output()
+        .unwrap();
+    assert!(!bad.status.success());
+    assert!(String::from_utf8_lossy(&bad.stderr).contains("--table-build"));
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -92,6 +92,9 @@ impl Precision {
 /// the odd prime factors in increasing order (a large prime is one stage of that radix).
 pub fn radices(n: usize) -> Vec<usize> {
     let mut out = Vec::new();
+    if n == 0 {
+        return out;
+    }
     let mut m = n;
     while m.is_multiple_of(4) {
         out.push(4);
@@ -516,13 +519,14 @@ pub fn sample_g_device(
             );
             Ok(())
         })?;
+        // The device stores the slice u-major; Slices are v-major.
         let values = precision.read(readback.mapped()?);
-        data.push(
-            values
-                .chunks_exact(3)
-                .map(|c| [c[0], c[1], c[2]])
-                .collect::<Vec<[f64; 3]>>(),
-        );
+        let mut slice = vec![[0.0f64; 3]; nu * nv];
+        for (node, c) in values.chunks_exact(3).enumerate() {
+            let (i, j) = (node / nv, node % nv);
+            slice[j * nu + i] = [c[0], c[1], c[2]];
+        }
+        data.push(slice);
         for _ in 0..lambdas {
             progress();
         }
