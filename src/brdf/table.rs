@@ -554,9 +554,17 @@ fn spline(
 pub trait GTable: Sync {
     /// The region the table covers.
     fn region(&self) -> &Region;
-    /// `G(u, v, w)` as the GPU variant computes it (in f64); `None` outside the region,
-    /// where the GPU writes black.
-    fn g(&self, uvw: [f64; 3]) -> Option<[f64; 3]>;
+    /// `G(u, v, w)` as the representation interpolates it (in f64), before the clamp to
+    /// `G ≥ 0`; `None` outside the region. Cubic splines and series in `w` may overshoot
+    /// below zero between nodes.
+    fn g_unclamped(&self, uvw: [f64; 3]) -> Option<[f64; 3]>;
+
+    /// `G(u, v, w)` as the GPU variant computes it (in f64): the interpolant clamped to
+    /// `G ≥ 0` per channel, as the shaders clamp it (light cannot be negative); `None`
+    /// outside the region, where the GPU writes black.
+    fn g(&self, uvw: [f64; 3]) -> Option<[f64; 3]> {
+        self.g_unclamped(uvw).map(|g| g.map(|x| x.max(0.0)))
+    }
     /// The stored planes, each `nu × nv` XYZ, in upload order.
     fn planes(&self) -> &[Vec<[f64; 3]>];
     /// Nodes along `u` and `v`.
@@ -570,6 +578,12 @@ pub trait GTable: Sync {
     /// How much float32 rounding the representation amplifies (the condition number of its
     /// sum), where that is the limiting factor; `None` for stable representations.
     fn conditioning(&self) -> Option<f64> {
+        None
+    }
+
+    /// Bound on float32's rounding error in `G` (absolute), where the representation
+    /// amplifies it beyond the stored values' own rounding; `None` for stable ones.
+    fn f32_error(&self) -> Option<f64> {
         None
     }
 
@@ -613,7 +627,7 @@ impl GTable for Volume {
     fn region(&self) -> &Region {
         &self.region
     }
-    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+    fn g_unclamped(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
         let s = &self.slices;
         let r = &self.region;
         let (k, fz) = grid_pos(w, r.lo[2], r.hi[2], s.data.len())?;
@@ -728,7 +742,7 @@ impl GTable for ChebyshevW {
     fn region(&self) -> &Region {
         &self.region
     }
-    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+    fn g_unclamped(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
         if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
             return None;
         }
@@ -928,7 +942,10 @@ impl GTable for Dhillon {
     fn conditioning(&self) -> Option<f64> {
         Some(Dhillon::conditioning(self))
     }
-    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+    fn f32_error(&self) -> Option<f64> {
+        Some(self.rounding())
+    }
+    fn g_unclamped(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
         if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
             return None;
         }
@@ -989,12 +1006,14 @@ mod tests {
         let cheb = ChebyshevW::from_nodes(region, &slices);
         let dh = Dhillon::from_chebyshev(&cheb, 0.0);
         for w in [-1.7, -1.2, -0.9, -0.4] {
-            let a = cheb.g([0.3, 0.6, w]).unwrap();
-            let b = dh.g([0.3, 0.6, w]).unwrap();
+            // Unclamped: this polynomial dips below zero (G itself cannot).
+            let a = cheb.g_unclamped([0.3, 0.6, w]).unwrap();
+            let b = dh.g_unclamped([0.3, 0.6, w]).unwrap();
             assert!((a[0] - f(w)).abs() < 1e-12 && (a[1] - 2.0 * f(w)).abs() < 1e-12);
             assert!((b[0] - f(w)).abs() < 1e-10, "{} vs {}", b[0], f(w));
         }
         assert!(cheb.g([0.3, 0.6, -0.3]).is_none());
+        assert_eq!(cheb.g([0.3, 0.6, -0.9]).unwrap()[0], 0.0, "clamped to G ≥ 0");
         // w = −1.05 + 0.65ŵ: the ŵ³ coefficient of −w³ is −0.65³.
         assert!((dh.powers[3][0][0] + 0.65f64.powi(3)).abs() < 1e-12);
         // Exact in three powers: the coefficient of T_4 is f64 noise and is dropped.

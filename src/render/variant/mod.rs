@@ -40,7 +40,9 @@ pub enum VariantKind {
     Nmm,
     /// Thesis §1.5.3 done right: one period's spectrum (3×3 sinc taps) × the periodic factor.
     Pq,
-    /// Dhillon et al. 2014: tables of the powers of w, Horner per pixel.
+    /// Dhillon et al. 2014's form: tables of the powers of ŵ (w mapped onto its reachable
+    /// interval), fitted from the f64 table; Horner per pixel; refused where float32 cannot
+    /// hold the sum.
     Dhillon,
     /// G as a Chebyshev series in w: K bilinear fetches, Clenshaw.
     ChebyshevW,
@@ -92,7 +94,7 @@ impl VariantKind {
             VariantKind::Flss => "thesis Algorithm 3: every wavelength × term × window tap per pixel (exact to its T, R, Δλ)",
             VariantKind::Nmm => "thesis §1.5.2 done right: FLSS at the wavelengths of the grating's orders only, Jacobian-weighted (needs a dominant period)",
             VariantKind::Pq => "thesis §1.5.3 done right: one period's spectrum from 3×3 periodic-sinc taps × |F_x F_y|² of N copies, N·L = 2√π σs (needs whole copies of one period)",
-            VariantKind::Dhillon => "Dhillon et al. 2014: G = Σ_p I_p(u,v)·w^p from f64 tables, Horner (monomials: ill-conditioned in f32)",
+            VariantKind::Dhillon => "Dhillon et al. 2014's form G = Σ_p I_p(u,v)·ŵ^p, ŵ = w mapped onto its reachable interval; I_p fitted from the f64 table (not built from products of Taylor terms as in the paper); Horner; refused, with its expected error, where float32 cannot hold the sum",
             VariantKind::ChebyshevW => "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw in w, cubic B-spline in (u,v): 4K bilinear fetches",
             VariantKind::Volume => "G(u,v,w) in a 3D texture from f64 tables: one trilinear fetch (the floor)",
             VariantKind::Default => unreachable!("resolved above"),
@@ -392,19 +394,24 @@ pub(crate) fn require_spectral(kind: VariantKind, output: OutputMode) -> Result<
 /// BRDF map at θi = 60° (its automatic `T` planned, not computed).
 pub fn list() -> String {
     let material = Material::default();
-    let terms = crate::heightfield::HeightField::load_source(
+    let hf = crate::heightfield::HeightField::load_source(
         &material.heightfield,
         material.dh_um,
         material.h_max_um,
-    )
-    .and_then(|hf| {
-        material.plan(
-            &hf,
-            &crate::brdf::truncation::Reach::brdf_map(60.0),
-            crate::brdf::truncation::Precision::F32,
-        )
-    })
-    .map_or(30, |p| p.terms);
+    );
+    let terms = hf
+        .as_ref()
+        .ok()
+        .and_then(|hf| {
+            material
+                .plan(
+                    hf,
+                    &crate::brdf::truncation::Reach::brdf_map(60.0),
+                    crate::brdf::truncation::Precision::F32,
+                )
+                .ok()
+        })
+        .map_or(30, |p| p.terms);
     let table = TableOptions::default();
     let region = Region::brdf_map(crate::brdf::direction(60.0, 0.0));
     let mut s = String::from(
@@ -433,13 +440,36 @@ pub fn list() -> String {
         } else {
             ""
         };
+        let mut fetches = kind.fetches(terms, &material, &table);
+        // nmm: per order and axis; the orders the map reaches (at its largest |u|, |v|).
+        if let (VariantKind::Nmm, Ok(hf)) = (kind, &hf) {
+            if let (Ok(g), Ok(w)) = (
+                crate::brdf::nmm::estimate_grating(hf),
+                crate::spectrum::Window::new(
+                    hf.nx(),
+                    hf.ny(),
+                    hf.dh_um(),
+                    material.coherence_um,
+                    material.window_radius,
+                ),
+            ) {
+                let (lx, ly) = hf.extent_um();
+                let t = [0, 1].map(|a| region.lo[a].abs().max(region.hi[a].abs()));
+                let n = crate::brdf::nmm::max_samples(&g, &w, [lx, ly], t, (380.0, 780.0));
+                fetches = fetches / (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * n;
+            }
+        }
         s.push_str(&format!(
             "{:<13} {:>13}  {memory}\n    {}{mark}\n",
             kind.name(),
-            kind.fetches(terms, &material, &table),
+            fetches,
             kind.summary()
         ));
     }
+    let scene = crate::scene::Scene::default_scene();
+    let disc = scene.light.disk_samples().len().max(1);
+    let ss = scene.output.supersample.max(1).pow(2) as usize;
+    s.push_str(&format!("fetches are per evaluation: a pixel of the default scene evaluates the variant for {disc} directions over the sun's disc and {ss} supersamples, {}× the counts above\n", disc * ss));
     s.push_str("per-vertex (--per-vertex on render, view, profile; thesis §1.5.1): flss, nmm and pq evaluated once per mesh vertex, the colour interpolated; cost per vertex, not per pixel\n");
     s
 }
