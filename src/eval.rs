@@ -34,6 +34,11 @@ pub struct GratingReport {
     pub thetas_deg: Vec<f64>,
     /// `ρ[λ index][θ index]`, the f64 model.
     pub rho: Vec<Vec<f64>>,
+    /// The ridge period of the height field's own spectrum ([`ridge_period_um`], nm), which
+    /// chose the first order. On a crop holding a fractional number of periods the
+    /// reflectance peaks sit on the crop's orders `jλ/L`, so the experiment reads `L/j`
+    /// (within half a bin, `d²/2L`, of the ridge period) while this reads `d` itself.
+    pub ridge_period_nm: Option<f64>,
 }
 
 /// Signed in-plane direction: negative angles lie on the mirror side (`φ = 180°`).
@@ -165,6 +170,7 @@ pub fn grating_equation(
         lambdas_nm: lambdas_nm.to_vec(),
         thetas_deg: thetas,
         rho: rho_map,
+        ridge_period_nm: ridge_um.map(|d| d * 1e3),
     })
 }
 
@@ -205,7 +211,11 @@ pub fn ridge_period_um(hf: &crate::heightfield::HeightField, azimuth_deg: f64) -
     let mut line = vec![rustfft::num_complex::Complex64::new(0.0, 0.0); n];
     for l in 0..lines {
         for (i, z) in line.iter_mut().enumerate() {
-            let v = if along_x { h[l * nx + i] } else { h[i * nx + l] };
+            let v = if along_x {
+                h[l * nx + i]
+            } else {
+                h[i * nx + l]
+            };
             *z = rustfft::num_complex::Complex64::new(v, 0.0);
         }
         let mean = line.iter().map(|z| z.re).sum::<f64>() / n as f64;
@@ -424,5 +434,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         r.mean_nm,
         r.variance_nm2
     );
+    if let Some(d) = r.ridge_period_nm {
+        println!("height-field spectrum along the plane of incidence: ridge period {d:.3} nm");
+    }
     Ok(())
 }

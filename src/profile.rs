@@ -663,10 +663,7 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
             continue;
         }
         let errors = if r.reference_dark {
-            format!(
-                "reference dark | {:.2e} | — | — | —",
-                e.max_abs_y
-            )
+            format!("reference dark | {:.2e} | — | — | —", e.max_abs_y)
         } else {
             format!(
                 "{:.2e} | {:.2e} | {:.3} | {:.3} | {:.3}",

@@ -828,6 +828,8 @@ pub struct TableCell {
     pub error: Option<f64>,
     /// `dhillon`: its stated expected error.
     pub expected: Option<f64>,
+    /// The largest exact `G` (any channel) over the probes: the signal the error is of.
+    pub peak: f64,
     pub message: String,
 }
 
@@ -864,12 +866,19 @@ pub fn run_table_cases(spec: &MatrixSpec) -> Result<Vec<TableCell>> {
                 step_nm: 10,
             };
             let exact = sample_g(&hf, spec.coherence_um, &exact_spec, &probes, &|| ())?;
+            let peak = exact
+                .data
+                .iter()
+                .flatten()
+                .flatten()
+                .fold(0.0f64, |m, x| m.max(*x));
             for kind in [
                 VariantKind::Volume,
                 VariantKind::ChebyshevW,
                 VariantKind::Dhillon,
             ] {
-                let w_nodes = options.w_nodes_for_field(kind, hi - lo, [region.lo[2], region.hi[2]]);
+                let w_nodes =
+                    options.w_nodes_for_field(kind, hi - lo, [region.lo[2], region.hi[2]]);
                 let tspec = TableSpec {
                     w_nodes,
                     ..exact_spec
@@ -881,6 +890,7 @@ pub fn run_table_cases(spec: &MatrixSpec) -> Result<Vec<TableCell>> {
                     status: Status::Pass,
                     error: None,
                     expected: None,
+                    peak,
                     message: String::new(),
                 };
                 // f32 evaluation at node `t` and probe `w`.
@@ -905,7 +915,8 @@ pub fn run_table_cases(spec: &MatrixSpec) -> Result<Vec<TableCell>> {
                             let x = c.w_hat(w) as f32;
                             let (mut b1, mut b2) = ([0.0f32; 3], [0.0f32; 3]);
                             for cj in c.coeffs.iter().skip(1).rev() {
-                                let b0 = [0, 1, 2].map(|ch| cj[t][ch] as f32 + 2.0 * x * b1[ch] - b2[ch]);
+                                let b0 = [0, 1, 2]
+                                    .map(|ch| cj[t][ch] as f32 + 2.0 * x * b1[ch] - b2[ch]);
                                 b2 = b1;
                                 b1 = b0;
                             }
@@ -960,12 +971,16 @@ pub fn run_table_cases(spec: &MatrixSpec) -> Result<Vec<TableCell>> {
 /// Markdown of the table cases: one row per case and height, one column per variant.
 pub fn table_cases_markdown(spec: &MatrixSpec, cells: &[TableCell]) -> String {
     let mut s = format!(
-        "\n## Table variants on narrow regions\n\nEach entry: max |G_f32 − G| (a mirror's specular G_Y is 1; tolerance {:.0e}) of the representation evaluated in float32 as its shader does, at its (u, v) nodes and at w between its nodes, against G sampled exactly there (10 nm); `refused` with the expected error where the variant refuses. Regions centred on (u, v, w) = (−0.326, 0, −1.851), half-widths: narrow w (a distant camera on a plane) ±(0.02, 0.02, 0.0025); narrow u ±(0.0025, 0.02, 0.3); narrow v ±(0.02, 0.0025, 0.3).\n\n| case | h_max (µm) | volume | chebyshev-w | dhillon |\n|---|---|---|---|---|\n",
+        "\n## Table variants on narrow regions\n\nEach entry: max |G_f32 − G| (a mirror's specular G_Y is 1; tolerance {:.0e}) of the representation evaluated in float32 as its shader does, at its (u, v) nodes and at w between its nodes, against G sampled exactly there (10 nm); `refused` with the expected error where the variant refuses. Regions centred on (u, v, w) = (−0.326, 0, −1.851), half-widths: narrow w (a distant camera on a plane) ±(0.02, 0.02, 0.0025); narrow u ±(0.0025, 0.02, 0.3); narrow v ±(0.02, 0.0025, 0.3).\n\n| case | h_max (µm) | max G | volume | chebyshev-w | dhillon |\n|---|---|---|---|---|---|\n",
         spec.tolerance
     );
     for (case, _) in TABLE_CASES {
         for &h in &spec.h_max_um {
-            s += &format!("| {case} | {h} |");
+            let peak = cells
+                .iter()
+                .find(|c| c.case == case && c.h_max_um == h)
+                .map_or(0.0, |c| c.peak);
+            s += &format!("| {case} | {h} | {peak:.1e} |");
             for kind in ["volume", "chebyshev-w", "dhillon"] {
                 let e = cells
                     .iter()

@@ -161,7 +161,10 @@ fn dhillon_on_a_plane_through_a_narrow_lens_is_right_or_refused() {
             off_volume <= 1e-3 * peak,
             "dhillon {nodes} vs volume: {off_volume:e} vs {peak:e}"
         );
-        assert!(worst <= 0.05 * peak, "dhillon {nodes}: {worst:e} vs {peak:e}");
+        assert!(
+            worst <= 0.05 * peak,
+            "dhillon {nodes}: {worst:e} vs {peak:e}"
+        );
     }
     // Every case was decided: the narrow interval is exactly where mapped powers are
     // stable, so at least the default count draws.

@@ -873,7 +873,11 @@ impl Dhillon {
         for x in [-1.0, 1.0f64] {
             for t in 0..n {
                 for c in 0..3 {
-                    let g = self.powers.iter().rev().fold(0.0, |acc, p| acc * x + p[t][c]);
+                    let g = self
+                        .powers
+                        .iter()
+                        .rev()
+                        .fold(0.0, |acc, p| acc * x + p[t][c]);
                     peak = peak.max(g.abs());
                 }
             }
@@ -1013,7 +1017,11 @@ mod tests {
             assert!((b[0] - f(w)).abs() < 1e-10, "{} vs {}", b[0], f(w));
         }
         assert!(cheb.g([0.3, 0.6, -0.3]).is_none());
-        assert_eq!(cheb.g([0.3, 0.6, -0.9]).unwrap()[0], 0.0, "clamped to G ≥ 0");
+        assert_eq!(
+            cheb.g([0.3, 0.6, -0.9]).unwrap()[0],
+            0.0,
+            "clamped to G ≥ 0"
+        );
         // w = −1.05 + 0.65ŵ: the ŵ³ coefficient of −w³ is −0.65³.
         assert!((dh.powers[3][0][0] + 0.65f64.powi(3)).abs() < 1e-12);
         // Exact in three powers: the coefficient of T_4 is f64 noise and is dropped.
@@ -1045,7 +1053,11 @@ mod tests {
             // Float32 evaluation of the stored planes, as the shader does it.
             for w in [-1.99, -1.985, -1.9731, -1.97] {
                 let x = dh.w_hat(w) as f32;
-                let g = dh.powers.iter().rev().fold(0.0f32, |acc, p| acc * x + p[0][1] as f32);
+                let g = dh
+                    .powers
+                    .iter()
+                    .rev()
+                    .fold(0.0f32, |acc, p| acc * x + p[0][1] as f32);
                 assert!(((g as f64) - f(w)).abs() < 1e-4, "K = {k}, w = {w}: {g}");
             }
         }
@@ -1064,7 +1076,11 @@ mod tests {
         };
         let dh = Dhillon::from_chebyshev(&ChebyshevW::from_nodes(wide, &slices), 1e-4);
         let err = dh.check(1e-3).unwrap_err().to_string();
-        assert!(err.contains("expected error") && !err.contains('\n'), "{err}");
+        assert!(
+            err.contains("expected error") && !err.contains('\n'),
+            "{err}"
+        );
+        println!("{err}");
     }
 
     #[test]

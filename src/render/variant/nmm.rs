@@ -115,8 +115,7 @@ impl Variant for Nmm {
         let r = &setup.region;
         let t_max = [0, 1].map(|a| r.lo[a].abs().max(r.hi[a].abs()));
         let range = (ubo.lambda_range[0] as f64, ubo.lambda_range[1] as f64);
-        let samples =
-            crate::brdf::nmm::max_samples(&grating, &p.window, [lx, ly], t_max, range);
+        let samples = crate::brdf::nmm::max_samples(&grating, &p.window, [lx, ly], t_max, range);
         // Near specular (if the region holds it) every kept wavelength is summed instead.
         let specular = (0..2).all(|a| r.lo[a] <= 0.0 && r.hi[a] >= 0.0);
         let lambdas = if specular {
