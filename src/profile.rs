@@ -231,9 +231,9 @@ pub struct VariantReport {
     /// Table variants: the most negative `G` (any channel) of the interpolant over the map
     /// before the clamp to `G ≥ 0`, relative to the map's largest `G_Y` (0: none).
     pub overshoot: Option<f64>,
-    /// The reference is dark: its brightest scored sample is below what the variants may
-    /// err by (the tolerance times the largest gain over the map), so ratios to it measure
-    /// noise and the table says `reference dark` instead.
+    /// The reference is dark: every scored sample is below what the variants may err by
+    /// there (the tolerance times the gain `C`: `ρ/C` under the tolerance of a mirror's
+    /// specular value), so ratios to it measure noise and the table says `reference dark`.
     pub reference_dark: bool,
     /// GPU against the f64 reference.
     pub vs_reference: ErrorStats,
@@ -462,14 +462,12 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                 0.0
             }
         });
-        // Dark: every reference sample lies under the error the variants promise
-        // (ρ/C within the tolerance of a mirror's specular value, times the gain C).
-        let gain_max = pixels
-            .iter()
-            .map(|p| crate::brdf::gain(wi, wr_of(p), &prepared.shading))
-            .fold(0.0, f64::max);
-        let reference_peak = refs.iter().map(|r| r[1]).fold(0.0, f64::max);
-        let reference_dark = reference_peak < material.tolerance * gain_max;
+        // Dark: every reference sample lies under the error the variants promise there,
+        // the tolerance on ρ/C (relative to a mirror's specular value) times the gain C.
+        let reference_dark = pixels.iter().zip(&refs).all(|(p, r)| {
+            let c = crate::brdf::gain(wi, wr_of(p), &prepared.shading);
+            c <= 0.0 || r[1] < material.tolerance * c
+        });
         // The wavelengths the variant kept (leaving out): its model integrates those only.
         let colour = match renderer.left_out().and_then(|l| l.wavelengths) {
             Some(w) if w.place == "per pixel" => {
@@ -685,7 +683,7 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
         s.push('\n');
     }
     if reports.iter().any(|r| r.reference_dark) {
-        s.push_str("\nreference dark: the brightest reference sample is below the tolerance times the largest gain over the scored pixels, the error every variant is allowed; relative errors and ΔE of a dark map measure noise, so only max ΔY is shown.\n");
+        s.push_str("\nreference dark: every reference sample is below the tolerance times its gain C (ρ/C under the tolerance of a mirror's specular value), the error every variant is allowed there; relative errors and ΔE of a dark map measure noise, so only max ΔY is shown.\n");
     }
     for r in reports {
         if let Some(k) = r.conditioning {
