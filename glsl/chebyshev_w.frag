@@ -53,7 +53,8 @@ vec3 diffractionXyz(vec3 wi, vec3 wr) {
         b2 = b1;
         b1 = b0;
     }
-    return gainC * (coefficientAt(p0, p1, g0, g1, 0) + x * b1 - b2);
+    // G ≥ 0: the splines and the series in w may overshoot below zero; light cannot.
+    return gainC * max(coefficientAt(p0, p1, g0, g1, 0) + x * b1 - b2, vec3(0.0));
 }
 
 #include "shade.glsl"

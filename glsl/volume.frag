@@ -15,7 +15,7 @@ vec3 diffractionXyz(vec3 wi, vec3 wr) {
     }
     vec3 n = tableInfo.nodes.xyz;
     vec3 t = vec3(nodeCentred(f.xy, n.xy), (f.z * (n.z - 1.0) + 0.5) / n.z);
-    return gainC * texture(gVolume, t).rgb;
+    return gainC * max(texture(gVolume, t).rgb, vec3(0.0)); // G ≥ 0
 }
 
 #include "shade.glsl"

@@ -34,6 +34,11 @@ pub struct GratingReport {
     pub thetas_deg: Vec<f64>,
     /// `ρ[λ index][θ index]`, the f64 model.
     pub rho: Vec<Vec<f64>>,
+    /// The ridge period of the height field's own spectrum ([`ridge_period_um`], nm), which
+    /// chose the first order. On a crop holding a fractional number of periods the
+    /// reflectance peaks sit on the crop's orders `jλ/L`, so the experiment reads `L/j`
+    /// (within half a bin, `d²/2L`, of the ridge period) while this reads `d` itself.
+    pub ridge_period_nm: Option<f64>,
 }
 
 /// Signed in-plane direction: negative angles lie on the mirror side (`φ = 180°`).
@@ -55,9 +60,17 @@ fn signed_direction(theta_deg: f64, azimuth_deg: f64) -> [f64; 3] {
 /// [`first_order`]: on tall gratings a higher order can be the brightest), refined by a
 /// parabola through the three samples around it (grid step `step_deg`).
 ///
+/// Which local maximum is the first order is decided from the height field itself where it
+/// can be ([`ridge_period_um`]: the strongest peak of its own spectrum along the plane of
+/// incidence): the peak nearest `|u| = λ/d_h`, within 5%. The period reported is still read
+/// from the reflectance peak's angle, not from `d_h`. Without a clear spectral peak (or at
+/// an azimuth off the axes) the brightest peak's first order is taken ([`first_order`]).
+///
 /// (An earlier rule took the maximum nearest to specular above 5% of the strongest. On a
 /// crop whose edges do not tile, the crop is a grating of its own size, and its weak orders
-/// near specular won: the experiment reported the crop size instead of the ridge period.)
+/// near specular won: the experiment reported the crop size instead of the ridge period.
+/// A crop holding a whole number of periods has the ridge's orders at whole multiples of
+/// its own, which the sub-harmonic rule alone cannot tell apart.)
 pub fn grating_equation(
     p: &PreparedMaterial,
     theta_i_deg: f64,
@@ -78,6 +91,7 @@ pub fn grating_equation(
         ));
     }
     let wi = signed_direction(theta_i_deg, azimuth_deg);
+    let ridge_um = ridge_period_um(&p.heightfield, azimuth_deg);
     let si = theta_i_deg.to_radians().sin();
     let sigma_s = p.material.coherence_um / 4.0;
     let n = (179.8 / step_deg).floor() as usize;
@@ -109,7 +123,16 @@ pub fn grating_equation(
             rho_map.push(rho);
             continue;
         };
-        let k = first_order(&peaks, &rho, brightest, &u_of);
+        let expected = ridge_um.map(|d| l * 1e-3 / d);
+        let k = expected
+            .and_then(|e| {
+                peaks
+                    .iter()
+                    .copied()
+                    .filter(|&k| (u_of(k) - e).abs() <= 0.05 * e)
+                    .min_by(|&a, &b| (u_of(a) - e).abs().total_cmp(&(u_of(b) - e).abs()))
+            })
+            .unwrap_or_else(|| first_order(&peaks, &rho, brightest, &u_of));
         let (a, b, c) = (rho[k - 1], rho[k], rho[k + 1]);
         let denom = a - 2.0 * b + c;
         let shift = if denom.abs() > 0.0 {
@@ -147,7 +170,80 @@ pub fn grating_equation(
         lambdas_nm: lambdas_nm.to_vec(),
         thetas_deg: thetas,
         rho: rho_map,
+        ridge_period_nm: ridge_um.map(|d| d * 1e3),
     })
+}
+
+/// Share of the non-DC power (of the row-averaged spectrum) that the strongest peak and its
+/// two neighbours must hold for [`ridge_period_um`] to trust it.
+const RIDGE_PEAK_SHARE: f64 = 0.2;
+
+/// The ridge period (µm) along the plane of incidence at `azimuth_deg` (0 or 180: along x,
+/// the rows; 90 or 270: along y, the columns), from the height field's own spectrum: the
+/// power spectrum of each mean-removed line along that axis, averaged over the lines, its
+/// strongest non-DC bin `k`, refined between `k` and its larger neighbour by the
+/// rectangular window's sinc ratio `δ = |X_{k±1}|/(|X_k| + |X_{k±1}|)` (exact for one
+/// sinusoid, whole number of periods or not), and `d = L/(k ± δ)`. `None` off the axes, on
+/// a flat field, or when the peak holds less than [`RIDGE_PEAK_SHARE`] of the power.
+///
+/// A crop's own orders (its seam) put power at every bin `j`, but a whole number of ridge
+/// periods puts the ridge's at bin `L/d` itself and a fractional number puts it between
+/// two: in both cases the strongest bin of a ridged surface is the ridge's, which is what
+/// the reflectance peaks alone (whose orders coincide on a whole-period crop) cannot say.
+pub fn ridge_period_um(hf: &crate::heightfield::HeightField, azimuth_deg: f64) -> Option<f64> {
+    let a = azimuth_deg.rem_euclid(180.0);
+    let along_x = if a.abs() < 1e-9 || (a - 180.0).abs() < 1e-9 {
+        true
+    } else if (a - 90.0).abs() < 1e-9 {
+        false
+    } else {
+        return None;
+    };
+    let (nx, ny) = (hf.nx(), hf.ny());
+    let h = hf.heights_um();
+    let (n, lines) = if along_x { (nx, ny) } else { (ny, nx) };
+    if n < 4 {
+        return None;
+    }
+    let mut planner = rustfft::FftPlanner::new();
+    let fft = planner.plan_fft_forward(n);
+    let mut power = vec![0.0f64; n / 2 + 1];
+    let mut line = vec![rustfft::num_complex::Complex64::new(0.0, 0.0); n];
+    for l in 0..lines {
+        for (i, z) in line.iter_mut().enumerate() {
+            let v = if along_x {
+                h[l * nx + i]
+            } else {
+                h[i * nx + l]
+            };
+            *z = rustfft::num_complex::Complex64::new(v, 0.0);
+        }
+        let mean = line.iter().map(|z| z.re).sum::<f64>() / n as f64;
+        line.iter_mut().for_each(|z| z.re -= mean);
+        fft.process(&mut line);
+        for (p, z) in power.iter_mut().zip(&line) {
+            *p += z.norm_sqr();
+        }
+    }
+    let total: f64 = power[1..].iter().sum();
+    if total <= 0.0 {
+        return None;
+    }
+    let k = (1..power.len()).max_by(|&a, &b| power[a].total_cmp(&power[b]))?;
+    let at = |i: usize| power.get(i).copied().unwrap_or(0.0);
+    let near = at(k) + at(k - 1) * (k > 1) as u8 as f64 + at(k + 1);
+    if near < RIDGE_PEAK_SHARE * total {
+        return None;
+    }
+    let amp = |i: usize| at(i).sqrt();
+    let (left, right) = (if k > 1 { amp(k - 1) } else { 0.0 }, amp(k + 1));
+    let f = if right >= left {
+        k as f64 + right / (amp(k) + right)
+    } else {
+        k as f64 - left / (amp(k) + left)
+    };
+    let length = n as f64 * hf.dh_um();
+    (f > 0.0).then(|| length / f)
 }
 
 /// Largest diffraction order the brightest peak is read as.
@@ -369,5 +465,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         r.mean_nm,
         r.variance_nm2
     );
+    if let Some(d) = r.ridge_period_nm {
+        println!("height-field spectrum along the plane of incidence: ridge period {d:.3} nm");
+    }
     Ok(())
 }

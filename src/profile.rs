@@ -35,6 +35,9 @@ pub struct Variant {
     pub lambda_step_nm: u32,
     pub storage: StorageFormat,
     pub table: TableOptions,
+    /// Leave out what the map cannot need, as `render` does (wavelengths whose weight is
+    /// under the tolerance, DFT texels outside the reached band); false: keep everything.
+    pub leave_out: bool,
 }
 
 impl Variant {
@@ -75,6 +78,7 @@ impl Variant {
                 lambda_step_nm: preset.lambda_step_nm,
                 storage: preset.storage,
                 table,
+                leave_out: preset.leave_out,
             },
             Family::Table | Family::Debug => Variant {
                 name,
@@ -85,6 +89,7 @@ impl Variant {
                 lambda_step_nm: table.step_nm,
                 storage: StorageFormat::Rg32f,
                 table,
+                leave_out: preset.leave_out,
             },
         }
     }
@@ -210,6 +215,13 @@ pub struct VariantReport {
     pub mesh_gpu_ms: Option<f64>,
     /// Condition number of the representation's sum, where float32 rounding limits it.
     pub conditioning: Option<f64>,
+    /// Table variants: the most negative `G` (any channel) of the interpolant over the map
+    /// before the clamp to `G ≥ 0`, relative to the map's largest `G_Y` (0: none).
+    pub overshoot: Option<f64>,
+    /// The reference is dark: every scored sample is below what the variants may err by
+    /// there (the tolerance times the gain `C`: `ρ/C` under the tolerance of a mirror's
+    /// specular value), so ratios to it measure noise and the table says `reference dark`.
+    pub reference_dark: bool,
     /// GPU against the f64 reference.
     pub vs_reference: ErrorStats,
     /// GPU against the f64 model of the same variant (float32 and driver error only).
@@ -333,7 +345,9 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                 lambda_step_nm: 1,
                 storage: StorageFormat::Rg32f,
                 table: TableOptions::default(),
+                leave_out: false,
             };
+            renderer.set_leave_out(false);
             let prepared = reference
                 .material(&setup.base)
                 .prepare(setup.cache_dir.as_deref())?;
@@ -361,6 +375,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
         renderer.set_variant(variant.kind);
         renderer.set_storage_format(variant.storage);
         renderer.set_table_options(variant.table);
+        renderer.set_leave_out(variant.leave_out);
         let map = |r: &mut Renderer| {
             r.render_brdf_map(
                 &prepared,
@@ -417,6 +432,42 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
         let wr_of =
             |&(i, j): &(u32, u32)| map_direction(i, j, setup.size).unwrap_or([0.0, 0.0, 1.0]);
         let conditioning = renderer.table_model().and_then(|t| t.conditioning());
+        let overshoot = renderer.table_model().map(|t| {
+            let (mut lowest, mut peak) = (0.0f64, 0.0f64);
+            for k in 0..setup.size * setup.size {
+                let Some(wr) = map_direction(k % setup.size, k / setup.size, setup.size) else {
+                    continue;
+                };
+                if let Some(g) = t.g_unclamped(crate::brdf::uvw(wi32, wr)) {
+                    peak = peak.max(g[1]);
+                    lowest = g.iter().fold(lowest, |m, x| m.min(*x));
+                }
+            }
+            if peak > 0.0 {
+                lowest / peak
+            } else {
+                0.0
+            }
+        });
+        // Dark: every reference sample lies under the error the variants promise there,
+        // the tolerance on ρ/C (relative to a mirror's specular value) times the gain C.
+        let reference_dark = pixels.iter().zip(&refs).all(|(p, r)| {
+            let c = crate::brdf::gain(wi, wr_of(p), &prepared.shading);
+            c <= 0.0 || r[1] < material.tolerance * c
+        });
+        // The wavelengths the variant kept (leaving out): its model integrates those only.
+        let colour = match renderer.left_out().and_then(|l| l.wavelengths) {
+            Some(w) if w.place == "per pixel" => {
+                let mut c = prepared.colour.clone();
+                for (l, wt) in c.lambdas_nm.iter().zip(c.weights.iter_mut()) {
+                    if !w.kept_nm.iter().any(|k| (k - l).abs() < 1e-9) {
+                        *wt = [0.0; 3];
+                    }
+                }
+                c
+            }
+            _ => prepared.colour.clone(),
+        };
         let density = crate::brdf::nmm::Density::new();
         let periodicity = renderer.pq_periodicity();
         let modelled: Vec<[f64; 3]> =
@@ -429,7 +480,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                             prepared.terms(),
                             &g,
                             &prepared.shading,
-                            &prepared.colour,
+                            &colour,
                             wi32,
                             wr_of(p),
                             crate::brdf::pq::Form::Intensity,
@@ -448,7 +499,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                             prepared.terms(),
                             &prepared.window,
                             &prepared.shading,
-                            &prepared.colour,
+                            &colour,
                             &g,
                             &density,
                             wi32,
@@ -465,7 +516,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                             prepared.terms(),
                             &prepared.window,
                             &prepared.shading,
-                            &prepared.colour,
+                            &colour,
                             wi32,
                             wr_of(p),
                         )
@@ -510,6 +561,8 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                 detail: format!("{} per-vertex", v.name),
                 mesh_gpu_ms: Some(*ms),
                 conditioning: None,
+                overshoot: None,
+                reference_dark,
                 vs_reference: error_stats(&gpu_xyz, &refs),
                 vs_model: error_stats(&gpu_xyz, &modelled),
                 mesh_vs_reference: mesh_error(rgb),
@@ -529,6 +582,8 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             },
             mesh_gpu_ms,
             conditioning,
+            overshoot,
+            reference_dark,
             vs_reference: error_stats(&gpu_xyz, &refs),
             vs_model: error_stats(&gpu_xyz, &modelled),
             mesh_vs_reference: mesh.as_ref().and_then(|m| mesh_error(&m.1)),
@@ -543,6 +598,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
     }
     progress.finish_and_clear();
     renderer.set_keep_models(false);
+    renderer.set_leave_out(false);
     Ok(reports)
 }
 
@@ -592,24 +648,30 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
             ));
             continue;
         }
+        let errors = if r.reference_dark {
+            format!("reference dark | {:.2e} | — | — | —", e.max_abs_y)
+        } else {
+            format!(
+                "{:.2e} | {:.2e} | {:.3} | {:.3} | {:.3}",
+                e.rel_l2, e.max_abs_y, e.p50_de, e.p99_de, e.max_de
+            )
+        };
         s.push_str(&format!(
-            "| {} | {} | {:.0} | {:.1} | {} | {} | {:.2e} | {:.2e} | {:.3} | {:.3} | {:.3} | {:.2e} |\n",
+            "| {} | {} | {:.0} | {:.1} | {} | {} | {errors} | {:.2e} |\n",
             r.variant.name,
             r.fetches,
             r.build_ms,
             r.gpu_bytes as f64 / 1e6,
             ms(r.gpu_ms),
             ms(r.mesh_gpu_ms),
-            e.rel_l2,
-            e.max_abs_y,
-            e.p50_de,
-            e.p99_de,
-            e.max_de,
             r.vs_model.rel_l2
         ));
         s.pop();
         s.push_str(&mesh_cols);
         s.push('\n');
+    }
+    if reports.iter().any(|r| r.reference_dark) {
+        s.push_str("\nreference dark: every reference sample is below the tolerance times its gain C (ρ/C under the tolerance of a mirror's specular value), the error every variant is allowed there; relative errors and ΔE of a dark map measure noise, so only max ΔY is shown.\n");
     }
     for r in reports {
         if let Some(k) = r.conditioning {
@@ -620,17 +682,27 @@ pub fn format_table(device: &str, setup: &ProfileSetup, reports: &[VariantReport
             ));
         }
     }
+    let over: Vec<String> = reports
+        .iter()
+        .filter_map(|r| Some(format!("{} {:.1e}", r.variant.name, r.overshoot?)))
+        .collect();
+    if !over.is_empty() {
+        s.push_str(&format!(
+            "\novershoot (most negative G of the interpolant over the map before the clamp to G ≥ 0, relative to the peak G_Y): {}\n",
+            over.join(", ")
+        ));
+    }
     s
 }
 
 /// The CSV of the reports: the columns of the first profiler, then the new ones.
 pub fn format_csv(reports: &[VariantReport]) -> String {
-    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref\n");
+    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref,overshoot,reference_dark,leave_out\n");
     let opt = |v: Option<f64>| v.map_or(String::new(), |g| g.to_string());
     for r in reports {
         let v = &r.variant;
         csv.push_str(&format!(
-            "{},{},{},{},{},{:?},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{:?},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             v.name,
             v.expansion,
             v.terms,
@@ -656,7 +728,10 @@ pub fn format_csv(reports: &[VariantReport]) -> String {
             opt(r.conditioning),
             r.per_vertex,
             opt(r.mesh_vs_reference.map(|m| m.rel_l2)),
-            opt(r.mesh_vs_reference.map(|m| m.p99_de))
+            opt(r.mesh_vs_reference.map(|m| m.p99_de)),
+            opt(r.overshoot),
+            r.reference_dark,
+            v.leave_out
         ));
     }
     csv

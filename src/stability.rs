@@ -557,6 +557,7 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
             return Err(Error::Validation(r.validation_messages()));
         }
     }
+    let table_cells = run_table_cases(&spec)?;
     let secs = start.elapsed().as_secs_f64();
     std::fs::create_dir_all(&args.out).map_err(|e| Error::io(&args.out, e))?;
     let header = format!(
@@ -567,10 +568,21 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
     crate::fsutil::write_atomic(&args.out.join("stability.csv"), to_csv(&cells).as_bytes())?;
     crate::fsutil::write_atomic(
         &args.out.join("stability.md"),
-        to_markdown(&spec, &cells, &header).as_bytes(),
+        (to_markdown(&spec, &cells, &header) + &table_cases_markdown(&spec, &table_cells))
+            .as_bytes(),
     )?;
     write_png(&spec, &cells, &args.out.join("stability.png"))?;
-    let fails = cells.iter().filter(|c| c.status == Status::Fail).count();
+    let fails = cells.iter().filter(|c| c.status == Status::Fail).count()
+        + table_cells
+            .iter()
+            .filter(|c| c.status == Status::Fail)
+            .count();
+    for c in table_cells.iter().filter(|c| c.status == Status::Fail) {
+        eprintln!(
+            "FAIL: {} on {}, h_max {} µm: error {:?}",
+            c.variant, c.case, c.h_max_um, c.error
+        );
+    }
     println!("{header}");
     println!("{}", summary(&spec, &cells).join("\n"));
     println!("→ {}/stability.{{md,csv,png}}", args.out.display());
@@ -876,4 +888,199 @@ pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
             ),
         },
     )
+}
+
+/// The narrow regions of the table cases: what a distant camera on a plane reaches (`w`
+/// within ±0.0025), and one narrow in `u` or `v` with a wide `w` (a thin strip of view).
+/// Centred on the first order of the default field at 520 nm under light at 30° viewed at
+/// 10° on the mirror side: `(u, v, w) = (−0.326, 0, −1.851)`.
+pub const TABLE_CASES: [(&str, [f64; 3]); 3] = [
+    ("narrow w", [0.02, 0.02, 0.0025]),
+    ("narrow u", [0.0025, 0.02, 0.3]),
+    ("narrow v", [0.02, 0.0025, 0.3]),
+];
+
+/// One table variant on one narrow region at one height.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TableCell {
+    pub variant: crate::render::VariantKind,
+    pub case: &'static str,
+    pub h_max_um: f64,
+    pub status: Status,
+    /// Max `|G_f32 − G|` over the probes (absolute; a mirror's specular `G_Y` is 1), with
+    /// `G_f32` the representation evaluated in float32 as its shader does (stored planes
+    /// rounded, the sum in float32, clamped to `G ≥ 0`) and `G` sampled exactly there.
+    pub error: Option<f64>,
+    /// `dhillon`: its stated expected error.
+    pub expected: Option<f64>,
+    /// The largest exact `G` (any channel) over the probes: the signal the error is of.
+    pub peak: f64,
+    pub message: String,
+}
+
+/// The table variants on [`TABLE_CASES`] for every `h_max` of `spec`: each representation
+/// built as `render` builds it (default `w` nodes; `chebyshev-w` raised for the height),
+/// probed at its `(u, v)` nodes (the `(u, v)` interpolation is the profile's business) and
+/// at `w` between its nodes, in float32 on the CPU, against `G` sampled exactly at those
+/// `w`. A cell passes within the tolerance, is refused where the variant refuses, and
+/// fails otherwise.
+pub fn run_table_cases(spec: &MatrixSpec) -> Result<Vec<TableCell>> {
+    use crate::brdf::table::{sample_g, ChebyshevW, Dhillon, Region, TableSpec, Volume};
+    use crate::render::{TableOptions, VariantKind};
+    let centre = crate::brdf::uvw(direction(30.0, 0.0), direction(10.0, 180.0));
+    let options = TableOptions::default();
+    let mut cells = Vec::new();
+    for &h in &spec.h_max_um {
+        let hf = scaled(&spec.field, h)?;
+        let (lo, hi) = hf.range();
+        for (case, half) in TABLE_CASES {
+            let region = Region {
+                lo: [0, 1, 2].map(|a| centre[a] - half[a]),
+                hi: [0, 1, 2].map(|a| centre[a] + half[a]),
+            };
+            let texel = 0.005;
+            // w probes strictly between nodes of every representation.
+            let probes: Vec<f64> = [0.137, 0.391, 0.503, 0.777, 0.951]
+                .iter()
+                .map(|f| region.lo[2] + f * (region.hi[2] - region.lo[2]))
+                .collect();
+            let exact_spec = TableSpec {
+                region,
+                texel_uv: texel,
+                w_nodes: probes.len(),
+                step_nm: 10,
+            };
+            let exact = sample_g(&hf, spec.coherence_um, &exact_spec, &probes, &|| ())?;
+            let peak = exact
+                .data
+                .iter()
+                .flatten()
+                .flatten()
+                .fold(0.0f64, |m, x| m.max(*x));
+            for kind in [
+                VariantKind::Volume,
+                VariantKind::ChebyshevW,
+                VariantKind::Dhillon,
+            ] {
+                let w_nodes =
+                    options.w_nodes_for_field(kind, hi - lo, [region.lo[2], region.hi[2]]);
+                let tspec = TableSpec {
+                    w_nodes,
+                    ..exact_spec
+                };
+                let mut cell = TableCell {
+                    variant: kind,
+                    case,
+                    h_max_um: h,
+                    status: Status::Pass,
+                    error: None,
+                    expected: None,
+                    peak,
+                    message: String::new(),
+                };
+                // f32 evaluation at node `t` and probe `w`.
+                let eval: Box<dyn Fn(usize, f64) -> [f64; 3]> = match kind {
+                    VariantKind::Volume => {
+                        let v = Volume::build(&hf, spec.coherence_um, &tspec, &|| ())?;
+                        Box::new(move |t, w| {
+                            let n = v.slices.data.len();
+                            let f = ((w - region.lo[2]) / (region.hi[2] - region.lo[2])) as f32
+                                * (n - 1) as f32;
+                            let k = (f.floor() as usize).min(n - 2);
+                            let x = f - k as f32;
+                            let (a, b) = (v.slices.data[k][t], v.slices.data[k + 1][t]);
+                            [0, 1, 2].map(|c| {
+                                (a[c] as f32 * (1.0 - x) + b[c] as f32 * x).max(0.0) as f64
+                            })
+                        })
+                    }
+                    VariantKind::ChebyshevW => {
+                        let c = ChebyshevW::build(&hf, spec.coherence_um, &tspec, &|| ())?;
+                        Box::new(move |t, w| {
+                            let x = c.w_hat(w) as f32;
+                            let (mut b1, mut b2) = ([0.0f32; 3], [0.0f32; 3]);
+                            for cj in c.coeffs.iter().skip(1).rev() {
+                                let b0 = [0, 1, 2]
+                                    .map(|ch| cj[t][ch] as f32 + 2.0 * x * b1[ch] - b2[ch]);
+                                b2 = b1;
+                                b1 = b0;
+                            }
+                            [0, 1, 2].map(|ch| {
+                                (c.coeffs[0][t][ch] as f32 + x * b1[ch] - b2[ch]).max(0.0) as f64
+                            })
+                        })
+                    }
+                    _ => {
+                        let cheb = ChebyshevW::build(&hf, spec.coherence_um, &tspec, &|| ())?;
+                        let d = Dhillon::from_chebyshev(&cheb, 0.1 * spec.tolerance);
+                        cell.expected = Some(d.expected_error());
+                        if let Err(e) = d.check(spec.tolerance) {
+                            cell.status = Status::Refused;
+                            cell.message = e.to_string();
+                            cells.push(cell);
+                            continue;
+                        }
+                        Box::new(move |t, w| {
+                            let x = d.w_hat(w) as f32;
+                            let mut g = [0.0f32; 3];
+                            for p in d.powers.iter().rev() {
+                                g = [0, 1, 2].map(|c| g[c] * x + p[t][c] as f32);
+                            }
+                            g.map(|v| v.max(0.0) as f64)
+                        })
+                    }
+                };
+                let mut worst = 0.0f64;
+                for (k, &w) in probes.iter().enumerate() {
+                    for (t, want) in exact.data[k].iter().enumerate() {
+                        let got = eval(t, w);
+                        for c in 0..3 {
+                            let e = (got[c] - want[c]).abs();
+                            worst = worst.max(if e.is_finite() { e } else { f64::INFINITY });
+                        }
+                    }
+                }
+                cell.error = Some(worst);
+                cell.status = if worst <= spec.tolerance {
+                    Status::Pass
+                } else {
+                    Status::Fail
+                };
+                cells.push(cell);
+            }
+        }
+    }
+    Ok(cells)
+}
+
+/// Markdown of the table cases: one row per case and height, one column per variant.
+pub fn table_cases_markdown(spec: &MatrixSpec, cells: &[TableCell]) -> String {
+    let mut s = format!(
+        "\n## Table variants on narrow regions\n\nEach entry: max |G_f32 − G| (a mirror's specular G_Y is 1; tolerance {:.0e}) of the representation evaluated in float32 as its shader does, at its (u, v) nodes and at w between its nodes, against G sampled exactly there (10 nm); `refused` with the expected error where the variant refuses. Regions centred on (u, v, w) = (−0.326, 0, −1.851), half-widths: narrow w (a distant camera on a plane) ±(0.02, 0.02, 0.0025); narrow u ±(0.0025, 0.02, 0.3); narrow v ±(0.02, 0.0025, 0.3).\n\n| case | h_max (µm) | max G | volume | chebyshev-w | dhillon |\n|---|---|---|---|---|---|\n",
+        spec.tolerance
+    );
+    for (case, _) in TABLE_CASES {
+        for &h in &spec.h_max_um {
+            let peak = cells
+                .iter()
+                .find(|c| c.case == case && c.h_max_um == h)
+                .map_or(0.0, |c| c.peak);
+            s += &format!("| {case} | {h} | {peak:.1e} |");
+            for kind in ["volume", "chebyshev-w", "dhillon"] {
+                let e = cells
+                    .iter()
+                    .find(|c| c.case == case && c.h_max_um == h && c.variant.name() == kind)
+                    .map_or(String::new(), |c| match c.status {
+                        Status::Refused => {
+                            format!("refused (expected {:.1e})", c.expected.unwrap_or(f64::NAN))
+                        }
+                        Status::Fail => format!("FAIL {:.1e}", c.error.unwrap_or(f64::NAN)),
+                        _ => format!("{:.1e}", c.error.unwrap_or(f64::NAN)),
+                    });
+                s += &format!(" {e} |");
+            }
+            s += "\n";
+        }
+    }
+    s
 }

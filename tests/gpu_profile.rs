@@ -61,6 +61,21 @@ fn variants_report_error_and_time() {
         diffract::profile::format_table(r.device_name(), &setup, &reports)
     );
     assert_eq!(reports.len(), setup.variants.len());
+    // This map holds the grating's orders: the reference is not dark, and the table
+    // variants' overshoot below zero (before the clamp) is reported.
+    assert!(reports.iter().all(|r| !r.reference_dark));
+    for rep in reports.iter().filter(|r| {
+        r.variant.kind != diffract::render::VariantKind::Flss
+            && r.variant.kind != diffract::render::VariantKind::Nmm
+    }) {
+        let o = rep
+            .overshoot
+            .expect("table variants report their overshoot");
+        assert!((-1.0..=0.0).contains(&o), "{}: {o}", rep.variant.name);
+    }
+    assert!(reports
+        .iter()
+        .any(|r| r.variant.name == "taylor R=2 keep-all" && !r.variant.leave_out));
     for rep in &reports {
         assert!(rep.wall_ms > 0.0 && rep.gpu_ms.is_none_or(|g| g > 0.0));
         for e in [rep.vs_reference, rep.vs_model] {

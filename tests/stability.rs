@@ -498,3 +498,94 @@ fn cli_refuses_and_warns_on_one_line() {
     assert!(!csv.contains("inf") && !csv.contains("NaN"), "{csv}");
     std::fs::remove_dir_all(&dir).ok();
 }
+
+/// Regular rounded ridges (Xenopeltis-like) of period `d_um` and height `h_um`, `n²`
+/// samples of `dh_um`, with a faint deterministic roughness as a scan would have.
+fn ridges(n: usize, dh_um: f64, d_um: f64, h_um: f64) -> HeightField {
+    let tau = 2.0 * std::f64::consts::PI;
+    let mut s = 0x9e37_79b9_u64;
+    let h = (0..n * n)
+        .map(|i| {
+            let x = (i % n) as f64 * dh_um;
+            s = s
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            let noise = ((s >> 40) as f64 / (1u64 << 24) as f64 - 0.5) * 0.02 * h_um;
+            h_um * (0.5 + 0.5 * (tau * x / d_um).cos()).powi(2) + noise
+        })
+        .collect();
+    HeightField::new(n, n, dh_um, h).unwrap()
+}
+
+#[test]
+fn grating_experiment_finds_the_ridge_period_on_whole_and_fractional_crops() {
+    // 100 samples holding exactly 10 periods of 900 nm: the crop's orders (|u| = jλ/L) fall
+    // on the ridge's at j = 10m, and the sub-harmonic rule alone took the crop's first order
+    // (9 000 nm) for the grating's. 100 samples of 83.7 nm hold 9.3 periods instead. The
+    // height field's spectrum finds 900 nm within 1% on both, tall and shallow.
+    let d_um = 0.9;
+    let m = Material {
+        window_radius: 3,
+        ..Material::default()
+    };
+    for (dh, what) in [(0.09, "whole (10 periods)"), (0.0837, "fractional (9.3)")] {
+        for h in [0.06, 0.6] {
+            let hf = ridges(100, dh, d_um, h);
+            let found = diffract::eval::ridge_period_um(&hf, 0.0).expect("a ridge period");
+            assert!(
+                (found - d_um).abs() < 0.01 * d_um,
+                "{what}, h {h}: spectrum says {found}"
+            );
+            assert!(diffract::eval::ridge_period_um(&hf, 30.0).is_none());
+            let plan = m.plan(&hf, &Reach::brdf_map(75.0), Precision::F64).unwrap();
+            let p = m.prepare_planned(hf, plan, None).unwrap();
+            let r = diffract::eval::grating_equation(&p, 75.0, 0.0, &[450.0, 550.0, 650.0], 0.02)
+                .unwrap();
+            println!(
+                "{what}, h {h} µm: mean {:.1} nm, variance {:.2} nm²",
+                r.mean_nm, r.variance_nm2
+            );
+            assert_eq!(r.samples.len(), 3);
+            let spectrum_nm = r.ridge_period_nm.expect("the spectrum's period");
+            assert!((spectrum_nm - 900.0).abs() < 9.0, "{what}: {spectrum_nm}");
+            // The reflectance of a crop sits on the crop's own orders jλ/L: a whole number
+            // of periods puts the ridge's first order on one (j = 10), a fractional number
+            // between two, where the experiment reads the nearest, L/9 = 930 nm for 9.3
+            // periods (the crop, not the method, limits it: half a bin is d²/2L = 4.8%).
+            let length_nm = 100.0 * dh * 1e3;
+            let nearest = length_nm / (length_nm / 900.0).round();
+            assert!(
+                (r.mean_nm - nearest).abs() < 0.01 * nearest,
+                "{what}, h {h} µm: {} nm (nearest crop order {nearest} nm)",
+                r.mean_nm
+            );
+            assert!((r.mean_nm - 900.0).abs() < 9.0 || dh != 0.09);
+        }
+    }
+}
+
+#[test]
+fn table_variants_on_narrow_regions_are_right_or_refused() {
+    // A distant camera on a plane (narrow w) and thin strips of view (narrow u, narrow v):
+    // every table variant evaluated in float32 as its shader does is within the tolerance
+    // of the exact G there, or refused.
+    let (field, period) = stability::default_field().unwrap();
+    let mut spec = MatrixSpec::full(field, "sinusoid", Some(period));
+    spec.h_max_um = vec![0.25, 1.0];
+    let cells = stability::run_table_cases(&spec).unwrap();
+    println!("{}", stability::table_cases_markdown(&spec, &cells));
+    assert_eq!(cells.len(), 2 * 3 * 3);
+    for c in &cells {
+        // The regions hold the first order: the errors are of a real signal.
+        assert!(c.peak > 1e-3, "{c:?}");
+        assert_ne!(c.status, Status::Fail, "{c:?}");
+        if c.status == Status::Refused {
+            assert!(c.message.contains("expected error"), "{c:?}");
+        }
+    }
+    // The narrow w interval is where mapped powers are stable: dhillon draws there.
+    assert!(cells
+        .iter()
+        .filter(|c| c.case == "narrow w" && c.variant.name() == "dhillon")
+        .all(|c| c.status == Status::Pass));
+}

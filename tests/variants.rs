@@ -105,7 +105,7 @@ fn representations_interpolate_g_within_their_stated_accuracy() {
         step_nm: 10,
     };
     let cheb = ChebyshevW::build(&hf, 65.0, &spec(10), &|| ()).unwrap();
-    let dh = Dhillon::from_chebyshev(&cheb);
+    let dh = Dhillon::from_chebyshev(&cheb, 0.0);
     let vol = Volume::build(&hf, 65.0, &spec(24), &|| ()).unwrap();
     // Points at (u, v) nodes (no u/v interpolation error) but between w nodes: the
     // error in w alone, against the exact G at that w.

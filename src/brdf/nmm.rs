@@ -200,6 +200,30 @@ pub fn plan(
     Some(out)
 }
 
+/// The most wavelength samples [`plan`] takes for one pixel whose `|u|`, `|v|` reach at
+/// most `t_max`, with wavelengths in `lambda_nm` (the kept range): per axis with a period,
+/// the orders whose line reaches the range at the largest `|t|` (their count grows with
+/// `|t|`), `2·HALF_SAMPLES + 1` samples each. What the fetch counts multiply.
+pub fn max_samples(
+    grating: &Grating,
+    window: &Window,
+    extent_um: [f64; 2],
+    t_max: [f64; 2],
+    lambda_nm: (f64, f64),
+) -> usize {
+    let per_order = (2 * HALF_SAMPLES + 1) as usize;
+    (0..2)
+        .filter_map(|a| {
+            let d = grating.period_um[a]?;
+            let t = t_max[a].abs().min(2.0);
+            let delta = half_width(d, window.sigma_texels[a], extent_um[a]);
+            let first = ((d * t * 1e3 / lambda_nm.1 - delta).ceil() as i64).max(1);
+            let last = (d * t * 1e3 / lambda_nm.0 + delta).floor() as i64;
+            Some((last - first + 1).max(0) as usize * per_order)
+        })
+        .sum()
+}
+
 /// Whether wavelength `λ` already lies on a line of an order along u (so a v-order sample
 /// at the same `λ` would count the same light twice).
 fn counted_along_u(

@@ -554,9 +554,17 @@ fn spline(
 pub trait GTable: Sync {
     /// The region the table covers.
     fn region(&self) -> &Region;
-    /// `G(u, v, w)` as the GPU variant computes it (in f64); `None` outside the region,
-    /// where the GPU writes black.
-    fn g(&self, uvw: [f64; 3]) -> Option<[f64; 3]>;
+    /// `G(u, v, w)` as the representation interpolates it (in f64), before the clamp to
+    /// `G ≥ 0`; `None` outside the region. Cubic splines and series in `w` may overshoot
+    /// below zero between nodes.
+    fn g_unclamped(&self, uvw: [f64; 3]) -> Option<[f64; 3]>;
+
+    /// `G(u, v, w)` as the GPU variant computes it (in f64): the interpolant clamped to
+    /// `G ≥ 0` per channel, as the shaders clamp it (light cannot be negative); `None`
+    /// outside the region, where the GPU writes black.
+    fn g(&self, uvw: [f64; 3]) -> Option<[f64; 3]> {
+        self.g_unclamped(uvw).map(|g| g.map(|x| x.max(0.0)))
+    }
     /// The stored planes, each `nu × nv` XYZ, in upload order.
     fn planes(&self) -> &[Vec<[f64; 3]>];
     /// Nodes along `u` and `v`.
@@ -570,6 +578,12 @@ pub trait GTable: Sync {
     /// How much float32 rounding the representation amplifies (the condition number of its
     /// sum), where that is the limiting factor; `None` for stable representations.
     fn conditioning(&self) -> Option<f64> {
+        None
+    }
+
+    /// Bound on float32's rounding error in `G` (absolute), where the representation
+    /// amplifies it beyond the stored values' own rounding; `None` for stable ones.
+    fn f32_error(&self) -> Option<f64> {
         None
     }
 
@@ -613,7 +627,7 @@ impl GTable for Volume {
     fn region(&self) -> &Region {
         &self.region
     }
-    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+    fn g_unclamped(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
         let s = &self.slices;
         let r = &self.region;
         let (k, fz) = grid_pos(w, r.lo[2], r.hi[2], s.data.len())?;
@@ -728,7 +742,7 @@ impl GTable for ChebyshevW {
     fn region(&self) -> &Region {
         &self.region
     }
-    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+    fn g_unclamped(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
         if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
             return None;
         }
@@ -750,10 +764,23 @@ impl GTable for ChebyshevW {
     }
 }
 
-/// `G = Σ_p a_p(u, v)·w^p` (Dhillon et al. 2014: tables of the powers of `w`), here the
-/// Chebyshev interpolant of [`ChebyshevW`] rewritten in powers of `w` itself; Horner at
-/// lookup. Mathematically the same polynomial, numerically the monomial basis: its
-/// conditioning is what this variant measures.
+/// Float32's unit roundoff (`2⁻²⁴`): the relative error of one stored value or operation.
+pub const F32_ROUNDOFF: f64 = 5.960_464_477_539_063e-8;
+
+/// `G = Σ_p a_p(u, v)·ŵ^p`: Dhillon et al. 2014's representation, tables of the powers of
+/// the view variable `w`, Horner at lookup. Two differences from the paper, both stated in
+/// the variant's summary:
+///
+/// - the powers are of `ŵ = (w − w_c)/w_h`, the reachable interval `[w_c − w_h, w_c + w_h]`
+///   mapped onto `[−1, 1]`: on a narrow interval (a distant camera, a plane) raw powers of
+///   `w` are hopelessly conditioned, powers of `ŵ` are not;
+/// - the planes are fitted from the exact f64 table (the Chebyshev interpolant of
+///   [`ChebyshevW`] rewritten in powers of `ŵ`), not built from products of Taylor terms.
+///
+/// Coefficients whose whole tail changes `G` by less than a tenth of the tolerance are
+/// dropped before the conversion (they carry only f64 noise, which the conversion would
+/// amplify like `(1 + √2)^K`). [`Dhillon::expected_error`] bounds the float32 error of the
+/// sum; [`Dhillon::check`] refuses a table whose bound exceeds the tolerance.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Dhillon {
     pub region: Region,
@@ -761,53 +788,49 @@ pub struct Dhillon {
     pub nv: usize,
     /// `powers[p][texel]` = `a_p`.
     pub powers: Vec<Vec<[f64; 3]>>,
+    /// Chebyshev coefficients sampled (`K`, the `w` nodes).
+    pub sampled: usize,
+    /// What the truncation in `w` may cost, absolute in `G`: the dropped tail
+    /// `Σ_{j≥P} max|c_j|`, or, when nothing could be dropped, the last coefficient's size
+    /// (the series has not converged and that is the order of its remainder).
+    pub truncation: f64,
 }
 
 impl Dhillon {
-    /// Samples at Chebyshev nodes (as [`ChebyshevW::build`]) and converts to powers of `w`.
-    pub fn build(
-        hf: &HeightField,
-        coherence_um: f64,
-        spec: &TableSpec,
-        progress: &(dyn Fn() + Sync),
-    ) -> Result<Self> {
-        Ok(Self::from_chebyshev(&ChebyshevW::build(
-            hf,
-            coherence_um,
-            spec,
-            progress,
-        )?))
-    }
-
-    /// Rewrites `Σ_j c_j T_j(αw + β)` as `Σ_p a_p w^p` (`ŵ = αw + β`).
-    pub fn from_chebyshev(cheb: &ChebyshevW) -> Self {
+    /// Converts `cheb` to powers of `ŵ`, dropping the tail of coefficients whose sum of
+    /// maxima stays under `drop_below` (absolute, in units of `G`).
+    pub fn from_chebyshev(cheb: &ChebyshevW, drop_below: f64) -> Self {
         let k = cheb.coeffs.len();
-        let (lo, hi) = (cheb.region.lo[2], cheb.region.hi[2]);
-        let alpha = 2.0 / (hi - lo);
-        let beta = -(lo + hi) / (hi - lo);
-        // m[j][p]: coefficient of w^p in T_j(αw + β), by T_{j+1} = 2ŵ T_j − T_{j−1}.
-        let mut m = vec![vec![0.0f64; k]; k];
-        m[0][0] = 1.0;
-        if k > 1 {
-            m[1][0] = beta;
-            m[1][1] = alpha;
+        let max_of = |c: &Vec<[f64; 3]>| c.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        let sizes: Vec<f64> = cheb.coeffs.iter().map(max_of).collect();
+        let (mut kept, mut tail) = (k, 0.0);
+        while kept > 1 && tail + sizes[kept - 1] <= drop_below {
+            tail += sizes[kept - 1];
+            kept -= 1;
         }
-        for j in 1..k.saturating_sub(1) {
-            for p in 0..k {
-                let mut x = -m[j - 1][p] + 2.0 * beta * m[j][p];
+        let truncation = if kept == k { sizes[k - 1] } else { tail };
+        // m[j][p]: coefficient of ŵ^p in T_j(ŵ), by T_{j+1} = 2ŵ T_j − T_{j−1}.
+        let mut m = vec![vec![0.0f64; kept]; kept];
+        m[0][0] = 1.0;
+        if kept > 1 {
+            m[1][1] = 1.0;
+        }
+        for j in 1..kept.saturating_sub(1) {
+            for p in 0..kept {
+                let mut x = -m[j - 1][p];
                 if p > 0 {
-                    x += 2.0 * alpha * m[j][p - 1];
+                    x += 2.0 * m[j][p - 1];
                 }
                 m[j + 1][p] = x;
             }
         }
         let n = cheb.nu * cheb.nv;
-        let powers = (0..k)
+        let powers = (0..kept)
             .map(|p| {
                 (0..n)
                     .map(|t| {
                         let mut a = [0.0; 3];
-                        for (j, cj) in cheb.coeffs.iter().enumerate() {
+                        for (j, cj) in cheb.coeffs.iter().take(kept).enumerate() {
                             for ch in 0..3 {
                                 a[ch] += cj[t][ch] * m[j][p];
                             }
@@ -822,32 +845,97 @@ impl Dhillon {
             nu: cheb.nu,
             nv: cheb.nv,
             powers,
+            sampled: k,
+            truncation,
         }
     }
 
-    /// Condition number of the monomial sum: `max Σ_p |a_p w^p| / |Σ_p a_p w^p|` over the
-    /// texels, at the `w` of the region's ends, for the Y channel where `G` is not tiny.
-    /// Multiplied by float32's 6e-8 it estimates the relative rounding error.
-    pub fn conditioning(&self) -> f64 {
-        let mut worst: f64 = 1.0;
+    /// `ŵ ∈ [−1, 1]` of `w` (the GPU computes it as `2f − 1` from the table's fraction).
+    pub fn w_hat(&self, w: f64) -> f64 {
+        let (lo, hi) = (self.region.lo[2], self.region.hi[2]);
+        (2.0 * w - lo - hi) / (hi - lo)
+    }
+
+    /// The largest `Σ_p |a_p|` over texels and channels: the largest magnitude Horner's
+    /// partial sums can reach (at `|ŵ| = 1`), which float32 rounds.
+    pub fn magnitude(&self) -> f64 {
         let n = self.nu * self.nv;
-        let g_max = (0..n)
-            .map(|t| self.powers[0][t][1].abs())
-            .fold(0.0f64, f64::max);
-        for w in [self.region.lo[2], self.region.hi[2]] {
+        (0..n)
+            .flat_map(|t| (0..3).map(move |c| (t, c)))
+            .map(|(t, c)| self.powers.iter().map(|p| p[t][c].abs()).sum::<f64>())
+            .fold(0.0, f64::max)
+    }
+
+    /// The largest `G` the table holds (over its nodes, both ends of `w`, every channel).
+    pub fn peak(&self) -> f64 {
+        let n = self.nu * self.nv;
+        let mut peak = 0.0f64;
+        for x in [-1.0, 1.0f64] {
             for t in 0..n {
-                let (mut sum, mut abs, mut wp) = (0.0, 0.0, 1.0);
-                for p in &self.powers {
-                    sum += p[t][1] * wp;
-                    abs += (p[t][1] * wp).abs();
-                    wp *= w;
-                }
-                if sum.abs() > 1e-3 * g_max && sum.abs() > 0.0 {
-                    worst = worst.max(abs / sum.abs());
+                for c in 0..3 {
+                    let g = self
+                        .powers
+                        .iter()
+                        .rev()
+                        .fold(0.0, |acc, p| acc * x + p[t][c]);
+                    peak = peak.max(g.abs());
                 }
             }
         }
-        worst
+        peak
+    }
+
+    /// Condition number of the sum relative to the table's peak: `max Σ_p |a_p| / max G`.
+    /// 1 for a constant; `(1 + √2)^P`-like for a series that needs all its terms.
+    pub fn conditioning(&self) -> f64 {
+        let peak = self.peak();
+        if peak > 0.0 {
+            (self.magnitude() / peak).max(1.0)
+        } else {
+            1.0
+        }
+    }
+
+    /// Bound on float32's error in `G` (absolute, units of `G`): each of the `P` planes is
+    /// stored and filtered in float32 (about two roundings of `|a_p|`), and Horner's `P`
+    /// multiply-adds round partial sums no larger than `Σ|a_p|`: `(2P + 3)·u·Σ|a_p|`.
+    pub fn rounding(&self) -> f64 {
+        (2 * self.powers.len() + 3) as f64 * F32_ROUNDOFF * self.magnitude()
+    }
+
+    /// Float32 rounding plus the truncation in `w` (absolute, units of `G`).
+    pub fn expected_error(&self) -> f64 {
+        self.rounding() + self.truncation
+    }
+
+    /// Refuses the table when its expected error exceeds `tolerance` (absolute in `G`,
+    /// which is `|P̂|²` weighted: a mirror's specular value is 1), with the reason.
+    pub fn check(&self, tolerance: f64) -> Result<()> {
+        let e = self.expected_error();
+        if e <= tolerance {
+            return Ok(());
+        }
+        let (lo, hi) = (self.region.lo[2], self.region.hi[2]);
+        let reason = if self.rounding() >= self.truncation {
+            format!(
+                "its {} powers of ŵ over w ∈ [{lo:.4}, {hi:.4}] sum to {:.1e} where G peaks at {:.1e} (condition number {:.1e}), which float32 cannot hold",
+                self.powers.len(),
+                self.magnitude(),
+                self.peak(),
+                self.conditioning()
+            )
+        } else {
+            format!(
+                "its series in w over [{lo:.4}, {hi:.4}] has not converged with {} nodes (last coefficient {:.1e}): raise --table-w-nodes",
+                self.sampled, self.truncation
+            )
+        };
+        Err(Error::invalid(
+            "variant",
+            format!(
+                "dhillon refused: {reason}; expected error {e:.1e} exceeds the tolerance {tolerance:.1e}; chebyshev-w draws this table stably"
+            ),
+        ))
     }
 }
 
@@ -858,14 +946,18 @@ impl GTable for Dhillon {
     fn conditioning(&self) -> Option<f64> {
         Some(Dhillon::conditioning(self))
     }
-    fn g(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+    fn f32_error(&self) -> Option<f64> {
+        Some(self.rounding())
+    }
+    fn g_unclamped(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
         if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
             return None;
         }
+        let x = self.w_hat(w);
         let mut acc = [0.0; 3];
         for p in self.powers.iter().rev() {
             let a = bilinear(p, self.nu, self.nv, &self.region, u, v)?;
-            acc = [0, 1, 2].map(|c| acc[c] * w + a[c]);
+            acc = [0, 1, 2].map(|c| acc[c] * x + a[c]);
         }
         Some(acc)
     }
@@ -916,15 +1008,79 @@ mod tests {
                 .collect(),
         };
         let cheb = ChebyshevW::from_nodes(region, &slices);
-        let dh = Dhillon::from_chebyshev(&cheb);
+        let dh = Dhillon::from_chebyshev(&cheb, 0.0);
         for w in [-1.7, -1.2, -0.9, -0.4] {
-            let a = cheb.g([0.3, 0.6, w]).unwrap();
-            let b = dh.g([0.3, 0.6, w]).unwrap();
+            // Unclamped: this polynomial dips below zero (G itself cannot).
+            let a = cheb.g_unclamped([0.3, 0.6, w]).unwrap();
+            let b = dh.g_unclamped([0.3, 0.6, w]).unwrap();
             assert!((a[0] - f(w)).abs() < 1e-12 && (a[1] - 2.0 * f(w)).abs() < 1e-12);
             assert!((b[0] - f(w)).abs() < 1e-10, "{} vs {}", b[0], f(w));
         }
         assert!(cheb.g([0.3, 0.6, -0.3]).is_none());
-        assert!(dh.powers[3][0][0] + 1.0 < 1e-9);
+        assert_eq!(
+            cheb.g([0.3, 0.6, -0.9]).unwrap()[0],
+            0.0,
+            "clamped to G ≥ 0"
+        );
+        // w = −1.05 + 0.65ŵ: the ŵ³ coefficient of −w³ is −0.65³.
+        assert!((dh.powers[3][0][0] + 0.65f64.powi(3)).abs() < 1e-12);
+        // Exact in three powers: the coefficient of T_4 is f64 noise and is dropped.
+        let dropped = Dhillon::from_chebyshev(&cheb, 1e-9);
+        assert_eq!(dropped.powers.len(), 4);
+        assert!(dropped.truncation < 1e-12 && dropped.check(1e-3).is_ok());
+    }
+
+    #[test]
+    fn dhillon_on_a_narrow_w_interval_is_well_conditioned_or_refused() {
+        // A smooth G on a narrow interval (a distant camera): nearly constant in w.
+        let region = Region {
+            lo: [0.0, 0.0, -1.99],
+            hi: [1.0, 1.0, -1.97],
+        };
+        let f = |w: f64| 0.77 + 0.3 * (40.0 * w).sin();
+        for k in [12, 24, 64] {
+            let nodes = chebyshev_nodes(-1.99, -1.97, k);
+            let slices = Slices {
+                nu: 2,
+                nv: 2,
+                w: nodes.clone(),
+                data: nodes.iter().map(|&w| vec![[f(w); 3]; 4]).collect(),
+            };
+            let cheb = ChebyshevW::from_nodes(region, &slices);
+            let dh = Dhillon::from_chebyshev(&cheb, 1e-4);
+            assert!(dh.check(1e-3).is_ok(), "K = {k}: {:?}", dh.check(1e-3));
+            assert!(dh.conditioning() < 10.0, "K = {k}: {}", dh.conditioning());
+            // Float32 evaluation of the stored planes, as the shader does it.
+            for w in [-1.99, -1.985, -1.9731, -1.97] {
+                let x = dh.w_hat(w) as f32;
+                let g = dh
+                    .powers
+                    .iter()
+                    .rev()
+                    .fold(0.0f32, |acc, p| acc * x + p[0][1] as f32);
+                assert!(((g as f64) - f(w)).abs() < 1e-4, "K = {k}, w = {w}: {g}");
+            }
+        }
+        // A series that needs all its terms over a wide interval: refused, saying why.
+        let wide = Region {
+            lo: [0.0, 0.0, -2.0],
+            hi: [1.0, 1.0, 0.0],
+        };
+        let g = |w: f64| 1.0 + (60.0 * w).cos();
+        let nodes = chebyshev_nodes(-2.0, 0.0, 64);
+        let slices = Slices {
+            nu: 2,
+            nv: 2,
+            w: nodes.clone(),
+            data: nodes.iter().map(|&w| vec![[g(w); 3]; 4]).collect(),
+        };
+        let dh = Dhillon::from_chebyshev(&ChebyshevW::from_nodes(wide, &slices), 1e-4);
+        let err = dh.check(1e-3).unwrap_err().to_string();
+        assert!(
+            err.contains("expected error") && !err.contains('\n'),
+            "{err}"
+        );
+        println!("{err}");
     }
 
     #[test]

@@ -170,9 +170,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     crate::image_io::output_format(&args.out)?;
     crate::guard::render_args(args, &scene)?;
-    check_per_vertex(args.per_vertex, args.brdf_map, args.variant)?;
+    // `default` means the best variant that can draw the request: one wavelength needs
+    // flss (the table variants integrate the spectrum offline). Explicit choices stand.
+    let spectral_default = args.variant == VariantKind::Default && args.lambda_nm.is_some();
+    let variant = if spectral_default {
+        VariantKind::Flss
+    } else {
+        args.variant
+    };
+    check_per_vertex(args.per_vertex, args.brdf_map, variant)?;
     if args.lambda_nm.is_some() {
-        args.variant.check_output(super::OutputMode::MapSpectral)?;
+        variant.check_output(super::OutputMode::MapSpectral)?;
     }
     if let Some(w) = args.width {
         scene.output.width = w;
@@ -190,9 +198,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     } else {
         Some(SceneInputs::load(&scene, true)?)
     };
+    if spectral_default {
+        eprintln!(
+            "note: one wavelength (--lambda-nm) is drawn by flss; the default {} integrates the spectrum offline",
+            VariantKind::DEFAULT
+        );
+    }
     let mut renderer = Renderer::new(validation_requested())?;
     renderer.set_storage_format(args.storage);
-    renderer.set_variant(args.variant);
+    renderer.set_variant(variant);
     renderer.set_per_vertex(args.per_vertex);
     renderer.set_table_options(args.table.options());
     renderer.set_leave_out(!args.keep_all);
@@ -200,8 +214,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     renderer.set_cache_dir(cache_dir.clone());
     let prepared = material.prepare_planned(heightfield, plan, cache_dir.as_deref())?;
     // Table variants show their own bar while they build; the draw after it is short.
-    let spin = args
-        .variant
+    let spin = variant
         .is_spectral()
         .then(|| crate::progress::spinner("rendering"));
 
@@ -255,8 +268,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             v.gpu_bytes as f64 / 1e6
         );
     }
+    // A scene's pixel evaluates the variant once per direction over the light's disc, for
+    // each of its supersample² samples; a BRDF map once.
+    let fetches = if args.brdf_map {
+        format!("{} fetches/pixel", v.fetches)
+    } else {
+        let disc = scene.light.disk_samples().len().max(1);
+        let ss = (scene.output.supersample.max(1) as usize).pow(2);
+        format!(
+            "{} fetches/pixel = {} × {disc} disc directions × {ss} samples",
+            v.fetches * disc * ss,
+            v.fetches
+        )
+    };
     println!(
-        "{}: {what} {}×{} → {written}: variant {}: GPU {gpu} ms, wall {:.1} ms (build {:.1} ms, {:.1} MB, {} fetches/pixel)",
+        "{}: {what} {}×{} → {written}: variant {}: GPU {gpu} ms, wall {:.1} ms (build {:.1} ms, {:.1} MB, {fetches})",
         renderer.device_name(),
         frame.width,
         frame.height,
@@ -264,7 +290,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         frame.wall_ms,
         v.build_ms,
         v.gpu_bytes as f64 / 1e6,
-        v.fetches
     );
     let n = renderer.validation_messages();
     if n > 0 {

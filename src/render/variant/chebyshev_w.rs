@@ -63,7 +63,7 @@ impl Variant for ChebyshevW {
             setup,
             Layout::Planes,
             table::ChebyshevW::nodes,
-            |r, s| table::ChebyshevW::from_nodes(r, &s),
+            |r, s| Ok(table::ChebyshevW::from_nodes(r, &s)),
         )
     }
 }

@@ -71,6 +71,10 @@ impl Variant for Flss {
             },
             Preset::named("taylor R=2"),
             Preset {
+                leave_out: false,
+                ..Preset::named("taylor R=2 keep-all")
+            },
+            Preset {
                 window_radius: 3,
                 ..Preset::named("taylor R=3")
             },

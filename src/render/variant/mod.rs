@@ -232,6 +232,8 @@ pub struct Preset {
     pub table_step_nm: Option<u32>,
     /// Table variants: the texel format instead of the profile's.
     pub table_format: Option<TableFormat>,
+    /// Leave out what `render` leaves out (false: keep everything, as `render --keep-all`).
+    pub leave_out: bool,
 }
 
 impl Preset {
@@ -244,6 +246,7 @@ impl Preset {
         storage: StorageFormat::Rg32f,
         table_step_nm: None,
         table_format: None,
+        leave_out: true,
     };
 
     /// The base settings under `label`.
@@ -549,19 +552,24 @@ pub(crate) trait PreparedVariant {
 /// BRDF map at θi = 60° (its automatic `T` planned, not computed).
 pub fn list() -> String {
     let material = Material::default();
-    let terms = crate::heightfield::HeightField::load_source(
+    let hf = crate::heightfield::HeightField::load_source(
         &material.heightfield,
         material.dh_um,
         material.h_max_um,
-    )
-    .and_then(|hf| {
-        material.plan(
-            &hf,
-            &crate::brdf::truncation::Reach::brdf_map(60.0),
-            crate::brdf::truncation::Precision::F32,
-        )
-    })
-    .map_or(30, |p| p.terms);
+    );
+    let terms = hf
+        .as_ref()
+        .ok()
+        .and_then(|hf| {
+            material
+                .plan(
+                    hf,
+                    &crate::brdf::truncation::Reach::brdf_map(60.0),
+                    crate::brdf::truncation::Precision::F32,
+                )
+                .ok()
+        })
+        .map_or(30, |p| p.terms);
     let table = TableOptions::default();
     let region = Region::brdf_map(crate::brdf::direction(60.0, 0.0));
     let mut s = String::from(
@@ -591,13 +599,36 @@ pub fn list() -> String {
         } else {
             ""
         };
+        let mut fetches = kind.fetches(terms, &material, &table);
+        // nmm: per order and axis; the orders the map reaches (at its largest |u|, |v|).
+        if let (VariantKind::Nmm, Ok(hf)) = (kind, &hf) {
+            if let (Ok(g), Ok(w)) = (
+                crate::brdf::nmm::estimate_grating(hf),
+                crate::spectrum::Window::new(
+                    hf.nx(),
+                    hf.ny(),
+                    hf.dh_um(),
+                    material.coherence_um,
+                    material.window_radius,
+                ),
+            ) {
+                let (lx, ly) = hf.extent_um();
+                let t = [0, 1].map(|a| region.lo[a].abs().max(region.hi[a].abs()));
+                let n = crate::brdf::nmm::max_samples(&g, &w, [lx, ly], t, (380.0, 780.0));
+                fetches = fetches / (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * n;
+            }
+        }
         s.push_str(&format!(
             "{:<13} {:>13}  {memory}\n    {}{mark}\n",
             kind.name(),
-            kind.fetches(terms, &material, &table),
+            fetches,
             kind.summary()
         ));
     }
+    let scene = crate::scene::Scene::default_scene();
+    let disc = scene.light.disk_samples().len().max(1);
+    let ss = scene.output.supersample.max(1).pow(2) as usize;
+    s.push_str(&format!("fetches are per evaluation: a pixel of the default scene evaluates the variant for {disc} directions over the sun's disc and {ss} supersamples, {}× the counts above\n", disc * ss));
     let per_vertex: Vec<&str> = VariantKind::ALL
         .into_iter()
         .filter(|k| k.per_vertex_file().is_some())

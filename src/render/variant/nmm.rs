@@ -121,9 +121,22 @@ impl Variant for Nmm {
             period(grating.period_um[1]),
             flss.stats.name.trim_start_matches("flss ")
         );
-        // Per order: 2·HALF_SAMPLES + 1 wavelengths instead of the whole table.
+        // Per order and axis: 2·HALF_SAMPLES + 1 wavelengths instead of the whole table;
+        // the count is the most any pixel of the region takes (the orders reaching the
+        // kept wavelengths at the region's largest |u| and |v|).
         let per_lambda = flss.stats.fetches / flss.keep.len().max(1);
-        flss.stats.fetches = per_lambda * (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1);
+        let r = &setup.region;
+        let t_max = [0, 1].map(|a| r.lo[a].abs().max(r.hi[a].abs()));
+        let range = (ubo.lambda_range[0] as f64, ubo.lambda_range[1] as f64);
+        let samples = crate::brdf::nmm::max_samples(&grating, &p.window, [lx, ly], t_max, range);
+        // Near specular (if the region holds it) every kept wavelength is summed instead.
+        let specular = (0..2).all(|a| r.lo[a] <= 0.0 && r.hi[a] >= 0.0);
+        let lambdas = if specular {
+            samples.max(flss.keep.len())
+        } else {
+            samples
+        };
+        flss.stats.fetches = per_lambda * lambdas.max(1);
         Ok(Box::new(NmmGpu {
             flss,
             info,

@@ -41,15 +41,15 @@ struct TableInfoUbo {
 unsafe impl Pod for TableInfoUbo {}
 
 /// Samples `G` at the `w` nodes `nodes(spec)` (through the table cache), assembles the
-/// representation of `kind` from the samples, and uploads it; a progress bar shows the
-/// build on a terminal.
+/// representation of `kind` from the samples (which may refuse it), and uploads it; a
+/// progress bar shows the build on a terminal.
 pub(crate) fn prepare<T: GTable + 'static>(
     kind: VariantKind,
     dev: &Arc<Device>,
     setup: &DrawSetup<'_>,
     layout: Layout,
     nodes: fn(&TableSpec) -> Vec<f64>,
-    assemble: impl FnOnce(Region, Slices) -> T,
+    assemble: impl FnOnce(Region, Slices) -> Result<T>,
 ) -> Result<Box<dyn PreparedVariant>> {
     let start = Instant::now();
     let material = &setup.prepared.material;
@@ -93,6 +93,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     )?;
     let table = assemble(spec.region, samples);
     bar.finish_and_clear();
+    let table = table?;
     let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
     gpu.stats.table_build = Some(built.to_string());
     // The table's size does not depend on the wavelengths: the saving is build time.

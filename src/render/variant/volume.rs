@@ -59,7 +59,7 @@ impl Variant for Volume {
             setup,
             Layout::Volume,
             table::Volume::nodes,
-            table::Volume::from_slices,
+            |r, s| Ok(table::Volume::from_slices(r, s)),
         )
     }
 }
