@@ -10,10 +10,10 @@ use ash::vk;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{
-    require_spectral, DrawSetup, PreparedVariant, TableFormat, VariantKind, VariantStats,
-    SPEC_COUNT,
+    require_spectral, DrawSetup, PreparedVariant, TableFormat, TableOptions, VariantKind,
+    VariantStats, SPEC_COUNT,
 };
-use crate::brdf::table::{GTable, Region, Slices, TableSpec};
+use crate::brdf::table::{prefilter_disc, GTable, Region, Slices, TableSpec};
 use crate::brdf::table_cache::sample_g_cached_kept;
 use crate::colour::ColourTable;
 use crate::gpu::formats::f32_to_f16;
@@ -59,7 +59,15 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let start = Instant::now();
     let material = &setup.prepared.material;
     let (lo, hi) = setup.prepared.heightfield.range();
-    let (spec, coarsened) = setup.table.spec(kind, material, hi - lo, setup.region)?;
+    // A table that holds the sun's disc is smoother: its texel follows the blurred lobe.
+    let options = match (&setup.disc, setup.table.texel_uv) {
+        (Some(disc), None) => TableOptions {
+            texel_uv: Some(TableSpec::blurred_texel(material.coherence_um, disc)),
+            ..*setup.table
+        },
+        _ => *setup.table,
+    };
+    let (spec, coarsened) = options.spec(kind, material, hi - lo, setup.region)?;
     if let Some(asked) = coarsened {
         eprintln!(
             "warning: {kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB",
@@ -85,7 +93,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let p = setup.prepared;
-    let samples = sample_g_cached_kept(
+    let mut samples = sample_g_cached_kept(
         &p.heightfield,
         p.material.coherence_um,
         &spec,
@@ -94,9 +102,18 @@ pub(crate) fn prepare<T: GTable + 'static>(
         setup.cache_dir,
         &|| bar.inc(1),
     )?;
-    let table = assemble(spec.region, samples);
     bar.finish_and_clear();
+    // The sun's disc, convolved into every slice: the shader then evaluates the disc's
+    // centre once instead of each of its directions (glsl/shade.glsl, DISC_PREFILTERED).
+    if let Some(kernel) = &setup.disc {
+        prefilter_disc(&mut samples, &spec.region, kernel);
+    }
+    let table = assemble(spec.region, samples);
     let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
+    gpu.disc_prefiltered = setup.disc.is_some();
+    if gpu.disc_prefiltered {
+        gpu.stats.name.push_str(" sun's disc pre-filtered");
+    }
     // The table's size does not depend on the wavelengths: the saving is build time.
     gpu.left_out = Some(LeftOut {
         wavelengths: Some(wavelengths),
@@ -114,6 +131,8 @@ struct TableGpu {
     stats: VariantStats,
     model: Option<Box<dyn GTable>>,
     left_out: Option<LeftOut>,
+    /// The table holds the light's disc: one evaluation per fragment.
+    disc_prefiltered: bool,
     terms: u32,
     info: Buffer,
     sampler: Sampler,
@@ -231,6 +250,7 @@ impl TableGpu {
         Ok(Self {
             model: None,
             left_out: None,
+            disc_prefiltered: false,
             stats: VariantStats {
                 name: format!(
                     "{kind} K={} {nu}×{nv} texel {:.4} dλ={} {format:?}",
@@ -280,6 +300,7 @@ impl PreparedVariant for TableGpu {
 
     fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
         spec[9] = self.terms;
+        spec[10] = self.disc_prefiltered as u32;
     }
 
     fn stats(&self) -> VariantStats {
