@@ -50,7 +50,10 @@ fn delta_e_over_snake(reference: &Path, actual: &Path) -> (f64, f64, f64, usize)
         .filter(|(p, _)| (0..3).any(|c| (p[c] as i32 - bg[c] as i32).abs() > 2))
         .map(|(p, q)| delta_e2000(xyz_to_lab(srgb8_to_xyz(*p)), xyz_to_lab(srgb8_to_xyz(*q))))
         .collect();
-    assert!(d.len() > (w * h / 10) as usize, "the snake covers too few pixels");
+    assert!(
+        d.len() > (w * h / 10) as usize,
+        "the snake covers too few pixels"
+    );
     d.sort_by(f64::total_cmp);
     let mean = d.iter().sum::<f64>() / d.len() as f64;
     let p99 = d[(d.len() * 99 / 100).min(d.len() - 1)];

@@ -103,5 +103,8 @@ fn one_evaluation_of_the_prefiltered_table_matches_its_f64_model() {
     eprintln!("{checked} pixels: GPU vs f64 model {worst:.3e} (max {max:.3})");
     assert!(checked > 1000, "{checked} pixels checked");
     // float32 arithmetic, interpolated frames and filtering weights.
-    assert!(worst <= 3e-3 * max, "GPU vs f64 model {worst:e} (max {max})");
+    assert!(
+        worst <= 3e-3 * max,
+        "GPU vs f64 model {worst:e} (max {max})"
+    );
 }

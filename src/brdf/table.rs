@@ -268,9 +268,9 @@ pub fn sample_g_kept(
         .map(|j| r.lo[1] + r.extent()[1] * j as f64 / (nv - 1) as f64)
         .collect();
     let mut spectrum = PhaseSpectrum::new(hf, coherence_um);
-    let (l_min, l_max) = samples
-        .iter()
-        .fold((f64::INFINITY, 0.0f64), |(a, b), s| (a.min(s.0), b.max(s.0)));
+    let (l_min, l_max) = samples.iter().fold((f64::INFINITY, 0.0f64), |(a, b), s| {
+        (a.min(s.0), b.max(s.0))
+    });
     let s_max = w_nodes.iter().fold(0.0f64, |m, w| m.max(w.abs())) * 2.0 * std::f64::consts::PI
         / (l_min * 1e-3);
     spectrum.share_terms(
@@ -402,7 +402,9 @@ impl PhaseSpectrum {
         let (lo, hi) = self
             .heights
             .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| (a.min(h), b.max(h)));
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
+                (a.min(h), b.max(h))
+            });
         let half_range = 0.5 * (hi - lo);
         if !(half_range.is_finite() && s_max.is_finite()) {
             return;
@@ -410,7 +412,10 @@ impl PhaseSpectrum {
         let a = s_max * half_range;
         let nmax = (a + 60.0).ceil() as usize;
         let j = super::bessel::jn_all(a, nmax);
-        let count = (0..=nmax).rev().find(|&n| j[n].abs() > 1e-16).map_or(1, |n| n + 1);
+        let count = (0..=nmax)
+            .rev()
+            .find(|&n| j[n].abs() > 1e-16)
+            .map_or(1, |n| n + 1);
         let [x0, x1] = self.texel_span(0, u, lambda_um);
         let [y0, y1] = self.texel_span(1, v, lambda_um);
         let (cols, rows) = ((x1 - x0 + 1) as usize, (y1 - y0 + 1) as usize);
@@ -431,7 +436,13 @@ impl PhaseSpectrum {
         let xs: Vec<f64> = self
             .heights
             .iter()
-            .map(|h| if half_range > 0.0 { ((h - mid) / half_range).clamp(-1.0, 1.0) } else { 0.0 })
+            .map(|h| {
+                if half_range > 0.0 {
+                    ((h - mid) / half_range).clamp(-1.0, 1.0)
+                } else {
+                    0.0
+                }
+            })
             .collect();
         let spectra = (0..count)
             .into_par_iter()
@@ -532,12 +543,27 @@ impl PhaseSpectrum {
             }
             _ => self.transform(s, [cx0, cy0], [cols, rows], &mut spectrum),
         }
-        self.window(u, v, lambda_um, [cx0, cy0], [cols, rows], &spectrum, weight, acc);
+        self.window(
+            u,
+            v,
+            lambda_um,
+            [cx0, cy0],
+            [cols, rows],
+            &spectrum,
+            weight,
+            acc,
+        );
     }
 
     /// The windowed-spectrum input of one job by direct transform: `spectrum[r·cols + c]`
     /// = DFT[exp(i·s·h)]/(N_x N_y) at shifted texel `t0 + (c, r)`.
-    fn transform(&self, s: f64, t0: [i64; 2], [cols, rows]: [usize; 2], spectrum: &mut [Complex64]) {
+    fn transform(
+        &self,
+        s: f64,
+        t0: [i64; 2],
+        [cols, rows]: [usize; 2],
+        spectrum: &mut [Complex64],
+    ) {
         let (nx, ny) = (self.nx, self.ny);
         let [cx0, cy0] = t0;
         // Rows: the x transform of every row of the phase field.
@@ -667,7 +693,10 @@ impl DiscKernel {
             wi[0] * a[1] - wi[1] * a[0],
         ];
         Self {
-            axes: [[radius * a[0], radius * b[0]], [radius * a[1], radius * b[1]]],
+            axes: [
+                [radius * a[0], radius * b[0]],
+                [radius * a[1], radius * b[1]],
+            ],
         }
     }
 
@@ -725,11 +754,12 @@ impl DiscKernel {
     /// the spline coefficients of a plane with it gives the exact disc average of the
     /// spline interpolant at every node. Sums to 1 (partition of unity).
     pub fn taps(&self, du: f64, dv: f64) -> Vec<(i64, i64, f64)> {
-        // Uniform points on the unit disc: a polar grid of equal-area rings.
+        // Uniform points on the unit disc: rings of equal width, points in proportion to
+        // each ring's area.
         const RINGS: usize = 24;
         let mut pts = Vec::new();
         for r in 0..RINGS {
-            let rho = ((r as f64 + 0.5) / RINGS as f64).sqrt();
+            let rho = (r as f64 + 0.5) / RINGS as f64;
             let n = 6 * (2 * r + 1);
             for k in 0..n {
                 let phi = 2.0 * std::f64::consts::PI * (k as f64 + 0.5 * (r % 2) as f64) / n as f64;

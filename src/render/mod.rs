@@ -1317,14 +1317,8 @@ fn scene_disc(scene: &Scene, mesh: &crate::mesh::Mesh, aspect: f32) -> Option<Di
     use glam::Vec3;
     let light = &scene.light;
     let radius = f64::from(light.angular_diameter_deg).to_radians() / 2.0;
-    if light.disk_samples() .len() < 2 || !(radius > 0.0) {
+    if light.disk_samples().len() < 2 || !(radius > 0.0) {
         return None;
-    }
-    if std::env::var("DIFFRACT_DISC_FILTER").as_deref() == Ok("off") {
-        return None;
-    }
-    if std::env::var("DIFFRACT_DISC_FILTER").as_deref() == Ok("iso") {
-        return Some(DiscKernel::isotropic(radius));
     }
     let l = light.towards_light();
     let frames = vertex_frames(scene, mesh);
@@ -1342,9 +1336,8 @@ fn scene_disc(scene: &Scene, mesh: &crate::mesh::Mesh, aspect: f32) -> Option<Di
         .zip(seen)
         .filter_map(|(&([t, b, n], wr), seen)| {
             let wi = Vec3::new(l.dot(t), l.dot(b), l.dot(n)).normalize_or(Vec3::Z);
-            (seen && wi.z > 0.0 && wr.z > 0.0).then(|| {
-                DiscKernel::footprint([wi.x, wi.y, wi.z].map(f64::from), radius)
-            })
+            (seen && wi.z > 0.0 && wr.z > 0.0)
+                .then(|| DiscKernel::footprint([wi.x, wi.y, wi.z].map(f64::from), radius))
         })
         .collect();
     DiscKernel::mean(&kernels)

@@ -205,7 +205,7 @@ impl Default for TableOptions {
             w_nodes: None,
             step_nm: 1,
             budget_bytes: 512 << 20,
-            format: TableFormat::Rgba16f,
+            format: TableFormat::Rgba32f,
         }
     }
 }
@@ -506,7 +506,7 @@ mod tests {
         assert_eq!(asked, Some(default_texel));
         assert!(spec.texel_uv > default_texel);
         let (nu, nv) = spec.uv_nodes().unwrap();
-        assert!(nu * nv * spec.w_nodes * TableFormat::Rgba16f.texel_bytes() <= 8 << 20);
+        assert!(nu * nv * spec.w_nodes * TableOptions::default().format.texel_bytes() <= 8 << 20);
         let (spec, asked) = with(None, 512 << 20)
             .spec(VariantKind::ChebyshevW, &m, 0.375, r)
             .unwrap();
