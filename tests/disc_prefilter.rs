@@ -41,7 +41,7 @@ fn disc_sum(table: &dyn GTable, shading: &Shading, wi: [f64; 3], wr: [f64; 3], n
 fn one_prefiltered_evaluation_matches_the_disc_sums() {
     let hf = field();
     let shading = Shading::default();
-    let wi = direction(50.0, 20.0);
+    let wi = direction(50.0, 0.0);
     let peak_wr = direction(30.0, 180.0);
     let d = uvw(wi, peak_wr);
     let region = Region {
@@ -98,10 +98,12 @@ fn one_prefiltered_evaluation_matches_the_disc_sums() {
             100.0 * e_pre / peak,
             100.0 * e_iso / peak
         );
-        assert!(peak > 1e-3, "the lobe must be in the box: peak {peak}");
-        // Measured: 8 directions 9.5 %, pre-filtered 0.7 % (texel 0.0015) and 1.5 %
-        // (texel 0.0035) of the lobe's peak.
-        assert!(e_pre < 0.03 * peak, "pre-filtered: {e_pre:e} of {peak:e}");
+        // The first order of this grating carries ~1e-4 of a mirror's reflectance.
+        assert!(peak > 2e-5, "the lobe must be in the box: peak {peak}");
+        // Measured (of the lobe's peak): 8 directions 3.5 % and 3.4 %, one pre-filtered
+        // evaluation 0.08 % and 0.23 %, a circle instead of this direction's ellipse 0.7 %
+        // and 0.6 % (texel 0.0015 and 0.0035).
+        assert!(e_pre < 0.01 * peak, "pre-filtered: {e_pre:e} of {peak:e}");
         assert!(
             e_pre < e8,
             "the pre-filter must beat 8 directions: {e_pre:e} vs {e8:e}"
