@@ -1317,7 +1317,7 @@ fn scene_disc(scene: &Scene, mesh: &crate::mesh::Mesh, aspect: f32) -> Option<Di
     use glam::Vec3;
     let light = &scene.light;
     let radius = f64::from(light.angular_diameter_deg).to_radians() / 2.0;
-    if light.disk_samples().len() < 2 || !(radius > 0.0) {
+    if light.disk_samples().len() < 2 || radius.is_nan() || radius <= 0.0 {
         return None;
     }
     let l = light.towards_light();
