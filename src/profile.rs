@@ -796,7 +796,7 @@ pub struct ProfileArgs {
 
 /// Runs `diffract profile`.
 pub fn run(args: &ProfileArgs) -> Result<()> {
-    crate::guard::profile_args(args)?;
+    profile_args(args)?;
     for p in args.csv.iter().chain(&args.plot) {
         if p.file_name().is_none() {
             return Err(Error::invalid(
@@ -912,6 +912,71 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         return Err(Error::Validation(n));
     }
     Ok(())
+}
+
+/// `diffract profile`: map size, angles, scored pixels (no more than the map's disk holds),
+/// repeats, the material's numbers and the CSV path.
+pub fn profile_args(args: &ProfileArgs) -> Result<()> {
+    use crate::render::{map_direction, MAX_MAP_SIZE};
+    if !(1..=MAX_MAP_SIZE).contains(&args.size) {
+        return Err(Error::invalid(
+            "BRDF map size",
+            format!("{}; expected 1..={MAX_MAP_SIZE} pixels", args.size),
+        ));
+    }
+    crate::guard::in_range("theta-i", args.theta_i, 0.0..=90.0, "°")?;
+    crate::guard::finite("phi-i", args.phi_i)?;
+    let inside = (0..args.size)
+        .flat_map(|j| (0..args.size).map(move |i| (i, j)))
+        .filter(|&(i, j)| map_direction(i, j, args.size).is_some())
+        .count();
+    let scored = args.pixels.saturating_add(args.brightest);
+    if scored == 0 || scored > inside {
+        return Err(Error::invalid(
+            "pixels",
+            format!(
+                "{} spread + {} brightest; a {}² map has {inside} pixels inside its disk to score (at least 1)",
+                args.pixels, args.brightest, args.size
+            ),
+        ));
+    }
+    if !(1..=1000).contains(&args.frames) {
+        return Err(Error::invalid(
+            "frames",
+            format!("{}; expected 1..=1000", args.frames),
+        ));
+    }
+    if args.mesh_size > 8192 {
+        return Err(Error::invalid(
+            "mesh-size",
+            format!("{}; expected 0 (none) ..=8192", args.mesh_size),
+        ));
+    }
+    if let Some(q) = args.mesh_quads {
+        if !(1..=32).contains(&q) || args.mesh_size == 0 {
+            return Err(Error::invalid(
+                "mesh-quads",
+                format!("{q}; expected 1..=32 with a mesh view (--mesh-size > 0)"),
+            ));
+        }
+    }
+    crate::render::table_args(&args.table)?;
+    if args.variant_terms > 64 {
+        return Err(Error::invalid(
+            "variant-terms",
+            format!("{}; at most 64 terms are supported", args.variant_terms),
+        ));
+    }
+    let material = args.material.apply(crate::material::Material::default());
+    material.validate()?;
+    let outputs: Vec<(&str, PathBuf)> = [("--csv", &args.csv), ("--plot", &args.plot)]
+        .into_iter()
+        .filter_map(|(flag, out)| out.clone().map(|o| (flag, o)))
+        .collect();
+    crate::guard::check_outputs(
+        &crate::guard::heightfield_inputs(&material.heightfield),
+        &outputs,
+    )
 }
 
 #[cfg(test)]

@@ -472,7 +472,7 @@ pub struct StabilityArgs {
 
 /// Runs `diffract stability`.
 pub fn run(args: &StabilityArgs) -> Result<()> {
-    crate::guard::stability_args(args)?;
+    stability_args(args)?;
     let (field, name, period) = match &args.heightfield {
         Some(src) => (
             HeightField::load_source(src, args.dh_um, None)?,
@@ -1083,4 +1083,108 @@ pub fn table_cases_markdown(spec: &MatrixSpec, cells: &[TableCell]) -> String {
         }
     }
     s
+}
+
+/// Files `diffract stability -o DIR` writes into `DIR`.
+pub const STABILITY_FILES: [&str; 3] = ["stability.csv", "stability.md", "stability.png"];
+
+/// `diffract stability`: every number of the matrix (heights, angles, wavelengths, term
+/// counts, the tolerance, the map size) and the output directory, whose files must not be
+/// the height field or its sidecar.
+pub fn stability_args(args: &StabilityArgs) -> Result<()> {
+    use crate::brdf::truncation::MAX_TERMS;
+    use crate::render::MAX_MAP_SIZE;
+    let t = args.tolerance;
+    if !(t.is_finite() && t > 0.0 && t < 1.0) {
+        return Err(Error::invalid(
+            "tolerance",
+            format!("{t}; must be in (0, 1)"),
+        ));
+    }
+    for &h in &args.hmax_um {
+        if !(h.is_finite() && h >= 0.0) {
+            return Err(Error::invalid(
+                "hmax-um",
+                format!("{h} µm; must be finite and ≥ 0"),
+            ));
+        }
+    }
+    for &th in &args.theta_i {
+        if !(th.is_finite() && (0.0..90.0).contains(&th)) {
+            return Err(Error::invalid(
+                "theta-i",
+                format!("{th}°; expected [0, 90)"),
+            ));
+        }
+    }
+    let (lo, hi) = (
+        crate::colour::LAMBDA_MIN_NM as f64,
+        crate::colour::LAMBDA_MAX_NM as f64,
+    );
+    for &l in &args.lambda_nm {
+        crate::guard::in_range("wavelength", l, lo..=hi, " nm")?;
+    }
+    for &n in &args.fixed_terms {
+        if n > MAX_TERMS {
+            return Err(Error::invalid(
+                "fixed-terms",
+                format!("{n}; at most {MAX_TERMS} terms are supported"),
+            ));
+        }
+    }
+    if let Some(dh) = args.dh_um {
+        crate::guard::positive("dh-um", dh, " µm")?;
+        if args.heightfield.is_none() {
+            return Err(Error::invalid(
+                "arguments",
+                "--dh-um only applies with --heightfield",
+            ));
+        }
+    }
+    if !(1..=MAX_MAP_SIZE).contains(&args.map_size) {
+        return Err(Error::invalid(
+            "map-size",
+            format!("{}; expected 1..={MAX_MAP_SIZE} pixels", args.map_size),
+        ));
+    }
+    let dir = &args.out;
+    if dir.as_os_str().is_empty() {
+        return Err(Error::invalid("output", "empty directory path"));
+    }
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => {
+            let outputs: Vec<(&str, PathBuf)> = STABILITY_FILES
+                .iter()
+                .map(|f| ("-o", dir.join(f)))
+                .collect();
+            let inputs = args
+                .heightfield
+                .as_deref()
+                .map(crate::guard::heightfield_inputs)
+                .unwrap_or_default();
+            crate::guard::check_outputs(&inputs, &outputs)
+        }
+        Ok(_) => Err(Error::invalid(
+            "output",
+            format!("{}: not a directory", dir.display()),
+        )),
+        // Created after the run, with its parents: the nearest existing one must be a
+        // directory. A new directory holds no input.
+        Err(_) => {
+            let mut up = dir.parent();
+            while let Some(p) = up.filter(|p| !p.as_os_str().is_empty()) {
+                if let Ok(m) = std::fs::metadata(p) {
+                    if m.is_dir() {
+                        return Ok(());
+                    }
+                    return Err(Error::invalid(
+                        "output",
+                        format!("{}: {} is not a directory", dir.display(), p.display()),
+                    ));
+                }
+                up = p.parent();
+            }
+            Ok(())
+        }
+    }
 }

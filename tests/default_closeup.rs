@@ -3,9 +3,6 @@
 //! CIEDE2000 over the snake's pixels (every pixel whose reference colour is not the
 //! background's). Needs Vulkan (lavapipe is enough); skipped loudly without it unless
 //! `DIFFRACT_REQUIRE_VULKAN=1`.
-//!
-//! `DIFFRACT_COMPARE_PNG=x.png cargo test --release --test default_closeup -- --ignored`
-//! compares an existing render instead (no Vulkan needed).
 
 use std::path::Path;
 use std::process::Command;
@@ -97,14 +94,4 @@ fn the_cold_default_render_matches_the_default_closeup() {
     eprintln!("ΔE2000 over {n} snake pixels: mean {mean:.3}, p99 {p99:.2}, max {max:.2}");
     assert!(mean <= MAX_MEAN, "mean ΔE2000 {mean:.3} > {MAX_MEAN}");
     assert!(p99 <= MAX_P99, "p99 ΔE2000 {p99:.2} > {MAX_P99}");
-}
-
-#[test]
-#[ignore = "a measuring tool: set DIFFRACT_COMPARE_PNG"]
-fn compare_a_render_with_the_default_closeup() {
-    let Some(png) = std::env::var_os("DIFFRACT_COMPARE_PNG") else {
-        panic!("set DIFFRACT_COMPARE_PNG to the render to compare");
-    };
-    let (mean, p99, max, n) = delta_e_over_snake(&reference(), Path::new(&png));
-    println!("ΔE2000 over {n} snake pixels: mean {mean:.3}, p99 {p99:.2}, max {max:.2}");
 }

@@ -170,7 +170,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         scene.output.exposure = e;
     }
     crate::image_io::output_format(&args.out)?;
-    crate::guard::render_args(args, &scene)?;
+    render_args(args, &scene)?;
     // `default` means the best variant that can draw the request: one wavelength needs
     // flss (the table variants integrate the spectrum offline). Explicit choices stand.
     let spectral_default = args.variant == VariantKind::Default && args.lambda_nm.is_some();
@@ -363,4 +363,122 @@ fn render_resolved(
     let frame = renderer.render_output(scene, Some(inputs), prepared, tone)?;
     crate::image_io::write_image(out_path, frame.width, frame.height, &frame.rgb, 1.0)?;
     Ok(frame)
+}
+
+/// Everything `diffract render` can check before the device and the precompute: flags that
+/// belong to the other mode, sizes and angles, the material's numbers, the output paths,
+/// outputs that would replace an input, and the size of the mesh file.
+pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()> {
+    use crate::render::MAX_MAP_SIZE;
+    let png_sibling = args.out.with_extension("png");
+    let exr_out = matches!(
+        crate::image_io::output_format(&args.out)?,
+        crate::image_io::OutputFormat::Exr
+    );
+    if args.brdf_map {
+        crate::guard::refuse_flags(
+            &[
+                ("--width", args.width.is_some()),
+                ("--height", args.height.is_some()),
+            ],
+            "a scene render (without --brdf-map)",
+        )?;
+        if let Some(s) = args.size {
+            if !(1..=MAX_MAP_SIZE).contains(&s) {
+                return Err(Error::invalid(
+                    "BRDF map size",
+                    format!("{s}; expected 1..={MAX_MAP_SIZE} pixels"),
+                ));
+            }
+        }
+        if let Some(t) = args.theta_i {
+            crate::guard::in_range("theta-i", t, 0.0..=90.0, "°")?;
+        }
+        if let Some(p) = args.phi_i {
+            crate::guard::finite("phi-i", p)?;
+        }
+        if let Some(l) = args.lambda_nm {
+            let (lo, hi) = (
+                crate::colour::LAMBDA_MIN_NM as f64,
+                crate::colour::LAMBDA_MAX_NM as f64,
+            );
+            crate::guard::in_range("wavelength", l, lo..=hi, " nm")?;
+        }
+        if args.png && !exr_out {
+            return Err(Error::invalid(
+                "arguments",
+                "--png adds a PNG beside an .exr output; this output is already a PNG",
+            ));
+        }
+    } else {
+        crate::guard::refuse_flags(
+            &[
+                ("--size", args.size.is_some()),
+                ("--theta-i", args.theta_i.is_some()),
+                ("--phi-i", args.phi_i.is_some()),
+                ("--lambda-nm", args.lambda_nm.is_some()),
+                ("--png", args.png),
+            ],
+            "--brdf-map",
+        )?;
+        for (what, v) in [
+            ("width", args.width.unwrap_or(scene.output.width)),
+            ("height", args.height.unwrap_or(scene.output.height)),
+        ] {
+            if !(1..=8192).contains(&v) {
+                return Err(Error::invalid(
+                    "image size",
+                    format!("{what} {v}; expected 1..=8192"),
+                ));
+            }
+        }
+    }
+    table_args(&args.table)?;
+    let material = args.material.apply(scene.material.clone());
+    material.validate()?;
+
+    let mut outputs = vec![("output", args.out.clone())];
+    if args.brdf_map && args.png {
+        outputs.push(("--png image", png_sibling));
+    }
+    crate::guard::check_outputs(
+        &crate::guard::scene_inputs(args.scene.as_deref(), scene, &material.heightfield),
+        &outputs,
+    )?;
+    if !args.brdf_map {
+        if let Some(m) = &scene.mesh.path {
+            crate::fsutil::check_input_file(m, "mesh", crate::fsutil::MAX_OBJ_BYTES)?;
+        }
+        if let Some(t) = scene.texture.as_ref().filter(|t| !t.is_builtin()) {
+            crate::fsutil::check_input_file(&t.path, "texture", crate::fsutil::MAX_PNG_BYTES)?;
+        }
+    }
+    Ok(())
+}
+
+/// The table variants' options (`--table-*`), checked the same way by every command that
+/// takes them, whichever variant is drawn: a spacing above zero, a `w` node count the
+/// table supports, a wavelength step that divides the visible range, a budget of at least
+/// 1 MB.
+pub fn table_args(t: &TableArgs) -> Result<()> {
+    use crate::brdf::table::MAX_NODES_W;
+    if let Some(texel) = t.table_texel {
+        crate::guard::positive("table texel", texel, "")?;
+    }
+    if let Some(n) = t.table_w_nodes {
+        if !(2..=MAX_NODES_W).contains(&n) {
+            return Err(Error::invalid(
+                "table w nodes",
+                format!("{n}; expected 2..={MAX_NODES_W}"),
+            ));
+        }
+    }
+    crate::colour::ColourTable::new(t.table_step_nm)?;
+    if t.table_budget_mb == 0 {
+        return Err(Error::invalid(
+            "table budget",
+            "0 MB; expected at least 1 MB",
+        ));
+    }
+    Ok(())
 }

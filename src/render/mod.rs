@@ -19,7 +19,7 @@ use std::time::Instant;
 
 use ash::vk;
 
-pub use command::{check_per_vertex, run, validation_requested, RenderArgs, TableArgs};
+pub use command::{check_per_vertex, run, table_args, validation_requested, RenderArgs, TableArgs};
 pub use pass::{MapView, PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 

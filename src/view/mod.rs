@@ -171,7 +171,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
             ));
         }
     }
-    crate::guard::view_args(args, &scene)?;
+    view_args(args, &scene)?;
     if args.frames == Some(0) {
         return Err(Error::invalid("frames", "0; expected at least 1"));
     }
@@ -205,4 +205,24 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         map_exposure,
     };
     app::run(scene, settings)
+}
+
+/// `diffract view`: the screenshot must be a PNG that can be written and is none of the
+/// files the scene reads.
+pub fn view_args(args: &ViewArgs, scene: &crate::scene::Scene) -> Result<()> {
+    crate::render::table_args(&args.table)?;
+    if let Some(p) = &args.screenshot {
+        if p.extension().and_then(|e| e.to_str()) != Some("png") {
+            return Err(Error::invalid(
+                "screenshot",
+                format!("{}: must be a .png file", p.display()),
+            ));
+        }
+        let material = args.material.apply(scene.material.clone());
+        crate::guard::check_outputs(
+            &crate::guard::scene_inputs(args.scene.as_deref(), scene, &material.heightfield),
+            &[("--screenshot", p.clone())],
+        )?;
+    }
+    Ok(())
 }
