@@ -1,7 +1,7 @@
 //! Meshes, scene files and image output: no GPU needed, all fast.
 //!
-//! `cargo test --release --test mesh_scene -- --ignored regenerate` rewrites the shipped
-//! `assets/{snake,sphere,plane}.obj` from the generators.
+//! `DIFFRACT_UPDATE_ASSETS=1 cargo test --release --test mesh_scene shipped_meshes` rewrites
+//! the shipped `assets/{snake,sphere,plane}.obj` from the generators before comparing.
 
 use std::path::{Path, PathBuf};
 
@@ -50,16 +50,13 @@ fn close(a: &Vertex, b: &Vertex, tol: f32) -> bool {
 const SHIPPED: [&str; 3] = ["snake", "sphere", "plane"];
 
 #[test]
-#[ignore = "writes assets/; run explicitly to regenerate the shipped meshes"]
-fn regenerate_builtin_assets() {
-    for name in SHIPPED {
-        let m = Mesh::builtin(name).unwrap();
-        m.write_obj(&asset(&format!("{name}.obj"))).unwrap();
-    }
-}
-
-#[test]
 fn shipped_meshes_match_the_generators() {
+    if std::env::var("DIFFRACT_UPDATE_ASSETS").is_ok_and(|v| v == "1") {
+        for name in SHIPPED {
+            let m = Mesh::builtin(name).unwrap();
+            m.write_obj(&asset(&format!("{name}.obj"))).unwrap();
+        }
+    }
     for name in SHIPPED {
         let generated = Mesh::builtin(name).unwrap();
         let loaded = Mesh::load_obj(&asset(&format!("{name}.obj")))
