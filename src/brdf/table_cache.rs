@@ -12,7 +12,7 @@
 use std::path::Path;
 
 use super::table::{sample_g_kept, Slices, TableSpec};
-use crate::fsutil::write_atomic;
+use crate::fsutil::write_replacing;
 use crate::heightfield::HeightField;
 use crate::spectrum::cache::{self, Fnv1a};
 use crate::{Error, Result};
@@ -234,7 +234,13 @@ pub fn sample_g_cached_by(
     }
     let saved = std::fs::create_dir_all(dir)
         .map_err(|e| Error::io(dir, e))
-        .and_then(|()| write_atomic(&path, &bytes))
+        .and_then(|()| {
+            // A cache file is diffract's own: replaced, never written into (a FIFO or a link
+            // left at its path must not receive it).
+            write_replacing(&path, |w| {
+                std::io::Write::write_all(w, &bytes).map_err(|e| Error::io(&path, e))
+            })
+        })
         .and_then(|()| cache::evict(dir, max, Some(&path)).map(|_| ()));
     if let Err(e) = saved {
         eprintln!("warning: could not write the table cache: {e}");
