@@ -130,6 +130,35 @@ pub struct TableSpec {
 }
 
 impl TableSpec {
+    /// The wavelengths (nm) of the offline spectral integral with their XYZ weights: every
+    /// line of the colour table at `step_nm`, or only those whose indices `keep` lists.
+    pub fn spectral_samples(&self, keep: Option<&[usize]>) -> Result<Vec<(f64, [f64; 3])>> {
+        let colour = ColourTable::new(self.step_nm)?;
+        Ok(match keep {
+            Some(k) => k
+                .iter()
+                .filter_map(|&i| Some((*colour.lambdas_nm.get(i)?, colour.weights[i])))
+                .collect(),
+            None => colour
+                .lambdas_nm
+                .iter()
+                .copied()
+                .zip(colour.weights.iter().copied())
+                .collect(),
+        })
+    }
+
+    /// The `u` and `v` of the `nu × nv` nodes over the region, both ends included.
+    pub fn node_coords(&self, nu: usize, nv: usize) -> (Vec<f64>, Vec<f64>) {
+        let r = &self.region;
+        let axis = |a: usize, n: usize| -> Vec<f64> {
+            (0..n)
+                .map(|i| r.lo[a] + r.extent()[a] * i as f64 / (n - 1) as f64)
+                .collect()
+        };
+        (axis(0, nu), axis(1, nv))
+    }
+
     /// The default `(u, v)` spacing: half the width of the coherence lobe,
     /// `λ/(2πσs)` at 550 nm (MODEL §7: about 0.005 in `u` for 65 µm).
     pub fn default_texel(coherence_um: f64) -> f64 {
@@ -247,26 +276,8 @@ pub fn sample_g_kept(
             format!("{coherence_um} µm; must be positive"),
         ));
     }
-    let colour = ColourTable::new(spec.step_nm)?;
-    let samples: Vec<(f64, [f64; 3])> = match keep {
-        Some(k) => k
-            .iter()
-            .filter_map(|&i| Some((*colour.lambdas_nm.get(i)?, colour.weights[i])))
-            .collect(),
-        None => colour
-            .lambdas_nm
-            .iter()
-            .copied()
-            .zip(colour.weights.iter().copied())
-            .collect(),
-    };
-    let r = &spec.region;
-    let u: Vec<f64> = (0..nu)
-        .map(|i| r.lo[0] + r.extent()[0] * i as f64 / (nu - 1) as f64)
-        .collect();
-    let v: Vec<f64> = (0..nv)
-        .map(|j| r.lo[1] + r.extent()[1] * j as f64 / (nv - 1) as f64)
-        .collect();
+    let samples = spec.spectral_samples(keep)?;
+    let (u, v) = spec.node_coords(nu, nv);
     let mut spectrum = PhaseSpectrum::new(hf, coherence_um);
     let (l_min, l_max) = samples.iter().fold((f64::INFINITY, 0.0f64), |(a, b), s| {
         (a.min(s.0), b.max(s.0))

@@ -18,7 +18,6 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 
 use crate::brdf::table::{Slices, TableSpec};
-use crate::colour::ColourTable;
 use crate::gpu::compute::{self, ComputeLayout, ComputePipeline, StorageSet};
 use crate::gpu::memory::Buffer;
 use crate::gpu::Device;
@@ -218,26 +217,8 @@ pub fn sample_g_device(
             ),
         ));
     }
-    let colour = ColourTable::new(spec.step_nm)?;
-    let samples: Vec<(f64, [f64; 3])> = match keep {
-        Some(k) => k
-            .iter()
-            .filter_map(|&i| Some((*colour.lambdas_nm.get(i)?, colour.weights[i])))
-            .collect(),
-        None => colour
-            .lambdas_nm
-            .iter()
-            .copied()
-            .zip(colour.weights.iter().copied())
-            .collect(),
-    };
-    let r = &spec.region;
-    let u: Vec<f64> = (0..nu)
-        .map(|i| r.lo[0] + r.extent()[0] * i as f64 / (nu - 1) as f64)
-        .collect();
-    let v: Vec<f64> = (0..nv)
-        .map(|j| r.lo[1] + r.extent()[1] * j as f64 / (nv - 1) as f64)
-        .collect();
+    let samples = spec.spectral_samples(keep)?;
+    let (u, v) = spec.node_coords(nu, nv);
     let (nx, ny, dh) = (hf.nx(), hf.ny(), hf.dh_um());
     let mean = hf.mean();
     let heights: Vec<f64> = hf.heights_um().iter().map(|h| h - mean).collect();
