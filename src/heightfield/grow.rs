@@ -103,15 +103,61 @@ pub fn grow(sample: &HeightField, n: usize, seed: u64) -> Result<HeightField> {
 /// Replaces every value by the sorted target value of the same rank (nearest rank): the
 /// result's histogram is `target`'s, resampled to `values.len()` samples.
 fn match_histogram(values: &mut [f64], sorted_target: &[f64]) {
+    let order = rank_order(values);
     let len = values.len();
-    let mut order: Vec<usize> = (0..len).collect();
-    order.sort_unstable_by(|&a, &b| values[a].total_cmp(&values[b]).then(a.cmp(&b)));
     let m = sorted_target.len();
     for (rank, &i) in order.iter().enumerate() {
         // Rank centre (rank + ½)/len → target index; floor keeps it in 0..m.
         let k = ((2 * rank + 1) * m) / (2 * len);
-        values[i] = sorted_target[k.min(m - 1)];
+        values[i as usize] = sorted_target[k.min(m - 1)];
     }
+}
+
+/// The indices of `values` in increasing order (`f64::total_cmp`), ties by index: a stable
+/// least-significant-digit radix sort of the values' order-preserving bit patterns, 11 bits
+/// a pass (a comparison sort of a million values dominated growing).
+fn rank_order(values: &[f64]) -> Vec<u32> {
+    const BITS: u32 = 11;
+    const BUCKETS: usize = 1 << BITS;
+    // total_cmp's order as unsigned integers: negatives flipped whole, positives' sign set.
+    let key = |x: f64| {
+        let b = x.to_bits();
+        if b >> 63 == 1 {
+            !b
+        } else {
+            b | 1 << 63
+        }
+    };
+    let mut order: Vec<(u64, u32)> = values
+        .iter()
+        .zip(0u32..)
+        .map(|(&x, i)| (key(x), i))
+        .collect();
+    let mut next = order.clone();
+    let mut shift = 0;
+    while shift < 64 {
+        let digit = |k: u64| ((k >> shift) as usize) & (BUCKETS - 1);
+        let mut count = vec![0usize; BUCKETS + 1];
+        for &(k, _) in &order {
+            count[digit(k) + 1] += 1;
+        }
+        if count[1..].iter().any(|&c| c == order.len()) {
+            // Every key has this digit: the pass would not move anything.
+            shift += BITS;
+            continue;
+        }
+        for d in 0..BUCKETS {
+            count[d + 1] += count[d];
+        }
+        for &(k, i) in &order {
+            let at = &mut count[digit(k)];
+            next[*at] = (k, i);
+            *at += 1;
+        }
+        std::mem::swap(&mut order, &mut next);
+        shift += BITS;
+    }
+    order.into_iter().map(|(_, i)| i).collect()
 }
 
 /// A square 2D complex FFT (rows, then columns through a transpose). `forward` is the `−i`
@@ -120,7 +166,8 @@ struct Fft2 {
     n: usize,
     fwd: std::sync::Arc<dyn rustfft::Fft<f64>>,
     inv: std::sync::Arc<dyn rustfft::Fft<f64>>,
-    scratch: Vec<Complex64>,
+    /// Scratch length each row transform needs.
+    scratch: usize,
     tmp: Vec<Complex64>,
 }
 
@@ -136,21 +183,38 @@ impl Fft2 {
             n,
             fwd,
             inv,
-            scratch: vec![Complex64::new(0.0, 0.0); len],
+            scratch: len,
             tmp: vec![Complex64::new(0.0, 0.0); n * n],
         }
     }
 
+    /// Rows transformed in parallel, then a tiled transpose; twice.
     fn run(&mut self, data: &mut [Complex64], forward: bool) {
+        use rayon::prelude::*;
         let plan = if forward { &self.fwd } else { &self.inv };
         let n = self.n;
+        let scratch = self.scratch;
+        const TILE: usize = 16;
         for _ in 0..2 {
-            plan.process_with_scratch(data, &mut self.scratch);
-            for r in 0..n {
-                for c in 0..n {
-                    self.tmp[c * n + r] = data[r * n + c];
-                }
-            }
+            data.par_chunks_mut(n * TILE).for_each_init(
+                || vec![Complex64::new(0.0, 0.0); scratch],
+                |scratch, rows| plan.process_with_scratch(rows, scratch),
+            );
+            let src: &[Complex64] = data;
+            // tmp row c (of TILE rows per task) = data column c.
+            self.tmp
+                .par_chunks_mut(n * TILE)
+                .enumerate()
+                .for_each(|(block, out)| {
+                    let c0 = block * TILE;
+                    let width = out.len() / n;
+                    for r in 0..n {
+                        let line = &src[r * n + c0..r * n + c0 + width];
+                        for (k, &z) in line.iter().enumerate() {
+                            out[k * n + r] = z;
+                        }
+                    }
+                });
             data.copy_from_slice(&self.tmp);
         }
     }
@@ -194,6 +258,36 @@ mod tests {
         for (a, b) in spec.iter().zip(&wave) {
             assert!((a - b).norm() < 1e-12);
         }
+    }
+
+    #[test]
+    fn rank_order_is_the_total_order_with_ties_by_index() {
+        let mut x = 0x2545_f491_4f6c_dd1du64;
+        let mut values: Vec<f64> = (0..5000)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                // Few distinct values (ties), both signs, both zeros, large and tiny.
+                match x % 7 {
+                    0 => -0.0,
+                    1 => 0.0,
+                    2 => ((x >> 8) % 5) as f64 - 2.0,
+                    3 => (x >> 11) as f64 * 1e-300,
+                    4 => -((x >> 11) as f64) * 1e200,
+                    _ => ((x >> 11) as f64 / (1u64 << 53) as f64) - 0.5,
+                }
+            })
+            .collect();
+        values.push(f64::INFINITY);
+        values.push(f64::NEG_INFINITY);
+        let mut want: Vec<u32> = (0..values.len() as u32).collect();
+        want.sort_by(|&a, &b| {
+            values[a as usize]
+                .total_cmp(&values[b as usize])
+                .then(a.cmp(&b))
+        });
+        assert_eq!(rank_order(&values), want);
     }
 
     #[test]
