@@ -157,7 +157,9 @@ impl MaterialArgs {
 pub struct PreparedMaterial {
     pub material: Material,
     pub heightfield: HeightField,
-    pub stack: TermStack,
+    /// The DFT terms ([`PreparedMaterial::load_terms`] computes them when they were
+    /// deferred).
+    pub stack: TermCell,
     pub window: Window,
     pub shading: Shading,
     pub colour: ColourTable,
@@ -165,7 +167,55 @@ pub struct PreparedMaterial {
     pub plan: TermPlan,
 }
 
+/// A material's DFT-term stack, computed when the material is prepared or, for a draw that
+/// may never read it (the table variants build from the height field), on first
+/// [`PreparedMaterial::load_terms`]. Reads it as a [`TermStack`].
+#[derive(Debug, Clone, Default)]
+pub struct TermCell {
+    stack: std::sync::OnceLock<TermStack>,
+    /// Where the deferred stack is cached.
+    cache_dir: Option<std::path::PathBuf>,
+}
+
+impl TermCell {
+    /// Whether the stack has been computed (or loaded).
+    pub fn is_loaded(&self) -> bool {
+        self.stack.get().is_some()
+    }
+}
+
+impl std::ops::Deref for TermCell {
+    type Target = TermStack;
+
+    /// The stack. Code that prepares with deferred terms calls
+    /// [`PreparedMaterial::load_terms`] before reading them; reading them unloaded is a
+    /// bug in that code, not an input error.
+    fn deref(&self) -> &TermStack {
+        self.stack
+            .get()
+            .expect("the term stack is read before PreparedMaterial::load_terms")
+    }
+}
+
 impl PreparedMaterial {
+    /// The term stack, computed (or loaded from the cache) on the first call when the
+    /// material was prepared with deferred terms
+    /// ([`Material::prepare_planned_deferred`]).
+    pub fn load_terms(&self) -> Result<&TermStack> {
+        if let Some(stack) = self.stack.stack.get() {
+            return Ok(stack);
+        }
+        let req = self
+            .material
+            .term_request(self.plan.expansion, self.plan.terms);
+        let stack = spectrum::cache::terms_cached(
+            &self.heightfield,
+            &req,
+            self.stack.cache_dir.as_deref(),
+        )?;
+        Ok(self.stack.stack.get_or_init(|| stack))
+    }
+
     /// The resolved highest term index `T` every evaluator uses (the stack holds `0..=T`).
     pub fn terms(&self) -> usize {
         self.plan.terms
@@ -296,8 +346,21 @@ impl Material {
         plan: TermPlan,
         cache_dir: Option<&std::path::Path>,
     ) -> Result<PreparedMaterial> {
-        let req = self.term_request(plan.expansion, plan.terms);
-        let stack = spectrum::cache::terms_cached(&heightfield, &req, cache_dir)?;
+        let prepared = self.prepare_planned_deferred(heightfield, plan, cache_dir)?;
+        prepared.load_terms()?;
+        Ok(prepared)
+    }
+
+    /// [`prepare_planned`](Self::prepare_planned) without computing the DFT terms: the
+    /// first [`PreparedMaterial::load_terms`] does (through the cache in `cache_dir`). For
+    /// draws whose variant may not read them: a table variant builds from the height field.
+    pub fn prepare_planned_deferred(
+        &self,
+        heightfield: HeightField,
+        plan: TermPlan,
+        cache_dir: Option<&std::path::Path>,
+    ) -> Result<PreparedMaterial> {
+        self.term_request(plan.expansion, plan.terms).validate()?;
         let window = Window::new(
             heightfield.nx(),
             heightfield.ny(),
@@ -310,7 +373,10 @@ impl Material {
             shading: self.shading(),
             colour: ColourTable::new(self.lambda_step_nm)?,
             heightfield,
-            stack,
+            stack: TermCell {
+                stack: std::sync::OnceLock::new(),
+                cache_dir: cache_dir.map(std::path::Path::to_path_buf),
+            },
             window,
             plan,
         })

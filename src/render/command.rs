@@ -190,8 +190,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         scene.output.height = h;
     }
     // Every file the user gave is read and checked before the device opens (a bad OBJ
-    // or PNG must not wait for Vulkan, nor be hidden by a missing driver); the term
-    // precompute, the slow part, comes after it, so a machine without Vulkan fails first.
+    // or PNG must not wait for Vulkan, nor be hidden by a missing driver); the slow parts
+    // (the term precompute, the table build) come after it, so a machine without Vulkan
+    // fails first. The terms are computed only if the variant reads them: a table variant
+    // builds from the height field.
     let material = args.material.apply(scene.material.clone());
     let (heightfield, plan) = material.load_planned(&Reach::ALL, Precision::F32)?;
     let inputs = if args.brdf_map {
@@ -213,7 +215,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     renderer.set_leave_out(!args.keep_all);
     let cache_dir = crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref());
     renderer.set_cache_dir(cache_dir.clone());
-    let prepared = material.prepare_planned(heightfield, plan, cache_dir.as_deref())?;
+    let prepared = material.prepare_planned_deferred(heightfield, plan, cache_dir.as_deref())?;
     // Table variants show their own bar while they build; the draw after it is short.
     let spin = variant
         .is_spectral()
