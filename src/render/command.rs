@@ -271,15 +271,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             v.gpu_bytes as f64 / 1e6
         );
     }
-    // A scene's pixel evaluates the variant once per direction over the light's disc, for
-    // each of its supersample² samples; a BRDF map once.
+    // A scene's pixel evaluates the variant once per direction over the light's disc (once
+    // when the disc is pre-filtered into the table), for each of its supersample²
+    // samples; a BRDF map once.
     let fetches = if args.brdf_map {
         format!("{} fetches/pixel", v.fetches)
     } else {
-        let disc = scene.light.disk_samples().len().max(1);
         let ss = (scene.output.supersample.max(1) as usize).pow(2);
+        let (disc, why) = if v.disc_prefiltered {
+            (1, "1 evaluation (disc pre-filtered)".to_string())
+        } else {
+            let n = scene.light.disk_samples().len().max(1);
+            (n, format!("{n} disc directions"))
+        };
         format!(
-            "{} fetches/pixel = {} × {disc} disc directions × {ss} samples",
+            "{} fetches/pixel = {} × {why} × {ss} samples",
             v.fetches * disc * ss,
             v.fetches
         )

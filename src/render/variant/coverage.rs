@@ -130,6 +130,7 @@ impl PreparedVariant for CoverageGpu {
             gpu_bytes: std::mem::size_of::<RegionUbo>(),
             fetches: 0,
             table_build: None,
+            disc_prefiltered: false,
         }
     }
 }

@@ -167,6 +167,7 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
             gpu_bytes: bytes(&band),
             fetches: selection.keep.len() * (t + 1) * taps,
             table_build: None,
+            disc_prefiltered: false,
         },
         spec: [
             t as u32,

@@ -447,6 +447,9 @@ pub struct VariantStats {
     /// Table variants: where the table was built and in how long, or that it came from
     /// the cache.
     pub table_build: Option<String>,
+    /// The light's disc is convolved into the table: a pixel evaluates the variant once per
+    /// sample, not once per direction over the disc.
+    pub disc_prefiltered: bool,
 }
 
 /// What a variant is prepared for.
@@ -658,7 +661,7 @@ pub fn list() -> String {
     let scene = crate::scene::Scene::default_scene();
     let disc = scene.light.disk_samples().len().max(1);
     let ss = scene.output.supersample.max(1).pow(2) as usize;
-    s.push_str(&format!("fetches are per evaluation: a pixel of the default scene evaluates the variant for {disc} directions over the sun's disc and {ss} supersamples, {}× the counts above\n", disc * ss));
+    s.push_str(&format!("fetches are per evaluation: a pixel of the default scene evaluates the variant for each of {ss} supersamples and, unless the variant's table holds the sun's disc pre-filtered (the table variants on a scene), for {disc} directions over the disc: {ss}× or {}× the counts above\n", disc * ss));
     let per_vertex: Vec<&str> = VariantKind::ALL
         .into_iter()
         .filter(|k| k.per_vertex_file().is_some())

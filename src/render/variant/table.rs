@@ -127,6 +127,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
     gpu.stats.table_build = Some(built.to_string());
     gpu.disc_prefiltered = setup.disc.is_some();
+    gpu.stats.disc_prefiltered = gpu.disc_prefiltered;
     if gpu.disc_prefiltered {
         gpu.stats.name.push_str(" sun's disc pre-filtered");
     }
@@ -278,6 +279,7 @@ impl TableGpu {
                 gpu_bytes: bytes.len(),
                 fetches,
                 table_build: None,
+                disc_prefiltered: false,
             },
             terms: planes.len() as u32,
             info,
