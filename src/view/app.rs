@@ -22,6 +22,7 @@ use winit::window::{Window, WindowId};
 use super::input::{tangent_frame_at_view, Controls, Effect, ViewState, HELP};
 use super::reload::ShaderReload;
 use super::ScriptAction;
+use crate::brdf::truncation::{Precision, Reach};
 use crate::gpu::frames::Frames;
 use crate::gpu::memory::Buffer;
 use crate::gpu::swapchain::{Acquired, Presented, Recreated, Surface, Swapchain, Vsync};
@@ -67,7 +68,14 @@ pub(super) fn run(scene: Scene, settings: Settings) -> Result<()> {
     let event_loop = EventLoop::new()
         .map_err(|e| Error::NoPresentation(format!("cannot open the display: {e}")))?;
     event_loop.set_control_flow(ControlFlow::Poll);
-    let prepared = scene.material.prepare(settings.cache_dir.as_deref())?;
+    // The DFT terms wait for a variant that reads them (`V` to flss, nmm or pq): the
+    // table variants build from the height field.
+    let (heightfield, plan) = scene.material.load_planned(&Reach::ALL, Precision::F32)?;
+    let prepared = scene.material.prepare_planned_deferred(
+        heightfield,
+        plan,
+        settings.cache_dir.as_deref(),
+    )?;
     let mut app = App {
         scene,
         prepared,
