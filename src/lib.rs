@@ -10,6 +10,7 @@
 
 pub mod brdf;
 pub mod cachedir;
+pub mod cli;
 pub mod colour;
 pub mod error;
 pub mod eval;

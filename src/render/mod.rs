@@ -8,7 +8,6 @@
 //! [`Target`](crate::gpu::target::Target) and does not know whether it draws
 //! offscreen or into a window.
 
-mod command;
 mod pass;
 mod record;
 pub mod table_build;
@@ -19,7 +18,6 @@ use std::time::Instant;
 
 use ash::vk;
 
-pub use command::{check_per_vertex, run, table_args, validation_requested, RenderArgs, TableArgs};
 pub use pass::{MapView, PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 
