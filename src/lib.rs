@@ -26,6 +26,7 @@ pub mod mesh;
 pub mod plot;
 pub mod profile;
 pub mod progress;
+pub mod report;
 pub mod render;
 pub mod scene;
 pub mod skin;

@@ -204,6 +204,8 @@ pub struct Renderer {
     /// Mesh frames evaluate the BRDF per vertex (thesis §1.5.1; `flss`, `nmm`, `pq`).
     per_vertex: bool,
     cache_dir: Option<std::path::PathBuf>,
+    /// Where warnings and progress of the work go (stderr unless the owner says otherwise).
+    report: Arc<dyn crate::report::Report>,
     prepared: Option<(PreparedKey, Arc<dyn PreparedVariant>)>,
     /// Table variants: when positive, built for the needed region widened by this much and
     /// reused while later regions fall inside it (the viewer); 0: built for exactly the region.
@@ -238,6 +240,7 @@ impl Renderer {
             leave_out: false,
             per_vertex: false,
             cache_dir: None,
+            report: Arc::new(crate::report::Stderr),
             prepared: None,
             region_margin: 0.0,
             table_region: None,
@@ -312,6 +315,12 @@ impl Renderer {
             self.dev.load_pipeline_cache(d);
         }
         self.cache_dir = dir;
+    }
+
+    /// Where the renderer's warnings and progress bars go (a table coarsened to fit its
+    /// budget, a table build's progress, a cache that could not be read): stderr by default.
+    pub fn set_report(&mut self, report: Arc<dyn crate::report::Report>) {
+        self.report = report;
     }
 
     /// Table variants: build for the needed `(u, v, w)` region widened by `margin` and reuse
@@ -799,6 +808,7 @@ impl Renderer {
             cache_dir: self.cache_dir.as_deref(),
             leave_out: self.leave_out,
             disc,
+            report: self.report.as_ref(),
         };
         let built = self.variant.implementation().prepare(&self.dev, &setup)?;
         self.prepared = Some((key, Arc::from(built)));

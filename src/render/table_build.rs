@@ -601,6 +601,7 @@ pub fn sample_g_built(
     w_nodes: &[f64],
     keep: Option<&[usize]>,
     dir: Option<&std::path::Path>,
+    report: &dyn crate::report::Report,
     progress: &(dyn Fn() + Sync),
 ) -> Result<(Slices, Built)> {
     let precision = build.on(dev);
@@ -618,6 +619,7 @@ pub fn sample_g_built(
         keep,
         dir,
         tag,
+        report,
         &make,
     )?;
     let seconds = start.elapsed().as_secs_f64();
