@@ -126,6 +126,12 @@ pub struct Renderer {
     linear: Sampler,
     vert_map: ShaderModule,
     vert_mesh: ShaderModule,
+    /// Shader modules by glsl file name, made once and shared by every pass built from
+    /// them (a variant or switch change rebuilds only what differs); emptied when the
+    /// run-time SPIR-V changes.
+    modules: std::sync::Mutex<std::collections::HashMap<String, Arc<ShaderModule>>>,
+    /// The 1×1 white texture of passes without a scene texture, made once.
+    white: std::sync::OnceLock<Arc<Image>>,
     /// Last: everything above holds handles of this device.
     dev: Arc<Device>,
 }
@@ -162,6 +168,8 @@ impl Renderer {
             )?,
             vert_map: ShaderModule::new(&dev, "brdfmap.vert", shaders::BRDFMAP_VERT)?,
             vert_mesh: ShaderModule::new(&dev, "diffraction.vert", shaders::DIFFRACTION_VERT)?,
+            modules: Default::default(),
+            white: Default::default(),
             dev,
         })
     }
@@ -251,6 +259,9 @@ impl Renderer {
     pub fn set_shader_overrides(&mut self, spirv: std::collections::HashMap<String, Vec<u8>>) {
         self.map = None;
         self.shader_overrides = spirv;
+        if let Ok(mut m) = self.modules.lock() {
+            m.clear();
+        }
     }
 
     /// Keep the f64 tables of table variants on the CPU (for [`Renderer::table_model`]);

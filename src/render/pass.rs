@@ -60,7 +60,7 @@ pub struct ScenePass {
     pub(crate) layout: PipelineLayout,
     pub(crate) ubo: Buffer,
     pub(crate) _colour: Buffer,
-    pub(crate) _texture: Image,
+    pub(crate) _texture: Arc<Image>,
     pub(crate) mesh: Option<MeshBuffers>,
     pub(crate) params: ParamsUbo,
     pub(crate) transforms: Transforms,
@@ -69,7 +69,7 @@ pub struct ScenePass {
     /// The variant's images and buffers the descriptor set points at: kept alive here even
     /// when the renderer prepares another variant.
     pub(crate) _variant: Arc<dyn PreparedVariant>,
-    pub(crate) _fragment: ShaderModule,
+    pub(crate) _fragment: Arc<ShaderModule>,
     pub(crate) dev: Arc<Device>,
 }
 
@@ -215,17 +215,34 @@ impl ScenePass {
 
 impl Renderer {
     /// The fragment shader of the current variant, or the vertex shader `name`: the
-    /// run-time override when there is one, else the SPIR-V built in.
-    pub(super) fn shader(&self, name: &str, built_in: &'static [u8]) -> Result<ShaderModule> {
+    /// run-time override when there is one, else the SPIR-V built in. Made once per name
+    /// and shared ([`Renderer::set_shader_overrides`] starts afresh).
+    pub(super) fn shader(&self, name: &str, built_in: &'static [u8]) -> Result<Arc<ShaderModule>> {
+        if let Some(m) = self.modules.lock().ok().and_then(|m| m.get(name).cloned()) {
+            return Ok(m);
+        }
         let spirv = self
             .shader_overrides
             .get(name)
             .map_or(built_in, Vec::as_slice);
-        ShaderModule::new(&self.dev, name, spirv)
+        let module = Arc::new(ShaderModule::new(&self.dev, name, spirv)?);
+        if let Ok(mut m) = self.modules.lock() {
+            m.insert(name.to_string(), Arc::clone(&module));
+        }
+        Ok(module)
+    }
+
+    /// The 1×1 white texture bound where a scene has none, made on first use and shared.
+    fn white(&self) -> Result<Arc<Image>> {
+        if let Some(w) = self.white.get() {
+            return Ok(Arc::clone(w));
+        }
+        let w = Arc::new(white_texture(&self.dev)?);
+        Ok(Arc::clone(self.white.get_or_init(|| w)))
     }
 
     /// The current variant's per-vertex stage (thesis §1.5.1), or why it has none.
-    pub(super) fn per_vertex_shader(&self) -> Result<ShaderModule> {
+    pub(super) fn per_vertex_shader(&self) -> Result<Arc<ShaderModule>> {
         let Some(name) = self.variant.per_vertex_file() else {
             return Err(Error::invalid(
                 "per-vertex",
@@ -289,8 +306,8 @@ impl Renderer {
         // The texture binding is statically used by the shader, so it always needs an
         // image; a scene without a texture gets 1×1 white (the variant never samples it).
         let texture = match texture {
-            Some(t) => t,
-            None => white_texture(dev)?,
+            Some(t) => Arc::new(t),
+            None => self.white()?,
         };
         let mut resources = vec![
             (0, Resource::Uniform(&ubo)),
@@ -350,7 +367,7 @@ impl Renderer {
         shape: PipelineShape,
         layout: &PipelineLayout,
         render_pass: vk::RenderPass,
-    ) -> Result<(Pipeline, ShaderModule)> {
+    ) -> Result<(Pipeline, Arc<ShaderModule>)> {
         let (vertex_name, vertex_layout, depth_test) = match shape.mesh {
             false => ("brdfmap.vert", None, false),
             true => ("diffraction.vert", Some(mesh_vertex_layout()), true),
