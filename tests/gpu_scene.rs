@@ -115,31 +115,6 @@ fn rainbow_plane_orders_colours_by_wavelength() {
     );
 }
 
-/// A unit-less plane facing +z (tangent +x, so the blazed grating's lines run along y),
-/// seen head-on; light 30° from the normal in the xz plane, so several diffraction orders of
-/// the 2.5 µm grating cross the middle row of the (odd-sized) image, where v = 0.
-const PLANE_SCENE: &str = r#"
-[camera]
-eye = [0.0, 0.0, 3.0]
-target = [0.0, 0.0, 0.0]
-up = [0.0, 1.0, 0.0]
-fov_y_deg = 35.0
-[light]
-direction = [-0.5, 0.0, -0.8660254037844386]
-intensity = 1.5
-[mesh]
-builtin = "plane"
-[material]
-heightfield = "builtin:blazed"
-terms = 6
-window_radius = 1
-lambda_step_nm = 10
-[output]
-width = 63
-height = 63
-exposure = 20.0
-background = [0.1, 0.2, 0.3]
-"#;
 
 /// Mesh mode against the CPU model: Algorithm 2's tangent frame, ωi/ωr and the lighting
 /// factors (cosθi · intensity · exposure, XYZ → linear sRGB) per pixel, where the exact
@@ -147,7 +122,7 @@ background = [0.1, 0.2, 0.3]
 #[test]
 fn plane_pixels_match_cpu_model() {
     let Some(mut r) = renderer() else { return };
-    let scene = Scene::from_toml_str(PLANE_SCENE, Path::new("plane.toml")).expect("scene");
+    let scene = plane_scene(3.0);
     let p = prepare(&scene.material);
     let frame = r.render_scene(&scene, &p).expect("render plane");
     assert_no_validation(&r);
@@ -249,7 +224,7 @@ fn plane_pixels_match_cpu_model() {
 #[test]
 fn sun_disc_is_the_weighted_sum_of_its_point_lights() {
     let Some(mut r) = renderer() else { return };
-    let scene = Scene::from_toml_str(PLANE_SCENE, Path::new("plane.toml")).expect("scene");
+    let scene = plane_scene(3.0);
     let p = prepare(&scene.material);
     let disc = r.render_scene(&scene, &p).expect("render the disc");
     let point_scene = |towards: [f32; 3]| {

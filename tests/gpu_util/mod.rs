@@ -5,8 +5,12 @@
 
 pub mod golden;
 
+use std::path::Path;
+
+use diffract::heightfield::HeightField;
 use diffract::material::{Material, PreparedMaterial, Terms};
 use diffract::render::Renderer;
+use diffract::scene::Scene;
 use diffract::spectrum::Expansion;
 use diffract::Error;
 
@@ -144,4 +148,59 @@ pub fn sample_pixels(size: u32, wi: [f64; 3], n: usize) -> Vec<(u32, u32)> {
     px.sort_unstable();
     px.dedup();
     px
+}
+
+/// A 65 µm patch of 130² samples (dH = 0.5 µm) saved as `dir/field.f32`: 13 copies of a
+/// 5 µm ridge along x and 5 copies of a 13 µm wave along y, so both axes are periodic
+/// with 3 taps each (nmm finds a dominant period, pq whole copies of one), with `terms`
+/// fixed terms and a `lambda_step_nm` step.
+pub fn periodic_material(dir: &Path, terms: usize, lambda_step_nm: u32) -> Material {
+    let n = 130;
+    let tau = 2.0 * std::f64::consts::PI;
+    let h = (0..n * n)
+        .map(|i| {
+            let (c, r) = ((i % n) as f64, (i / n) as f64);
+            0.1 * (1.0 + (tau * c / 10.0).sin()) + 0.04 * (1.0 + (tau * r / 26.0).cos())
+        })
+        .collect();
+    let path = dir.join("field.f32");
+    HeightField::new(n, n, 0.5, h).unwrap().save(&path).unwrap();
+    Material {
+        heightfield: path.to_string_lossy().into_owned(),
+        terms: Terms::Fixed(terms),
+        lambda_step_nm,
+        ..Material::default()
+    }
+}
+
+/// The built-in plane (facing +z, tangent +x, so the blazed grating's lines run along y)
+/// seen head-on from `eye_z` on the z axis through a 63² camera; light 30° from the normal
+/// in the xz plane, so several diffraction orders of the 2.5 µm grating cross the middle
+/// row of the image, where v = 0; the default 0.53° sun of 8 directions.
+pub fn plane_scene(eye_z: f64) -> Scene {
+    let text = format!(
+        r#"
+[camera]
+eye = [0.0, 0.0, {eye_z:?}]
+target = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y_deg = 35.0
+[light]
+direction = [-0.5, 0.0, -0.8660254037844386]
+intensity = 1.5
+[mesh]
+builtin = "plane"
+[material]
+heightfield = "builtin:blazed"
+terms = 6
+window_radius = 1
+lambda_step_nm = 10
+[output]
+width = 63
+height = 63
+exposure = 20.0
+background = [0.1, 0.2, 0.3]
+"#
+    );
+    Scene::from_toml_str(&text, Path::new("plane.toml")).expect("plane scene")
 }
