@@ -97,6 +97,19 @@ struct PreparedKey {
     disc: Option<[u64; 4]>,
 }
 
+/// A scene's files and their device copies, kept by the renderer so later scene passes of
+/// the same mesh and texture (the viewer's switches) neither read nor upload them again.
+struct SceneUploads {
+    key: (
+        crate::scene::MeshSpec,
+        Option<crate::scene::TextureSpec>,
+        bool,
+    ),
+    inputs: Arc<SceneInputs>,
+    mesh: Arc<MeshBuffers>,
+    texture: Option<Arc<Image>>,
+}
+
 /// Owns the GPU device, what every frame shares (vertex shaders, the texture sampler), the
 /// last prepared variant, which later frames of the same material reuse, and the last BRDF
 /// map's pass and target, which later maps of the same size and variant reuse.
@@ -132,6 +145,9 @@ pub struct Renderer {
     modules: std::sync::Mutex<std::collections::HashMap<String, Arc<ShaderModule>>>,
     /// The 1×1 white texture of passes without a scene texture, made once.
     white: std::sync::OnceLock<Arc<Image>>,
+    /// The last scene pass's files and device copies, reused while the mesh and texture
+    /// stay the same.
+    scene_uploads: Option<SceneUploads>,
     /// Last: everything above holds handles of this device.
     dev: Arc<Device>,
 }
@@ -170,6 +186,7 @@ impl Renderer {
             vert_mesh: ShaderModule::new(&dev, "diffraction.vert", shaders::DIFFRACTION_VERT)?,
             modules: Default::default(),
             white: Default::default(),
+            scene_uploads: None,
             dev,
         })
     }
@@ -322,8 +339,74 @@ impl Renderer {
         render_pass: vk::RenderPass,
         aspect: f32,
     ) -> Result<ScenePass> {
-        let inputs = SceneInputs::load(scene, options.texture_blending)?;
-        self.scene_pass_of(scene, &inputs, prepared, options, render_pass, aspect)
+        let key = (
+            scene.mesh.clone(),
+            scene.texture.clone(),
+            options.texture_blending,
+        );
+        let kept = self.scene_uploads.as_ref().filter(|u| u.key == key);
+        let (inputs, uploads) = match kept {
+            Some(u) => (
+                Arc::clone(&u.inputs),
+                (Arc::clone(&u.mesh), u.texture.clone()),
+            ),
+            None => {
+                self.scene_uploads = None;
+                let inputs = Arc::new(SceneInputs::load(scene, options.texture_blending)?);
+                let (mesh, texture) = self.upload_scene(scene, &inputs, options)?;
+                self.scene_uploads = Some(SceneUploads {
+                    key,
+                    inputs: Arc::clone(&inputs),
+                    mesh: Arc::clone(&mesh),
+                    texture: texture.clone(),
+                });
+                (inputs, (mesh, texture))
+            }
+        };
+        self.scene_pass_of(
+            scene,
+            &inputs.mesh,
+            uploads,
+            prepared,
+            options,
+            render_pass,
+            aspect,
+        )
+    }
+
+    /// The device copies of a scene's inputs: its mesh's vertex and index buffers and, when
+    /// the pass blends it, its texture.
+    pub(super) fn upload_scene(
+        &self,
+        scene: &Scene,
+        inputs: &SceneInputs,
+        options: PassOptions,
+    ) -> Result<(Arc<MeshBuffers>, Option<Arc<Image>>)> {
+        let mesh = &inputs.mesh;
+        let texture = match (&scene.texture, &inputs.texture) {
+            (Some(t), Some(pixels)) if options.texture_blending => {
+                Some(Arc::new(self.upload_texture(t, pixels)?))
+            }
+            _ => None,
+        };
+        let vertices = Buffer::with_data(
+            &self.dev,
+            &format!("{} vertices", mesh.name),
+            vk::BufferUsageFlags::VERTEX_BUFFER,
+            &mesh.vertices,
+        )?;
+        let indices = Buffer::with_data(
+            &self.dev,
+            &format!("{} indices", mesh.name),
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            &mesh.indices,
+        )?;
+        let buffers = MeshBuffers {
+            vertices,
+            indices,
+            index_count: mesh.indices.len() as u32,
+        };
+        Ok((Arc::new(buffers), texture))
     }
 
     /// Whether the prepared table covers what `scene`'s view needs, so a pass built now
@@ -340,10 +423,12 @@ impl Renderer {
         Ok(region_contains(&built.map(f64::from_bits), &need))
     }
 
+    #[allow(clippy::too_many_arguments)]
     fn scene_pass_of(
         &mut self,
         scene: &Scene,
-        inputs: &SceneInputs,
+        mesh: &crate::mesh::Mesh,
+        (buffers, texture): (Arc<MeshBuffers>, Option<Arc<Image>>),
         prepared: &PreparedMaterial,
         options: PassOptions,
         render_pass: vk::RenderPass,
@@ -354,7 +439,6 @@ impl Renderer {
             // Before any table is built for nothing.
             self.per_vertex_shader()?;
         }
-        let mesh = &inputs.mesh;
         // `render` (no covering margin) fits the table to what its frame shows and, for the
         // table variants, pre-filters the sun's disc into it; the viewer keeps every lit
         // vertex and the per-direction loop (its BRDF map shares the table).
@@ -380,24 +464,6 @@ impl Renderer {
         params.shading[1] = gain;
         let bg = out.background;
 
-        let texture = match (&scene.texture, &inputs.texture) {
-            (Some(t), Some(pixels)) if options.texture_blending => {
-                Some(self.upload_texture(t, pixels)?)
-            }
-            _ => None,
-        };
-        let vertices = Buffer::with_data(
-            &self.dev,
-            &format!("{} vertices", mesh.name),
-            vk::BufferUsageFlags::VERTEX_BUFFER,
-            &mesh.vertices,
-        )?;
-        let indices = Buffer::with_data(
-            &self.dev,
-            &format!("{} indices", mesh.name),
-            vk::BufferUsageFlags::INDEX_BUFFER,
-            &mesh.indices,
-        )?;
         let transforms = Transforms {
             model: glam::Mat4::IDENTITY.to_cols_array(),
             view_proj: scene.camera.view_proj(aspect).to_cols_array(),
@@ -407,14 +473,7 @@ impl Renderer {
             params,
             OutputMode::Mesh,
             options,
-            Some((
-                MeshBuffers {
-                    vertices,
-                    indices,
-                    index_count: mesh.indices.len() as u32,
-                },
-                transforms,
-            )),
+            Some((buffers, transforms)),
             [bg[0], bg[1], bg[2], 1.0],
             texture,
             render_pass,

@@ -176,9 +176,11 @@ impl Renderer {
             texture_blending: true,
         };
         let target = OffscreenTarget::new(&self.dev, out.width, out.height)?;
+        let uploads = self.upload_scene(scene, inputs, options)?;
         let pass = self.scene_pass_of(
             scene,
-            inputs,
+            &inputs.mesh,
+            uploads,
             prepared,
             options,
             target.render_pass(),

@@ -61,7 +61,7 @@ pub struct ScenePass {
     pub(crate) ubo: Buffer,
     pub(crate) _colour: Buffer,
     pub(crate) _texture: Arc<Image>,
-    pub(crate) mesh: Option<MeshBuffers>,
+    pub(crate) mesh: Option<Arc<MeshBuffers>>,
     pub(crate) params: ParamsUbo,
     pub(crate) transforms: Transforms,
     pub(crate) clear: [f32; 4],
@@ -264,9 +264,9 @@ impl Renderer {
         params: ParamsUbo,
         output: OutputMode,
         options: PassOptions,
-        mesh: Option<(MeshBuffers, Transforms)>,
+        mesh: Option<(Arc<MeshBuffers>, Transforms)>,
         clear: [f32; 4],
-        texture: Option<Image>,
+        texture: Option<Arc<Image>>,
         render_pass: vk::RenderPass,
     ) -> Result<ScenePass> {
         let dev = &self.dev;
@@ -306,7 +306,7 @@ impl Renderer {
         // The texture binding is statically used by the shader, so it always needs an
         // image; a scene without a texture gets 1×1 white (the variant never samples it).
         let texture = match texture {
-            Some(t) => Arc::new(t),
+            Some(t) => t,
             None => self.white()?,
         };
         let mut resources = vec![
