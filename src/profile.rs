@@ -14,11 +14,11 @@ use std::path::PathBuf;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::brdf::{direction, model, reference};
-use crate::colour::{delta_e2000, xyz_to_lab, ColourTable};
-use crate::gpu::StorageFormat;
 use crate::cli::cache::CacheArgs;
 use crate::cli::gpu::TableArgs;
 use crate::cli::material::MaterialArgs;
+use crate::colour::{delta_e2000, xyz_to_lab, ColourTable};
+use crate::gpu::StorageFormat;
 use crate::material::Material;
 use crate::render::variant::{Family, Preset};
 use crate::render::{map_direction, Renderer, TableOptions, VariantKind};

@@ -4,11 +4,9 @@
 
 mod gpu_util;
 
-
 use diffract::colour::xyz_to_linear_srgb;
 use diffract::render::{TableOptions, VariantKind};
 use gpu_util::*;
-
 
 #[test]
 fn one_evaluation_of_the_prefiltered_table_matches_its_f64_model() {

@@ -5,7 +5,6 @@
 
 mod gpu_util;
 
-
 use diffract::brdf::pq::{self, Form};
 use diffract::heightfield::HeightField;
 use diffract::material::{Material, Terms};

@@ -5,7 +5,6 @@
 
 mod gpu_util;
 
-
 use clap::ValueEnum;
 use diffract::brdf::table::Region;
 use diffract::brdf::uvw;

@@ -31,9 +31,9 @@ fn a_coarsened_table_warns_through_the_report() {
     assert!(frame.rgb.iter().flatten().all(|c| c.is_finite()));
     let warnings = report.warnings();
     assert!(
-        warnings
-            .iter()
-            .any(|w| w.starts_with("volume table over u") && w.contains("coarsened from texel 0.0001") && w.ends_with("to fit 1 MB")),
+        warnings.iter().any(|w| w.starts_with("volume table over u")
+            && w.contains("coarsened from texel 0.0001")
+            && w.ends_with("to fit 1 MB")),
         "the coarsening warning reached the report: {warnings:?}"
     );
     assert_eq!(report.bars(), ["volume table"], "the build's progress bar");

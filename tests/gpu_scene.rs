@@ -115,7 +115,6 @@ fn rainbow_plane_orders_colours_by_wavelength() {
     );
 }
 
-
 /// Mesh mode against the CPU model: Algorithm 2's tangent frame, ωi/ωr and the lighting
 /// factors (cosθi · intensity · exposure, XYZ → linear sRGB) per pixel, where the exact
 /// pixel ray is intersected with the plane in f64.

@@ -157,8 +157,18 @@ pub fn sample_g_cached_kept(
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
     let build = || sample_g_kept(hf, coherence_um, spec, w_nodes, keep, progress);
-    sample_g_cached_by(hf, coherence_um, spec, w_nodes, keep, dir, None, report, &build)
-        .map(|(s, _)| s)
+    sample_g_cached_by(
+        hf,
+        coherence_um,
+        spec,
+        w_nodes,
+        keep,
+        dir,
+        None,
+        report,
+        &build,
+    )
+    .map(|(s, _)| s)
 }
 
 /// [`sample_g_cached_kept`] with the samples made by `build` on a miss (the CPU build, or
@@ -285,10 +295,25 @@ mod tests {
         let (hf, spec, w) = setup();
         let dir = std::env::temp_dir().join(format!("diffract-gtab-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let built = sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &crate::report::Stderr, &|| ()).unwrap();
-        let loaded = sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &crate::report::Stderr, &|| {
-            panic!("a cached table must not be rebuilt")
-        })
+        let built = sample_g_cached(
+            &hf,
+            65.0,
+            &spec,
+            &w,
+            Some(&dir),
+            &crate::report::Stderr,
+            &|| (),
+        )
+        .unwrap();
+        let loaded = sample_g_cached(
+            &hf,
+            65.0,
+            &spec,
+            &w,
+            Some(&dir),
+            &crate::report::Stderr,
+            &|| panic!("a cached table must not be rebuilt"),
+        )
         .unwrap();
         for (a, b) in built
             .data
@@ -314,11 +339,21 @@ mod tests {
         let k = key(&hf, 65.0, &spec, &w);
         assert!(decode(&bytes, k, &w).unwrap_err().contains("checksum"));
         let rebuilt = std::sync::atomic::AtomicUsize::new(0);
-        sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &crate::report::Stderr, &|| {
+        let report = crate::report::Collect::default();
+        sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &report, &|| {
             rebuilt.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         })
         .unwrap();
         assert!(rebuilt.into_inner() > 0);
+        // The rebuild is said to the caller's report, not printed.
+        let warnings = report.warnings();
+        assert!(
+            warnings.len() == 1
+                && warnings[0].starts_with("table cache ")
+                && warnings[0].contains("checksum")
+                && warnings[0].ends_with("; rebuilding"),
+            "{warnings:?}"
+        );
         // Another coherence length is another key.
         assert_ne!(k, key(&hf, 60.0, &spec, &w));
         let _ = std::fs::remove_dir_all(&dir);

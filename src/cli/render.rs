@@ -138,6 +138,25 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         gpu_bytes: frame.variant.gpu_bytes,
         keep_all: args.keep_all,
     };
+    print_result(args, &scene, renderer.device_name(), &frame, &what);
+    let n = renderer.validation_messages();
+    if n > 0 {
+        return Err(Error::Validation(n));
+    }
+    // After the checks: a failed render ends on its one error line.
+    eprintln!("{}", report.line());
+    if args.verbose {
+        for line in report.details() {
+            eprintln!("{line}");
+        }
+    }
+    Ok(())
+}
+
+/// The render's lines on stdout: where the table was built (table variants), then the
+/// device, what was drawn, the output, the variant, GPU and wall time, and the fetches a
+/// pixel costs.
+fn print_result(args: &RenderArgs, scene: &Scene, device: &str, frame: &Picture, what: &str) {
     let gpu = frame
         .gpu_ms
         .map_or("n/a".to_string(), |ms| format!("{ms:.2}"));
@@ -168,7 +187,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     };
     println!(
         "{}: {what} {}×{} → {written}: variant {}: GPU {gpu} ms, wall {:.1} ms (build {:.1} ms, {:.1} MB, {fetches})",
-        renderer.device_name(),
+        device,
         frame.width,
         frame.height,
         v.name,
@@ -176,18 +195,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         v.build_ms,
         v.gpu_bytes as f64 / 1e6,
     );
-    let n = renderer.validation_messages();
-    if n > 0 {
-        return Err(Error::Validation(n));
-    }
-    // After the checks: a failed render ends on its one error line.
-    eprintln!("{}", report.line());
-    if args.verbose {
-        for line in report.details() {
-            eprintln!("{line}");
-        }
-    }
-    Ok(())
 }
 
 /// Writes a BRDF map: an EXR holds the raw channels (XYZ or ρ); a PNG shows XYZ as sRGB

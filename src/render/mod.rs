@@ -39,8 +39,8 @@ use crate::scene::Scene;
 use crate::{Error, Result};
 use offscreen::MapPass;
 use pass::MeshBuffers;
-use region::{load_scene_mesh, region_contains, scene_disc, scene_region, widen};
 use record::Transforms;
+use region::{load_scene_mesh, region_contains, scene_disc, scene_region, widen};
 use variant::{DrawSetup, PreparedVariant};
 
 /// Largest BRDF map side.
@@ -594,7 +594,6 @@ impl Renderer {
             &bytes,
         )
     }
-
 }
 
 #[cfg(test)]

@@ -8,16 +8,16 @@ use std::time::Instant;
 use ash::vk;
 
 use super::params::{colour_weights, OutputMode};
+use super::pass::PassOptions;
 use super::pass::{MapView, ScenePass};
+use super::region::{load_scene_mesh, region_contains, scene_region};
+use super::variant::VariantStats;
 use super::{Renderer, SceneInputs, MAX_MAP_SIZE};
 use crate::brdf;
 use crate::brdf::table::Region;
 use crate::material::PreparedMaterial;
 use crate::scene::Scene;
 use crate::{Error, Result};
-use super::region::{load_scene_mesh, region_contains, scene_region};
-use super::pass::PassOptions;
-use super::variant::VariantStats;
 
 use crate::gpu::frames::Frames;
 use crate::gpu::target::OffscreenTarget;

@@ -55,7 +55,6 @@ impl ParamsUbo {
 // SAFETY: repr(C) of 4-byte scalars in 16-byte groups: no padding.
 unsafe impl Pod for ParamsUbo {}
 
-
 impl Renderer {
     /// The shared part of the uniform block plus the variant's; callers fill in the scene
     /// or map part.
@@ -69,7 +68,12 @@ impl Renderer {
             spectrum_size: [0; 4],
             band: [0; 4],
             lookup: [0.0; 4],
-            shading: [crate::brdf::schlick_r0(prepared.shading.ior) as f32, 1.0, 0.0, 0.0],
+            shading: [
+                crate::brdf::schlick_r0(prepared.shading.ior) as f32,
+                1.0,
+                0.0,
+                0.0,
+            ],
             light_info: [1, 0, 0, 0],
             decode: [[0.0; 4]; MAX_TERMS],
             light_disk: [[0.0, 0.0, 1.0, 1.0]; crate::light::MAX_DISK_SAMPLES as usize],
@@ -84,7 +88,10 @@ impl Renderer {
 /// The colour table as the shader reads it: the XYZ weights and `λ` of each line.
 /// The colour table as binding 2 holds it: per spectral sample the CIE weight and `λ`, only
 /// the samples the variant keeps (all of them when it leaves none out).
-pub(super) fn colour_weights(prepared: &PreparedMaterial, variant: &dyn PreparedVariant) -> Vec<[f32; 4]> {
+pub(super) fn colour_weights(
+    prepared: &PreparedMaterial,
+    variant: &dyn PreparedVariant,
+) -> Vec<[f32; 4]> {
     let table = &prepared.colour;
     let sample = |i: usize| {
         let w = table.weights[i];

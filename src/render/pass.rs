@@ -10,22 +10,22 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::record::{begin_pass, end_pass, record_draw, record_pass, Geometry, Transforms};
-use super::variant::{PreparedVariant, VariantStats};
 use super::params::{colour_weights, OutputMode, ParamsUbo};
 use super::record::mesh_vertex_layout;
+use super::record::{begin_pass, end_pass, record_draw, record_pass, Geometry, Transforms};
 use super::variant::SPEC_COUNT;
+use super::variant::{PreparedVariant, VariantStats};
 use super::Renderer;
 use crate::gpu::memory::{bytes_of, Buffer, Image, ImageDesc};
 use crate::gpu::pipeline::{
     Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
 };
 use crate::gpu::shaders;
-use crate::material::PreparedMaterial;
-use crate::{Error, Result};
 use crate::gpu::target::Target;
 use crate::gpu::Device;
+use crate::material::PreparedMaterial;
 use crate::scene::{Camera, Light};
+use crate::{Error, Result};
 
 /// Feature switches a pass is specialised for (the viewer toggles them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -288,20 +288,7 @@ impl Renderer {
                 std::mem::size_of::<Transforms>() as u32,
             ),
         )?;
-        // Device-written per frame (ScenePass::record), so TRANSFER_DST too.
-        let ubo = Buffer::with_data(
-            dev,
-            "params",
-            vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
-            std::slice::from_ref(&params),
-        )?;
-        let weights = colour_weights(prepared, variant.as_ref());
-        let colour = Buffer::with_data(
-            dev,
-            "colour weights",
-            vk::BufferUsageFlags::STORAGE_BUFFER,
-            &weights,
-        )?;
+        let (ubo, colour) = pass_buffers(dev, prepared, variant.as_ref(), &params)?;
         let texture_blending = texture.is_some();
         // The texture binding is statically used by the shader, so it always needs an
         // image; a scene without a texture gets 1×1 white (the variant never samples it).
@@ -328,16 +315,11 @@ impl Renderer {
             &layout,
             render_pass,
         )?;
-        let (mesh, transforms) = match mesh {
-            Some((m, t)) => (Some(m), t),
-            None => (
-                None,
-                Transforms {
-                    model: [0.0; 16],
-                    view_proj: [0.0; 16],
-                },
-            ),
+        let no_transforms = Transforms {
+            model: [0.0; 16],
+            view_proj: [0.0; 16],
         };
+        let (mesh, transforms) = mesh.map_or((None, no_transforms), |(m, t)| (Some(m), t));
         Ok(ScenePass {
             pipeline,
             set,
@@ -401,7 +383,11 @@ impl Renderer {
             variant.pipeline_name(),
             if options.fresnel { " fresnel" } else { "" },
             if options.shadowing { " shadowing" } else { "" },
-            if shape.texture_blending { " texture" } else { "" },
+            if shape.texture_blending {
+                " texture"
+            } else {
+                ""
+            },
         );
         let pipeline = Pipeline::new(
             &self.dev,
@@ -463,6 +449,29 @@ fn pass_bindings(variant: &dyn PreparedVariant, per_vertex: bool) -> Vec<Binding
         bindings[1].stages |= vk::ShaderStageFlags::VERTEX;
     }
     bindings
+}
+
+/// A pass's uniform block (binding 0, holding `params`) and colour table (binding 2).
+fn pass_buffers(
+    dev: &Arc<Device>,
+    prepared: &PreparedMaterial,
+    variant: &dyn PreparedVariant,
+    params: &ParamsUbo,
+) -> Result<(Buffer, Buffer)> {
+    // Device-written per frame (ScenePass::record), so TRANSFER_DST too.
+    let ubo = Buffer::with_data(
+        dev,
+        "params",
+        vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
+        std::slice::from_ref(params),
+    )?;
+    let colour = Buffer::with_data(
+        dev,
+        "colour weights",
+        vk::BufferUsageFlags::STORAGE_BUFFER,
+        &colour_weights(prepared, variant),
+    )?;
+    Ok((ubo, colour))
 }
 
 /// The 1×1 white texture bound where a scene has none (the binding is statically used, so

@@ -5,8 +5,6 @@ use crate::brdf::table::{DiscKernel, Region};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
-
-
 /// A scene's mesh in world space (the placement is already applied, so the model matrix is
 /// identity); a mesh without triangles is an error.
 pub(super) fn load_scene_mesh(scene: &Scene) -> Result<crate::mesh::Mesh> {
@@ -36,7 +34,10 @@ pub(super) fn region_contains(built: &[f64; 6], need: &Region) -> bool {
 
 /// Per vertex of `scene`'s mesh: its tangent frame `(T, B, N)` (as the shaders build it)
 /// and `ωr` in that frame.
-pub(super) fn vertex_frames(scene: &Scene, mesh: &crate::mesh::Mesh) -> Vec<([glam::Vec3; 3], glam::Vec3)> {
+pub(super) fn vertex_frames(
+    scene: &Scene,
+    mesh: &crate::mesh::Mesh,
+) -> Vec<([glam::Vec3; 3], glam::Vec3)> {
     use glam::Vec3;
     let eye = Vec3::from(scene.camera.eye);
     mesh.vertices
@@ -57,7 +58,11 @@ pub(super) fn vertex_frames(scene: &Scene, mesh: &crate::mesh::Mesh) -> Vec<([gl
 /// Whether each triangle of `mesh` may show in the frame of `scene`'s camera at `aspect`
 /// (not wholly outside one side of the view volume, with 5 % slack); all of them without
 /// an aspect.
-pub(super) fn triangles_in_view(scene: &Scene, mesh: &crate::mesh::Mesh, aspect: Option<f32>) -> Vec<bool> {
+pub(super) fn triangles_in_view(
+    scene: &Scene,
+    mesh: &crate::mesh::Mesh,
+    aspect: Option<f32>,
+) -> Vec<bool> {
     let Some(aspect) = aspect else {
         return vec![true; mesh.indices.len() / 3];
     };
@@ -143,7 +148,11 @@ pub(super) fn scene_region(
 /// The footprint in `(u, v)` of the light's disc for a table to pre-filter: the
 /// covariance-mean of the exact footprints ([`DiscKernel::footprint`]) at the lit vertices
 /// of the triangles in the camera's frame at `aspect`. `None` for a point light.
-pub(super) fn scene_disc(scene: &Scene, mesh: &crate::mesh::Mesh, aspect: f32) -> Option<DiscKernel> {
+pub(super) fn scene_disc(
+    scene: &Scene,
+    mesh: &crate::mesh::Mesh,
+    aspect: f32,
+) -> Option<DiscKernel> {
     use glam::Vec3;
     let light = &scene.light;
     let radius = f64::from(light.angular_diameter_deg).to_radians() / 2.0;
