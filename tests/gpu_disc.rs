@@ -45,19 +45,7 @@ fn one_evaluation_of_the_prefiltered_table_matches_its_f64_model() {
     let (mut checked, mut worst) = (0, 0.0f64);
     for j in 0..h {
         for i in 0..w {
-            let ndc = |z: f64| {
-                let c = inv
-                    * glam::DVec4::new(
-                        2.0 * (i as f64 + 0.5) / w as f64 - 1.0,
-                        2.0 * (j as f64 + 0.5) / h as f64 - 1.0,
-                        z,
-                        1.0,
-                    );
-                c.truncate() / c.w
-            };
-            let (near, far) = (ndc(0.0), ndc(1.0));
-            let t = -near.z / (far.z - near.z);
-            let hit = near + (far - near) * t;
+            let hit = plane_hit(&inv, i, j, w, h);
             if hit.x.abs() > 0.99 || hit.y.abs() > 0.99 {
                 continue;
             }

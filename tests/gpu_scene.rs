@@ -155,19 +155,7 @@ fn plane_pixels_match_cpu_model() {
     pixels.extend((0..12).map(|k| ((k * 37 + 5) % w, (k * 23 + 3) % h)));
     let mut coloured = 0;
     for (i, j) in pixels {
-        let ndc = |z: f64| {
-            let c = inv
-                * glam::DVec4::new(
-                    2.0 * (i as f64 + 0.5) / w as f64 - 1.0,
-                    2.0 * (j as f64 + 0.5) / h as f64 - 1.0,
-                    z,
-                    1.0,
-                );
-            c.truncate() / c.w
-        };
-        let (near, far) = (ndc(0.0), ndc(1.0));
-        let t = -near.z / (far.z - near.z);
-        let hit = near + (far - near) * t;
+        let hit = plane_hit(&inv, i, j, w, h);
         let gpu = frame.at(i, j);
         if hit.x.abs() > 0.99 || hit.y.abs() > 0.99 {
             // Off the plane (or too close to its edge to tell): skip edge pixels.
@@ -327,18 +315,7 @@ w_diffuse = 0.3
     // Rows 4 and 27 are far from v = 0 (no diffraction there); columns away from the edges.
     for (j, expected_tex) in [(4u32, top), (27u32, bottom)] {
         for i in [6u32, 12, 19, 25] {
-            let ndc = |z: f64| {
-                let c = inv
-                    * glam::DVec4::new(
-                        2.0 * (i as f64 + 0.5) / 32.0 - 1.0,
-                        2.0 * (j as f64 + 0.5) / 32.0 - 1.0,
-                        z,
-                        1.0,
-                    );
-                c.truncate() / c.w
-            };
-            let (near, far) = (ndc(0.0), ndc(1.0));
-            let hit = near + (far - near) * (-near.z / (far.z - near.z));
+            let hit = plane_hit(&inv, i, j, 32, 32);
             let wr = (eye - hit).normalize();
             let h = (wi + wr).normalize();
             let f = r0 + (1.0 - r0) * (1.0 - wr.dot(h)).powi(5);

@@ -204,3 +204,37 @@ background = [0.1, 0.2, 0.3]
     );
     Scene::from_toml_str(&text, Path::new("plane.toml")).expect("plane scene")
 }
+
+/// Where the ray of pixel `(i, j)` of a `w`×`h` image (row `j` from the top, through the
+/// pixel's centre) meets the plane z = 0, from the inverse of the camera's view-projection
+/// `inv` (f64): the exact hit a plane scene's pixel shows.
+pub fn plane_hit(inv: &glam::DMat4, i: u32, j: u32, w: u32, h: u32) -> glam::DVec3 {
+    let ndc = |z: f64| {
+        let c = *inv
+            * glam::DVec4::new(
+                2.0 * (i as f64 + 0.5) / w as f64 - 1.0,
+                2.0 * (j as f64 + 0.5) / h as f64 - 1.0,
+                z,
+                1.0,
+            );
+        c.truncate() / c.w
+    };
+    let (near, far) = (ndc(0.0), ndc(1.0));
+    near + (far - near) * (-near.z / (far.z - near.z))
+}
+
+/// A validated headless device, or `None` (skip, with a notice) where the machine has no
+/// Vulkan; under `DIFFRACT_REQUIRE_VULKAN=1` a missing device fails, as [`renderer`].
+pub fn device() -> Option<std::sync::Arc<diffract::gpu::Device>> {
+    match diffract::gpu::Device::new(true) {
+        Ok(d) => Some(d),
+        Err(Error::NoVulkan(msg)) if vulkan_required() => {
+            panic!("DIFFRACT_REQUIRE_VULKAN=1 but {msg}")
+        }
+        Err(Error::NoVulkan(msg)) => {
+            eprintln!("SKIPPED: no Vulkan device on this machine ({msg})");
+            None
+        }
+        Err(e) => panic!("cannot create a validated device: {e}"),
+    }
+}
