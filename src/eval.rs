@@ -8,7 +8,9 @@ use std::path::PathBuf;
 use rayon::prelude::*;
 
 use crate::brdf::{direction, model};
-use crate::material::{MaterialArgs, PreparedMaterial};
+use crate::cli::cache::CacheArgs;
+use crate::cli::material::MaterialArgs;
+use crate::material::PreparedMaterial;
 use crate::{Error, Result};
 
 /// One wavelength's result.
@@ -302,12 +304,8 @@ pub struct EvalArgs {
     /// Viewing-angle grid step (degrees).
     #[arg(long, default_value_t = 0.01)]
     pub step_deg: f64,
-    /// Directory of the DFT-term cache.
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
-    /// Do not read or write the term cache.
-    #[arg(long)]
-    pub no_cache: bool,
+    #[command(flatten)]
+    pub cache: CacheArgs,
     /// Print each wavelength's peak.
     #[arg(long)]
     pub verbose: bool,
@@ -429,7 +427,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let count = ((to - from) / step).floor() as usize + 1;
     let lambdas: Vec<f64> = (0..count).map(|i| from + i as f64 * step).collect();
     let material = args.material.apply(crate::material::Material::default());
-    let cache = crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref());
+    let cache = args.cache.dir();
     // The f64 model evaluates in-plane directions only: |w| ≤ cos θi + 1.
     let p = material.prepare_for(
         cache.as_deref(),

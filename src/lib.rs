@@ -10,6 +10,7 @@
 
 pub mod brdf;
 pub mod cachedir;
+pub mod cli;
 pub mod colour;
 pub mod error;
 pub mod eval;
@@ -26,6 +27,7 @@ pub mod plot;
 pub mod profile;
 pub mod progress;
 pub mod render;
+pub mod report;
 pub mod scene;
 pub mod skin;
 pub mod spectrum;

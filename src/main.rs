@@ -16,9 +16,9 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Render a scene (default: the embedded snake) or a BRDF map on the GPU.
-    Render(diffract::render::RenderArgs),
+    Render(diffract::cli::render::RenderArgs),
     /// Evaluate the BRDF for a CSV of directions and wavelengths (reference or model).
-    Brdf(diffract::brdf::query::BrdfArgs),
+    Brdf(diffract::cli::brdf::BrdfArgs),
     /// Generate a test grating height field (PNG or .f32 with a .toml sidecar).
     Heightfield(diffract::heightfield::HeightfieldArgs),
     /// Grating-equation experiment (MODEL §8): period estimated from first-order peaks.
@@ -32,7 +32,7 @@ enum Command {
         markdown: bool,
     },
     /// The DFT-term cache: list its files or clear it.
-    Cache(diffract::spectrum::cache::CacheArgs),
+    Cache(diffract::spectrum::cache::CacheCommandArgs),
     /// Stability matrix: error of each evaluator against the f64 reference over heights,
     /// light angles, wavelengths and expansions, with the terms used and pass/warned/refused.
     Stability(diffract::stability::StabilityArgs),
@@ -160,8 +160,8 @@ fn main() -> ExitCode {
     };
     diffract::fsutil::remove_temps_on_interrupt();
     let result = match &cli.command {
-        Command::Render(a) => diffract::render::run(a),
-        Command::Brdf(a) => diffract::brdf::query::run(a),
+        Command::Render(a) => diffract::cli::render::run(a),
+        Command::Brdf(a) => diffract::cli::brdf::run(a),
         Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),

@@ -14,11 +14,14 @@ use std::path::PathBuf;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use crate::brdf::{direction, model, reference};
+use crate::cli::cache::CacheArgs;
+use crate::cli::gpu::TableArgs;
+use crate::cli::material::MaterialArgs;
 use crate::colour::{delta_e2000, xyz_to_lab, ColourTable};
 use crate::gpu::StorageFormat;
-use crate::material::{Material, MaterialArgs};
+use crate::material::Material;
 use crate::render::variant::{Family, Preset};
-use crate::render::{map_direction, Renderer, TableArgs, TableOptions, VariantKind};
+use crate::render::{map_direction, Renderer, TableOptions, VariantKind};
 use crate::scene::Scene;
 use crate::spectrum::Expansion;
 use crate::{Error, Result};
@@ -786,12 +789,8 @@ pub struct ProfileArgs {
     pub plot: Option<PathBuf>,
     #[command(flatten)]
     pub table: TableArgs,
-    /// Directory of the DFT-term cache.
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
-    /// Do not read or write the term cache.
-    #[arg(long)]
-    pub no_cache: bool,
+    #[command(flatten)]
+    pub cache: CacheArgs,
 }
 
 /// Runs `diffract profile`.
@@ -841,7 +840,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     // variant loads the field again when it prepares; that is cheap next to its terms).
     base.validate()?;
     crate::heightfield::HeightField::load_source(&base.heightfield, base.dh_um, base.h_max_um)?;
-    let mut renderer = Renderer::new(crate::render::validation_requested())?;
+    let mut renderer = Renderer::new(crate::cli::gpu::validation_requested())?;
     let mesh = (args.mesh_size > 0).then(|| {
         let mut s = Scene::default_scene();
         s.output.width = args.mesh_size;
@@ -862,7 +861,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         frames: args.frames,
         mesh,
         per_vertex: args.per_vertex,
-        cache_dir: crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref()),
+        cache_dir: args.cache.dir(),
     };
     let reports = profile(&mut renderer, &setup)?;
     print!("{}", format_table(renderer.device_name(), &setup, &reports));
@@ -960,7 +959,7 @@ pub fn profile_args(args: &ProfileArgs) -> Result<()> {
             ));
         }
     }
-    crate::render::table_args(&args.table)?;
+    args.table.check()?;
     if args.variant_terms > 64 {
         return Err(Error::invalid(
             "variant-terms",

@@ -156,7 +156,7 @@ impl MatrixSpec {
             window_radius: 2,
             coherence_um: crate::material::DEFAULT_COHERENCE_UM,
             map_size: 15,
-            validation: crate::render::validation_requested(),
+            validation: crate::cli::gpu::validation_requested(),
         }
     }
 }

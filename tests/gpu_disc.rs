@@ -4,43 +4,14 @@
 
 mod gpu_util;
 
-use std::path::Path;
-
 use diffract::colour::xyz_to_linear_srgb;
 use diffract::render::{TableOptions, VariantKind};
-use diffract::scene::Scene;
 use gpu_util::*;
-
-/// A plane facing +z seen head-on, light 30° from the normal in the xz plane: the blazed
-/// grating's orders cross the middle row (as in tests/gpu_scene.rs), under the default
-/// 0.53° sun of 8 directions.
-const PLANE_SCENE: &str = r#"
-[camera]
-eye = [0.0, 0.0, 3.0]
-target = [0.0, 0.0, 0.0]
-up = [0.0, 1.0, 0.0]
-fov_y_deg = 35.0
-[light]
-direction = [-0.5, 0.0, -0.8660254037844386]
-intensity = 1.5
-[mesh]
-builtin = "plane"
-[material]
-heightfield = "builtin:blazed"
-terms = 6
-window_radius = 1
-lambda_step_nm = 10
-[output]
-width = 63
-height = 63
-exposure = 20.0
-background = [0.1, 0.2, 0.3]
-"#;
 
 #[test]
 fn one_evaluation_of_the_prefiltered_table_matches_its_f64_model() {
     let Some(mut r) = renderer() else { return };
-    let scene = Scene::from_toml_str(PLANE_SCENE, Path::new("plane.toml")).expect("scene");
+    let scene = plane_scene(3.0);
     assert_eq!(scene.light.disk_samples().len(), 8);
     let p = prepare(&scene.material);
     r.set_variant(VariantKind::ChebyshevW);
@@ -74,19 +45,7 @@ fn one_evaluation_of_the_prefiltered_table_matches_its_f64_model() {
     let (mut checked, mut worst) = (0, 0.0f64);
     for j in 0..h {
         for i in 0..w {
-            let ndc = |z: f64| {
-                let c = inv
-                    * glam::DVec4::new(
-                        2.0 * (i as f64 + 0.5) / w as f64 - 1.0,
-                        2.0 * (j as f64 + 0.5) / h as f64 - 1.0,
-                        z,
-                        1.0,
-                    );
-                c.truncate() / c.w
-            };
-            let (near, far) = (ndc(0.0), ndc(1.0));
-            let t = -near.z / (far.z - near.z);
-            let hit = near + (far - near) * t;
+            let hit = plane_hit(&inv, i, j, w, h);
             if hit.x.abs() > 0.99 || hit.y.abs() > 0.99 {
                 continue;
             }

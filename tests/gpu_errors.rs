@@ -6,7 +6,7 @@ mod gpu_util;
 use std::path::Path;
 
 use clap::Parser;
-use diffract::render::{run, RenderArgs};
+use diffract::cli::render::{run, RenderArgs};
 use diffract::Error;
 use gpu_util::*;
 

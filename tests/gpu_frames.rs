@@ -18,25 +18,8 @@ use diffract::gpu::pipeline_cache::CacheLoad;
 use diffract::gpu::Device;
 use diffract::render::Renderer;
 use diffract::spectrum::Expansion;
-use diffract::Error;
 use gpu_allocator::MemoryLocation;
-
-/// A validated headless device, or `None` (skip) without Vulkan, as `gpu_util::renderer`.
-fn device() -> Option<Arc<Device>> {
-    match Device::new(true) {
-        Ok(d) => Some(d),
-        Err(Error::NoVulkan(msg))
-            if std::env::var("DIFFRACT_REQUIRE_VULKAN").is_ok_and(|v| v == "1") =>
-        {
-            panic!("DIFFRACT_REQUIRE_VULKAN=1 but {msg}")
-        }
-        Err(Error::NoVulkan(msg)) => {
-            eprintln!("SKIPPED: no Vulkan device on this machine ({msg})");
-            None
-        }
-        Err(e) => panic!("cannot create a validated device: {e}"),
-    }
-}
+use gpu_util::device;
 
 /// A buffer that says when it was dropped.
 struct Tracked {

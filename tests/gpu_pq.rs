@@ -5,8 +5,6 @@
 
 mod gpu_util;
 
-use std::path::Path;
-
 use diffract::brdf::pq::{self, Form};
 use diffract::heightfield::HeightField;
 use diffract::material::{Material, Terms};
@@ -20,32 +18,11 @@ fn scratch(name: &str) -> std::path::PathBuf {
     d
 }
 
-/// A 65 µm patch of 130² samples (dH = 0.5 µm): 13 copies of a 5 µm ridge along x and 5
-/// copies of a 13 µm wave along y, so both axes are periodic with 3 taps each.
-fn periodic_material(dir: &Path) -> Material {
-    let n = 130;
-    let tau = 2.0 * std::f64::consts::PI;
-    let h = (0..n * n)
-        .map(|i| {
-            let (c, r) = ((i % n) as f64, (i / n) as f64);
-            0.1 * (1.0 + (tau * c / 10.0).sin()) + 0.04 * (1.0 + (tau * r / 26.0).cos())
-        })
-        .collect();
-    let path = dir.join("field.f32");
-    HeightField::new(n, n, 0.5, h).unwrap().save(&path).unwrap();
-    Material {
-        heightfield: path.to_string_lossy().into_owned(),
-        terms: Terms::Fixed(12),
-        lambda_step_nm: 10,
-        ..Material::default()
-    }
-}
-
 #[test]
 fn pq_map_matches_its_own_f64_model() {
     let Some(mut r) = renderer() else { return };
     let dir = scratch("model");
-    let prepared = prepare(&periodic_material(&dir));
+    let prepared = prepare(&periodic_material(&dir, 12, 10));
     let (size, theta) = (24, 30.0);
     let wi = uploaded_direction(theta, 0.0);
     r.set_variant(VariantKind::Pq);
@@ -138,31 +115,7 @@ fn pq_refuses_a_field_without_a_period() {
 fn vertex_aligned_scene() -> Scene {
     let tan_half = (17.5f64).to_radians().tan();
     let d = 63.0 / 32.0 / tan_half;
-    let text = format!(
-        r#"
-[camera]
-eye = [0.0, 0.0, {d}]
-target = [0.0, 0.0, 0.0]
-up = [0.0, 1.0, 0.0]
-fov_y_deg = 35.0
-[light]
-direction = [-0.5, 0.0, -0.8660254037844386]
-intensity = 1.5
-[mesh]
-builtin = "plane"
-[material]
-heightfield = "builtin:blazed"
-terms = 6
-window_radius = 1
-lambda_step_nm = 10
-[output]
-width = 63
-height = 63
-exposure = 20.0
-background = [0.1, 0.2, 0.3]
-"#
-    );
-    Scene::from_toml_str(&text, Path::new("aligned.toml")).expect("scene")
+    plane_scene(d)
 }
 
 fn best_of(r: &mut Renderer, scene: &Scene, m: &diffract::material::PreparedMaterial) -> Picture {

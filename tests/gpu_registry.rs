@@ -5,13 +5,9 @@
 
 mod gpu_util;
 
-use std::path::Path;
-
 use clap::ValueEnum;
 use diffract::brdf::table::Region;
 use diffract::brdf::uvw;
-use diffract::heightfield::HeightField;
-use diffract::material::{Material, Terms};
 use diffract::render::variant::{markdown_table, Family};
 use diffract::render::{TableOptions, VariantKind};
 use gpu_util::*;
@@ -22,27 +18,6 @@ fn scratch(name: &str) -> std::path::PathBuf {
     d
 }
 
-/// Whole copies of a 5 µm ridge along x and a 13 µm wave along y over a 65 µm patch: a
-/// field every variant can draw (nmm finds a dominant period, pq whole copies of one).
-fn periodic_material(dir: &Path) -> Material {
-    let n = 130;
-    let tau = 2.0 * std::f64::consts::PI;
-    let h = (0..n * n)
-        .map(|i| {
-            let (c, r) = ((i % n) as f64, (i / n) as f64);
-            0.1 * (1.0 + (tau * c / 10.0).sin()) + 0.04 * (1.0 + (tau * r / 26.0).cos())
-        })
-        .collect();
-    let path = dir.join("field.f32");
-    HeightField::new(n, n, 0.5, h).unwrap().save(&path).unwrap();
-    Material {
-        heightfield: path.to_string_lossy().into_owned(),
-        terms: Terms::Fixed(8),
-        lambda_step_nm: 20,
-        ..Material::default()
-    }
-}
-
 const SIZE: u32 = 16;
 const THETA: f64 = 30.0;
 
@@ -50,7 +25,7 @@ const THETA: f64 = 30.0;
 fn every_registered_variant_renders_a_map() {
     let Some(mut r) = renderer() else { return };
     let dir = scratch("all");
-    let prepared = prepare(&periodic_material(&dir));
+    let prepared = prepare(&periodic_material(&dir, 8, 20));
     r.set_table_options(TableOptions {
         texel_uv: Some(0.02),
         step_nm: 20,
@@ -136,7 +111,7 @@ fn lookup(wi: [f64; 3], i: u32, j: u32) -> Option<[f64; 3]> {
 fn coverage_colours_inside_by_fraction_and_outside_magenta() {
     let Some(mut r) = renderer() else { return };
     let dir = scratch("coverage");
-    let prepared = prepare(&periodic_material(&dir));
+    let prepared = prepare(&periodic_material(&dir, 8, 20));
     let wi = uploaded_direction(THETA, 0.0);
     r.set_variant(VariantKind::Coverage);
 

@@ -115,39 +115,13 @@ fn rainbow_plane_orders_colours_by_wavelength() {
     );
 }
 
-/// A unit-less plane facing +z (tangent +x, so the blazed grating's lines run along y),
-/// seen head-on; light 30° from the normal in the xz plane, so several diffraction orders of
-/// the 2.5 µm grating cross the middle row of the (odd-sized) image, where v = 0.
-const PLANE_SCENE: &str = r#"
-[camera]
-eye = [0.0, 0.0, 3.0]
-target = [0.0, 0.0, 0.0]
-up = [0.0, 1.0, 0.0]
-fov_y_deg = 35.0
-[light]
-direction = [-0.5, 0.0, -0.8660254037844386]
-intensity = 1.5
-[mesh]
-builtin = "plane"
-[material]
-heightfield = "builtin:blazed"
-terms = 6
-window_radius = 1
-lambda_step_nm = 10
-[output]
-width = 63
-height = 63
-exposure = 20.0
-background = [0.1, 0.2, 0.3]
-"#;
-
 /// Mesh mode against the CPU model: Algorithm 2's tangent frame, ωi/ωr and the lighting
 /// factors (cosθi · intensity · exposure, XYZ → linear sRGB) per pixel, where the exact
 /// pixel ray is intersected with the plane in f64.
 #[test]
 fn plane_pixels_match_cpu_model() {
     let Some(mut r) = renderer() else { return };
-    let scene = Scene::from_toml_str(PLANE_SCENE, Path::new("plane.toml")).expect("scene");
+    let scene = plane_scene(3.0);
     let p = prepare(&scene.material);
     let frame = r.render_scene(&scene, &p).expect("render plane");
     assert_no_validation(&r);
@@ -181,19 +155,7 @@ fn plane_pixels_match_cpu_model() {
     pixels.extend((0..12).map(|k| ((k * 37 + 5) % w, (k * 23 + 3) % h)));
     let mut coloured = 0;
     for (i, j) in pixels {
-        let ndc = |z: f64| {
-            let c = inv
-                * glam::DVec4::new(
-                    2.0 * (i as f64 + 0.5) / w as f64 - 1.0,
-                    2.0 * (j as f64 + 0.5) / h as f64 - 1.0,
-                    z,
-                    1.0,
-                );
-            c.truncate() / c.w
-        };
-        let (near, far) = (ndc(0.0), ndc(1.0));
-        let t = -near.z / (far.z - near.z);
-        let hit = near + (far - near) * t;
+        let hit = plane_hit(&inv, i, j, w, h);
         let gpu = frame.at(i, j);
         if hit.x.abs() > 0.99 || hit.y.abs() > 0.99 {
             // Off the plane (or too close to its edge to tell): skip edge pixels.
@@ -249,7 +211,7 @@ fn plane_pixels_match_cpu_model() {
 #[test]
 fn sun_disc_is_the_weighted_sum_of_its_point_lights() {
     let Some(mut r) = renderer() else { return };
-    let scene = Scene::from_toml_str(PLANE_SCENE, Path::new("plane.toml")).expect("scene");
+    let scene = plane_scene(3.0);
     let p = prepare(&scene.material);
     let disc = r.render_scene(&scene, &p).expect("render the disc");
     let point_scene = |towards: [f32; 3]| {
@@ -353,18 +315,7 @@ w_diffuse = 0.3
     // Rows 4 and 27 are far from v = 0 (no diffraction there); columns away from the edges.
     for (j, expected_tex) in [(4u32, top), (27u32, bottom)] {
         for i in [6u32, 12, 19, 25] {
-            let ndc = |z: f64| {
-                let c = inv
-                    * glam::DVec4::new(
-                        2.0 * (i as f64 + 0.5) / 32.0 - 1.0,
-                        2.0 * (j as f64 + 0.5) / 32.0 - 1.0,
-                        z,
-                        1.0,
-                    );
-                c.truncate() / c.w
-            };
-            let (near, far) = (ndc(0.0), ndc(1.0));
-            let hit = near + (far - near) * (-near.z / (far.z - near.z));
+            let hit = plane_hit(&inv, i, j, 32, 32);
             let wr = (eye - hit).normalize();
             let h = (wi + wr).normalize();
             let f = r0 + (1.0 - r0) * (1.0 - wr.dot(h)).powi(5);

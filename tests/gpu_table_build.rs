@@ -6,6 +6,8 @@
 //! alone against rustfft. Validation on; every object and allocation released. Its own
 //! test binary, because the leak counter is process-wide.
 
+mod gpu_util;
+
 use std::sync::Arc;
 
 use diffract::brdf::table::{sample_g_kept, Region, Slices, TableSpec};
@@ -14,7 +16,7 @@ use diffract::gpu::Device;
 use diffract::heightfield::HeightField;
 use diffract::render::table_build::{fft_rows_device, sample_g_device, Precision};
 use diffract::spectrum::num_complex::Complex64;
-use diffract::Error;
+use gpu_util::device;
 
 /// Largest |device − CPU| over a slice's nodes, relative to the slice's peak, that the
 /// float64 build may show (measured on lavapipe: at most 8.4e-16).
@@ -22,23 +24,6 @@ const F64_TOLERANCE: f64 = 1e-12;
 /// The same bound for the float32 build (measured on lavapipe: 6.0e-6 on the grown Elaphe
 /// field, 8.6e-7 on the rough 105×102 field; docs/tables.md).
 const F32_TOLERANCE: f64 = 5e-5;
-
-/// A validated device, or `None` (with a notice) where the machine has no Vulkan.
-fn device() -> Option<Arc<Device>> {
-    match Device::new(true) {
-        Ok(d) => Some(d),
-        Err(Error::NoVulkan(msg))
-            if std::env::var("DIFFRACT_REQUIRE_VULKAN").is_ok_and(|v| v == "1") =>
-        {
-            panic!("DIFFRACT_REQUIRE_VULKAN=1 but {msg}")
-        }
-        Err(Error::NoVulkan(msg)) => {
-            eprintln!("SKIPPED: no Vulkan device on this machine ({msg})");
-            None
-        }
-        Err(e) => panic!("cannot create a validated device: {e}"),
-    }
-}
 
 /// Drops the device and checks that validation stayed silent and nothing leaked.
 fn finish(dev: Arc<Device>) {

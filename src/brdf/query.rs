@@ -7,17 +7,14 @@
 //! `rho,X,Y,Z`: for a spectral row `rho = ρ_λ` and `XYZ` is the per-nm tristimulus density
 //! of that line under D65; for an integrated row `rho = Y`.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use rayon::prelude::*;
 
-use crate::colour::{monochromatic_xyz, ColourTable, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
-use crate::fsutil::write_atomic;
-use crate::heightfield::HeightField;
-use crate::material::MaterialArgs;
+use crate::colour::{monochromatic_xyz, LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 use crate::{Error, Result};
 
-use super::{direction, model, reference};
+use super::direction;
 
 /// Which evaluator answers the queries.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -26,28 +23,6 @@ pub enum Method {
     Reference,
     /// f64 model of the GPU algorithm (MODEL §6.2) with the material's T, R and Δλ.
     Model,
-}
-
-/// `diffract brdf` options.
-#[derive(Debug, Clone, clap::Args)]
-pub struct BrdfArgs {
-    #[command(flatten)]
-    pub material: MaterialArgs,
-    /// Query CSV (theta_i_deg,phi_i_deg,theta_r_deg,phi_r_deg,lambda_nm).
-    #[arg(long)]
-    pub queries: PathBuf,
-    /// Result CSV (the query columns plus rho,X,Y,Z).
-    #[arg(long)]
-    pub out: PathBuf,
-    /// Evaluator.
-    #[arg(long, value_enum, default_value_t = Method::Model)]
-    pub method: Method,
-    /// Directory of the DFT-term cache (default: $DIFFRACT_CACHE or ~/.cache/diffract).
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
-    /// Do not read or write the term cache.
-    #[arg(long)]
-    pub no_cache: bool,
 }
 
 /// One parsed query row.
@@ -229,51 +204,6 @@ pub fn format_answers(queries: &[Query], answers: &[Answer]) -> String {
         ));
     }
     s
-}
-
-/// Runs `diffract brdf`.
-pub fn run(args: &BrdfArgs) -> Result<()> {
-    let material = args.material.apply(crate::material::Material::default());
-    material.validate()?;
-    let mut inputs = crate::guard::heightfield_inputs(&material.heightfield);
-    inputs.push(("query CSV", args.queries.clone()));
-    crate::fsutil::check_outputs(&inputs, &[("--out", args.out.clone())])?;
-    let text =
-        crate::fsutil::read_text_bounded(&args.queries, "query CSV", crate::fsutil::MAX_CSV_BYTES)?;
-    let queries = parse_queries(&args.queries, &text)?;
-    let answers = match args.method {
-        Method::Reference => {
-            let hf =
-                HeightField::load_source(&material.heightfield, material.dh_um, material.h_max_um)?;
-            // MODEL §6.1: 1 nm steps unless a step was asked for explicitly.
-            let table = ColourTable::new(args.material.lambda_step_nm.unwrap_or(1))?;
-            let shading = material.shading();
-            let coh = material.coherence_um;
-            answer_all(
-                &queries,
-                |wi, wr, l| reference::rho(&hf, coh, &shading, wi, wr, l),
-                |wi, wr| reference::xyz(&hf, coh, &shading, &table, wi, wr),
-            )
-        }
-        Method::Model => {
-            let cache = crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref());
-            let p = material.prepare(cache.as_deref())?;
-            let t = p.terms();
-            answer_all(
-                &queries,
-                |wi, wr, l| model::rho(&p.stack, t, &p.window, &p.shading, wi, wr, l),
-                |wi, wr| model::xyz(&p.stack, t, &p.window, &p.shading, &p.colour, wi, wr),
-            )
-        }
-    };
-    write_atomic(&args.out, format_answers(&queries, &answers).as_bytes())?;
-    eprintln!(
-        "{} queries answered by the {:?} evaluator → {}",
-        answers.len(),
-        args.method,
-        args.out.display()
-    );
-    Ok(())
 }
 
 #[cfg(test)]

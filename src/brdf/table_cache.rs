@@ -14,6 +14,7 @@ use std::path::Path;
 use super::table::{sample_g_kept, Slices, TableSpec};
 use crate::fsutil::write_replacing;
 use crate::heightfield::HeightField;
+use crate::report::Report;
 use crate::spectrum::cache::{self, Fnv1a};
 use crate::{Error, Result};
 
@@ -128,21 +129,23 @@ fn decode(data: &[u8], key: u64, w_nodes: &[f64]) -> std::result::Result<Slices,
 
 /// [`sample_g`](super::table::sample_g) through the cache in `dir` (none: always build). A valid file
 /// `gtable-{key:016x}.bin` is loaded (`progress` is not called); a missing one is built
-/// and written; a corrupt or stale one is reported on stderr, rebuilt and overwritten.
-/// Failing to write only warns.
+/// and written; a corrupt or stale one is reported to `report` as a warning, rebuilt and
+/// overwritten. Failing to write only warns.
 pub fn sample_g_cached(
     hf: &HeightField,
     coherence_um: f64,
     spec: &TableSpec,
     w_nodes: &[f64],
     dir: Option<&Path>,
+    report: &dyn Report,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
-    sample_g_cached_kept(hf, coherence_um, spec, w_nodes, None, dir, progress)
+    sample_g_cached_kept(hf, coherence_um, spec, w_nodes, None, dir, report, progress)
 }
 
 /// [`sample_g_cached`] over only the wavelengths `keep` ([`sample_g_kept`]); the kept
 /// list is part of the key (a table of every wavelength keeps its old key).
+#[allow(clippy::too_many_arguments)]
 pub fn sample_g_cached_kept(
     hf: &HeightField,
     coherence_um: f64,
@@ -150,10 +153,22 @@ pub fn sample_g_cached_kept(
     w_nodes: &[f64],
     keep: Option<&[usize]>,
     dir: Option<&Path>,
+    report: &dyn Report,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
     let build = || sample_g_kept(hf, coherence_um, spec, w_nodes, keep, progress);
-    sample_g_cached_by(hf, coherence_um, spec, w_nodes, keep, dir, None, &build).map(|(s, _)| s)
+    sample_g_cached_by(
+        hf,
+        coherence_um,
+        spec,
+        w_nodes,
+        keep,
+        dir,
+        None,
+        report,
+        &build,
+    )
+    .map(|(s, _)| s)
 }
 
 /// [`sample_g_cached_kept`] with the samples made by `build` on a miss (the CPU build, or
@@ -170,6 +185,7 @@ pub fn sample_g_cached_by(
     keep: Option<&[usize]>,
     dir: Option<&Path>,
     tag: Option<&str>,
+    report: &dyn Report,
     build: &dyn Fn() -> Result<Slices>,
 ) -> Result<(Slices, bool)> {
     let Some(dir) = dir else {
@@ -213,23 +229,26 @@ pub fn sample_g_cached_by(
                     .and_then(|f| f.set_modified(std::time::SystemTime::now()));
                 return Ok((s, true));
             }
-            Ok(_) => eprintln!(
-                "warning: table cache {}: grid does not match; rebuilding",
+            Ok(_) => report.warn(&format!(
+                "table cache {}: grid does not match; rebuilding",
                 path.display()
-            ),
-            Err(msg) => eprintln!("warning: table cache {}: {msg}; rebuilding", path.display()),
+            )),
+            Err(msg) => report.warn(&format!(
+                "table cache {}: {msg}; rebuilding",
+                path.display()
+            )),
         },
         Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => eprintln!("warning: {e}; rebuilding"),
+        Err(e) => report.warn(&format!("{e}; rebuilding")),
     }
     let s = build()?;
     let bytes = encode(&s, key);
     if bytes.len() as u64 > max {
-        eprintln!(
-            "warning: the table takes {} MiB, more than the cache cap of {} MiB (DIFFRACT_CACHE_MAX); not cached",
+        report.warn(&format!(
+            "the table takes {} MiB, more than the cache cap of {} MiB (DIFFRACT_CACHE_MAX); not cached",
             bytes.len() >> 20,
             max >> 20
-        );
+        ));
         return Ok((s, false));
     }
     let saved = std::fs::create_dir_all(dir)
@@ -243,7 +262,7 @@ pub fn sample_g_cached_by(
         })
         .and_then(|()| cache::evict(dir, max, Some(&path)).map(|_| ()));
     if let Err(e) = saved {
-        eprintln!("warning: could not write the table cache: {e}");
+        report.warn(&format!("could not write the table cache: {e}"));
     }
     Ok((s, false))
 }
@@ -276,10 +295,25 @@ mod tests {
         let (hf, spec, w) = setup();
         let dir = std::env::temp_dir().join(format!("diffract-gtab-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
-        let built = sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| ()).unwrap();
-        let loaded = sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| {
-            panic!("a cached table must not be rebuilt")
-        })
+        let built = sample_g_cached(
+            &hf,
+            65.0,
+            &spec,
+            &w,
+            Some(&dir),
+            &crate::report::Stderr,
+            &|| (),
+        )
+        .unwrap();
+        let loaded = sample_g_cached(
+            &hf,
+            65.0,
+            &spec,
+            &w,
+            Some(&dir),
+            &crate::report::Stderr,
+            &|| panic!("a cached table must not be rebuilt"),
+        )
         .unwrap();
         for (a, b) in built
             .data
@@ -305,11 +339,21 @@ mod tests {
         let k = key(&hf, 65.0, &spec, &w);
         assert!(decode(&bytes, k, &w).unwrap_err().contains("checksum"));
         let rebuilt = std::sync::atomic::AtomicUsize::new(0);
-        sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| {
+        let report = crate::report::Collect::default();
+        sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &report, &|| {
             rebuilt.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         })
         .unwrap();
         assert!(rebuilt.into_inner() > 0);
+        // The rebuild is said to the caller's report, not printed.
+        let warnings = report.warnings();
+        assert!(
+            warnings.len() == 1
+                && warnings[0].starts_with("table cache ")
+                && warnings[0].contains("checksum")
+                && warnings[0].ends_with("; rebuilding"),
+            "{warnings:?}"
+        );
         // Another coherence length is another key.
         assert_ne!(k, key(&hf, 60.0, &spec, &w));
         let _ = std::fs::remove_dir_all(&dir);

@@ -12,6 +12,7 @@ use gpu_allocator::MemoryLocation;
 
 use super::context::Device;
 use super::memory::Buffer;
+use super::pipeline::DescriptorSet;
 use crate::{Error, Result};
 
 /// Invocations per workgroup that [`ComputeLayout::dispatch`] assumes
@@ -109,7 +110,7 @@ impl ComputeLayout {
                 vk::PipelineBindPoint::COMPUTE,
                 self.raw,
                 0,
-                &[set.raw],
+                &[set.set.raw],
                 &[],
             );
             if !push.is_empty() {
@@ -202,9 +203,7 @@ impl Drop for ComputePipeline {
 /// One descriptor set of a [`ComputeLayout`] with its own pool, binding `i` pointing at
 /// the whole of `buffers[i]`.
 pub struct StorageSet {
-    dev: Arc<Device>,
-    pool: vk::DescriptorPool,
-    raw: vk::DescriptorSet,
+    set: DescriptorSet,
 }
 
 impl StorageSet {
@@ -224,26 +223,7 @@ impl StorageSet {
             ty: vk::DescriptorType::STORAGE_BUFFER,
             descriptor_count: layout.bindings,
         }];
-        let info = vk::DescriptorPoolCreateInfo::default()
-            .max_sets(1)
-            .pool_sizes(&sizes);
-        // SAFETY: live device, valid create info.
-        let pool = unsafe { dev.raw.create_descriptor_pool(&info, None) }
-            .map_err(Error::vk("vkCreateDescriptorPool"))?;
-        let mut set = Self {
-            dev: dev.clone(),
-            pool,
-            raw: vk::DescriptorSet::null(),
-        };
-        dev.set_name(pool, name);
-        let layouts = [layout.set_layout];
-        let alloc = vk::DescriptorSetAllocateInfo::default()
-            .descriptor_pool(pool)
-            .set_layouts(&layouts);
-        // SAFETY: the pool has room for exactly this set.
-        set.raw = unsafe { dev.raw.allocate_descriptor_sets(&alloc) }
-            .map_err(Error::vk("vkAllocateDescriptorSets"))?[0];
-        dev.set_name(set.raw, name);
+        let set = DescriptorSet::allocate(dev, name, layout.set_layout, &sizes)?;
         let infos: Vec<[vk::DescriptorBufferInfo; 1]> = buffers
             .iter()
             .map(|b| {
@@ -267,14 +247,7 @@ impl StorageSet {
             .collect();
         // SAFETY: the infos outlive the call; the buffers are live storage buffers.
         unsafe { dev.raw.update_descriptor_sets(&writes, &[]) };
-        Ok(set)
-    }
-}
-
-impl Drop for StorageSet {
-    fn drop(&mut self) {
-        // SAFETY: no pending GPU work uses the set (submissions are waited on).
-        unsafe { self.dev.raw.destroy_descriptor_pool(self.pool, None) };
+        Ok(Self { set })
     }
 }
 
@@ -365,6 +338,40 @@ pub fn barrier(
             &[],
         );
     }
+}
+
+/// Records the copy of the first `bytes` of `from`, written by compute shaders, into the
+/// host-visible `to`, with the barriers before (shader writes → transfer) and after
+/// (transfer → host read): once the submission has finished, the host reads `to`.
+pub fn copy_to_host(dev: &Device, cb: vk::CommandBuffer, from: &Buffer, to: &Buffer, bytes: u64) {
+    barrier(
+        dev,
+        cb,
+        (
+            vk::PipelineStageFlags::COMPUTE_SHADER,
+            vk::AccessFlags::SHADER_WRITE,
+        ),
+        (
+            vk::PipelineStageFlags::TRANSFER,
+            vk::AccessFlags::TRANSFER_READ,
+        ),
+    );
+    let region = vk::BufferCopy {
+        src_offset: 0,
+        dst_offset: 0,
+        size: bytes,
+    };
+    // SAFETY: cb is recording; both buffers are live and at least `bytes` long.
+    unsafe { dev.raw.cmd_copy_buffer(cb, from.raw, to.raw, &[region]) };
+    barrier(
+        dev,
+        cb,
+        (
+            vk::PipelineStageFlags::TRANSFER,
+            vk::AccessFlags::TRANSFER_WRITE,
+        ),
+        (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
+    );
 }
 
 /// The barrier between two compute dispatches where the second reads or overwrites what

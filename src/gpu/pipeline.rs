@@ -150,26 +150,7 @@ impl DescriptorSet {
                 descriptor_count: 1,
             })
             .collect();
-        let info = vk::DescriptorPoolCreateInfo::default()
-            .max_sets(1)
-            .pool_sizes(&sizes);
-        // SAFETY: live device, valid create info.
-        let pool = unsafe { dev.raw.create_descriptor_pool(&info, None) }
-            .map_err(Error::vk("vkCreateDescriptorPool"))?;
-        let mut set = DescriptorSet {
-            dev: dev.clone(),
-            pool,
-            raw: vk::DescriptorSet::null(),
-        };
-        dev.set_name(pool, name);
-        let layouts = [layout.set_layout];
-        let alloc = vk::DescriptorSetAllocateInfo::default()
-            .descriptor_pool(pool)
-            .set_layouts(&layouts);
-        // SAFETY: the pool has room for exactly this set.
-        set.raw = unsafe { dev.raw.allocate_descriptor_sets(&alloc) }
-            .map_err(Error::vk("vkAllocateDescriptorSets"))?[0];
-        dev.set_name(set.raw, name);
+        let set = Self::allocate(dev, name, layout.set_layout, &sizes)?;
 
         let mut buffer_infos = Vec::new();
         let mut image_infos = Vec::new();
@@ -216,6 +197,39 @@ impl DescriptorSet {
             .collect();
         // SAFETY: all infos outlive the call; the resources are live and match the layout.
         unsafe { dev.raw.update_descriptor_sets(&writes, &[]) };
+        Ok(set)
+    }
+}
+
+impl DescriptorSet {
+    /// One set of `set_layout` from a pool of its own that holds `sizes` (the graphics
+    /// passes' sets and the compute builds' storage sets alike).
+    pub(crate) fn allocate(
+        dev: &Arc<Device>,
+        name: &str,
+        set_layout: vk::DescriptorSetLayout,
+        sizes: &[vk::DescriptorPoolSize],
+    ) -> Result<Self> {
+        let info = vk::DescriptorPoolCreateInfo::default()
+            .max_sets(1)
+            .pool_sizes(sizes);
+        // SAFETY: live device, valid create info.
+        let pool = unsafe { dev.raw.create_descriptor_pool(&info, None) }
+            .map_err(Error::vk("vkCreateDescriptorPool"))?;
+        let mut set = DescriptorSet {
+            dev: dev.clone(),
+            pool,
+            raw: vk::DescriptorSet::null(),
+        };
+        dev.set_name(pool, name);
+        let layouts = [set_layout];
+        let alloc = vk::DescriptorSetAllocateInfo::default()
+            .descriptor_pool(pool)
+            .set_layouts(&layouts);
+        // SAFETY: the pool has room for exactly this set.
+        set.raw = unsafe { dev.raw.allocate_descriptor_sets(&alloc) }
+            .map_err(Error::vk("vkAllocateDescriptorSets"))?[0];
+        dev.set_name(set.raw, name);
         Ok(set)
     }
 }

@@ -10,14 +10,22 @@ use std::sync::Arc;
 
 use ash::vk;
 
+use super::params::{colour_weights, OutputMode, ParamsUbo};
+use super::record::mesh_vertex_layout;
 use super::record::{begin_pass, end_pass, record_draw, record_pass, Geometry, Transforms};
+use super::variant::SPEC_COUNT;
 use super::variant::{PreparedVariant, VariantStats};
-use super::ParamsUbo;
-use crate::gpu::memory::{bytes_of, Buffer, Image};
-use crate::gpu::pipeline::{DescriptorSet, Pipeline, PipelineLayout, ShaderModule};
+use super::Renderer;
+use crate::gpu::memory::{bytes_of, Buffer, Image, ImageDesc};
+use crate::gpu::pipeline::{
+    Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
+};
+use crate::gpu::shaders;
 use crate::gpu::target::Target;
 use crate::gpu::Device;
+use crate::material::PreparedMaterial;
 use crate::scene::{Camera, Light};
+use crate::{Error, Result};
 
 /// Feature switches a pass is specialised for (the viewer toggles them).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -52,8 +60,8 @@ pub struct ScenePass {
     pub(crate) layout: PipelineLayout,
     pub(crate) ubo: Buffer,
     pub(crate) _colour: Buffer,
-    pub(crate) _texture: Image,
-    pub(crate) mesh: Option<MeshBuffers>,
+    pub(crate) _texture: Arc<Image>,
+    pub(crate) mesh: Option<Arc<MeshBuffers>>,
     pub(crate) params: ParamsUbo,
     pub(crate) transforms: Transforms,
     pub(crate) clear: [f32; 4],
@@ -61,7 +69,7 @@ pub struct ScenePass {
     /// The variant's images and buffers the descriptor set points at: kept alive here even
     /// when the renderer prepares another variant.
     pub(crate) _variant: Arc<dyn PreparedVariant>,
-    pub(crate) _fragment: ShaderModule,
+    pub(crate) _fragment: Arc<ShaderModule>,
     pub(crate) dev: Arc<Device>,
 }
 
@@ -203,4 +211,295 @@ impl ScenePass {
             );
         }
     }
+}
+
+impl Renderer {
+    /// The fragment shader of the current variant, or the vertex shader `name`: the
+    /// run-time override when there is one, else the SPIR-V built in. Made once per name
+    /// and shared ([`Renderer::set_shader_overrides`] starts afresh).
+    pub(super) fn shader(&self, name: &str, built_in: &'static [u8]) -> Result<Arc<ShaderModule>> {
+        if let Some(m) = self.modules.lock().ok().and_then(|m| m.get(name).cloned()) {
+            return Ok(m);
+        }
+        let spirv = self
+            .shader_overrides
+            .get(name)
+            .map_or(built_in, Vec::as_slice);
+        let module = Arc::new(ShaderModule::new(&self.dev, name, spirv)?);
+        if let Ok(mut m) = self.modules.lock() {
+            m.insert(name.to_string(), Arc::clone(&module));
+        }
+        Ok(module)
+    }
+
+    /// The 1×1 white texture bound where a scene has none, made on first use and shared.
+    fn white(&self) -> Result<Arc<Image>> {
+        if let Some(w) = self.white.get() {
+            return Ok(Arc::clone(w));
+        }
+        let w = Arc::new(white_texture(&self.dev)?);
+        Ok(Arc::clone(self.white.get_or_init(|| w)))
+    }
+
+    /// The current variant's per-vertex stage (thesis §1.5.1), or why it has none.
+    pub(super) fn per_vertex_shader(&self) -> Result<Arc<ShaderModule>> {
+        let Some(name) = self.variant.per_vertex_file() else {
+            return Err(Error::invalid(
+                "per-vertex",
+                format!(
+                    "'{}' has no per-vertex evaluation (its table lookup already costs about as much as a vertex; per-vertex is built for flss, nmm and pq)",
+                    self.variant
+                ),
+            ));
+        };
+        self.shader(name, built_in(name)?)
+    }
+
+    /// Builds a pass: layout, uniform and colour buffers, descriptor set and a pipeline for
+    /// `render_pass` specialised for `output` and `options`.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn build_pass(
+        &self,
+        prepared: &PreparedMaterial,
+        params: ParamsUbo,
+        output: OutputMode,
+        options: PassOptions,
+        mesh: Option<(Arc<MeshBuffers>, Transforms)>,
+        clear: [f32; 4],
+        texture: Option<Arc<Image>>,
+        render_pass: vk::RenderPass,
+    ) -> Result<ScenePass> {
+        let dev = &self.dev;
+        let Some((_, variant)) = &self.prepared else {
+            return Err(Error::invalid("variant", "no variant prepared"));
+        };
+        let per_vertex = self.per_vertex && mesh.is_some();
+        let bindings = pass_bindings(variant.as_ref(), per_vertex);
+        let mut stats = variant.stats();
+        if per_vertex {
+            stats.name = format!("{} per-vertex", stats.name);
+        }
+        let layout = PipelineLayout::new(
+            dev,
+            &format!("{} layout", stats.name),
+            &bindings,
+            (
+                vk::ShaderStageFlags::VERTEX,
+                std::mem::size_of::<Transforms>() as u32,
+            ),
+        )?;
+        let (ubo, colour) = pass_buffers(dev, prepared, variant.as_ref(), &params)?;
+        let texture_blending = texture.is_some();
+        // The texture binding is statically used by the shader, so it always needs an
+        // image; a scene without a texture gets 1×1 white (the variant never samples it).
+        let texture = match texture {
+            Some(t) => t,
+            None => self.white()?,
+        };
+        let mut resources = vec![
+            (0, Resource::Uniform(&ubo)),
+            (2, Resource::Storage(&colour)),
+            (3, Resource::Sampled(&texture, &self.linear)),
+        ];
+        resources.extend(variant.resources());
+        let set = DescriptorSet::new(dev, "diffraction set", &layout, &resources)?;
+        let (pipeline, fragment) = self.pass_pipeline(
+            variant.as_ref(),
+            output,
+            options,
+            PipelineShape {
+                per_vertex,
+                mesh: mesh.is_some(),
+                texture_blending,
+            },
+            &layout,
+            render_pass,
+        )?;
+        let no_transforms = Transforms {
+            model: [0.0; 16],
+            view_proj: [0.0; 16],
+        };
+        let (mesh, transforms) = mesh.map_or((None, no_transforms), |(m, t)| (Some(m), t));
+        Ok(ScenePass {
+            pipeline,
+            set,
+            layout,
+            ubo,
+            _colour: colour,
+            _texture: texture,
+            mesh,
+            params,
+            transforms,
+            clear,
+            stats,
+            _variant: Arc::clone(variant),
+            _fragment: fragment,
+            dev: dev.clone(),
+        })
+    }
+
+    /// The pipeline of a pass and its fragment module: the vertex stage (the map's, the
+    /// mesh's, per-vertex evaluation or a hot-reloaded one), the variant's fragment stage,
+    /// and the specialisation constants of `output`, `options` and `shape`.
+    fn pass_pipeline(
+        &self,
+        variant: &dyn PreparedVariant,
+        output: OutputMode,
+        options: PassOptions,
+        shape: PipelineShape,
+        layout: &PipelineLayout,
+        render_pass: vk::RenderPass,
+    ) -> Result<(Pipeline, Arc<ShaderModule>)> {
+        let (vertex_name, vertex_layout, depth_test) = match shape.mesh {
+            false => ("brdfmap.vert", None, false),
+            true => ("diffraction.vert", Some(mesh_vertex_layout()), true),
+        };
+        let override_vertex = if shape.per_vertex {
+            Some(self.per_vertex_shader()?)
+        } else if self.shader_overrides.contains_key(vertex_name) {
+            Some(self.shader(vertex_name, &[])?)
+        } else {
+            None
+        };
+        let vertex = match (&override_vertex, shape.mesh) {
+            (Some(v), _) => v,
+            (None, false) => &self.vert_map,
+            (None, true) => &self.vert_mesh,
+        };
+        let mut spec = [0u32; SPEC_COUNT];
+        spec[4] = options.shadowing as u32;
+        spec[5] = options.fresnel as u32;
+        spec[6] = shape.texture_blending as u32;
+        spec[8] = output as u32;
+        variant.specialise(&mut spec);
+        let fragment = if shape.per_vertex {
+            self.shader("per_vertex.frag", shaders::PER_VERTEX_FRAG)?
+        } else {
+            let file = self.variant.fragment_file();
+            self.shader(file, built_in(file)?)?
+        };
+        let name = format!(
+            "{} {output:?}{}{}{}",
+            variant.pipeline_name(),
+            if options.fresnel { " fresnel" } else { "" },
+            if options.shadowing { " shadowing" } else { "" },
+            if shape.texture_blending {
+                " texture"
+            } else {
+                ""
+            },
+        );
+        let pipeline = Pipeline::new(
+            &self.dev,
+            &PipelineDesc {
+                name: &name,
+                vertex,
+                fragment: &fragment,
+                spec: &spec,
+                vertex_layout: vertex_layout.as_ref(),
+                layout,
+                render_pass,
+                depth_test,
+            },
+        )?;
+        Ok((pipeline, fragment))
+    }
+}
+
+/// The SPIR-V build.rs compiled from glsl/`file`; an error names a stage a variant declares
+/// but glsl/ does not have (the registry test renders every variant, so it shows there).
+pub(super) fn built_in(file: &str) -> Result<&'static [u8]> {
+    shaders::spirv(file).ok_or_else(|| {
+        Error::invalid(
+            "shader",
+            format!("glsl/{file} was not compiled into this build"),
+        )
+    })
+}
+
+/// The descriptor bindings of a pass: the uniform block (0), the colour table (2), the
+/// texture (3) and the variant's own; with `per_vertex` the vertex stage reads the colour
+/// table and the variant's resources too.
+fn pass_bindings(variant: &dyn PreparedVariant, per_vertex: bool) -> Vec<Binding> {
+    let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
+    let mut bindings = vec![
+        Binding {
+            binding: 0,
+            kind: vk::DescriptorType::UNIFORM_BUFFER,
+            stages,
+        },
+        Binding {
+            binding: 2,
+            kind: vk::DescriptorType::STORAGE_BUFFER,
+            stages: vk::ShaderStageFlags::FRAGMENT,
+        },
+        Binding {
+            binding: 3,
+            kind: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+            stages: vk::ShaderStageFlags::FRAGMENT,
+        },
+    ];
+    bindings.extend(variant.bindings().into_iter().map(|mut b| {
+        if per_vertex {
+            b.stages |= vk::ShaderStageFlags::VERTEX;
+        }
+        b
+    }));
+    if per_vertex {
+        bindings[1].stages |= vk::ShaderStageFlags::VERTEX;
+    }
+    bindings
+}
+
+/// A pass's uniform block (binding 0, holding `params`) and colour table (binding 2).
+fn pass_buffers(
+    dev: &Arc<Device>,
+    prepared: &PreparedMaterial,
+    variant: &dyn PreparedVariant,
+    params: &ParamsUbo,
+) -> Result<(Buffer, Buffer)> {
+    // Device-written per frame (ScenePass::record), so TRANSFER_DST too.
+    let ubo = Buffer::with_data(
+        dev,
+        "params",
+        vk::BufferUsageFlags::UNIFORM_BUFFER | vk::BufferUsageFlags::TRANSFER_DST,
+        std::slice::from_ref(params),
+    )?;
+    let colour = Buffer::with_data(
+        dev,
+        "colour weights",
+        vk::BufferUsageFlags::STORAGE_BUFFER,
+        &colour_weights(prepared, variant),
+    )?;
+    Ok((ubo, colour))
+}
+
+/// The 1×1 white texture bound where a scene has none (the binding is statically used, so
+/// it always needs an image; the variant never samples it then).
+fn white_texture(dev: &Arc<Device>) -> Result<Image> {
+    Image::sampled_with_data(
+        dev,
+        "no texture (1×1 white)",
+        ImageDesc {
+            format: vk::Format::R8G8B8A8_UNORM,
+            width: 1,
+            height: 1,
+            layers: 1,
+            usage: vk::ImageUsageFlags::SAMPLED,
+            aspect: vk::ImageAspectFlags::COLOR,
+            view_type: vk::ImageViewType::TYPE_2D,
+        },
+        4,
+        &[255u8; 4],
+    )
+}
+
+/// What a pass's pipeline is specialised for besides the output and the options.
+#[derive(Debug, Clone, Copy)]
+struct PipelineShape {
+    /// The variant evaluates per vertex (a mesh only).
+    per_vertex: bool,
+    /// A mesh (depth-tested, the mesh's vertex layout) rather than a BRDF map.
+    mesh: bool,
+    texture_blending: bool,
 }

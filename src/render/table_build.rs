@@ -467,37 +467,7 @@ pub fn sample_g_device(
                 )?;
                 run(&window_y, base, (nu * nv) as u64)?;
             }
-            compute::barrier(
-                dev,
-                cb,
-                (
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::AccessFlags::SHADER_WRITE,
-                ),
-                (
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::AccessFlags::TRANSFER_READ,
-                ),
-            );
-            let region = vk::BufferCopy {
-                src_offset: 0,
-                dst_offset: 0,
-                size: acc_bytes,
-            };
-            // SAFETY: cb is recording; both buffers are live and acc_bytes long.
-            unsafe {
-                dev.raw()
-                    .cmd_copy_buffer(cb, acc.raw, readback.raw, &[region])
-            };
-            compute::barrier(
-                dev,
-                cb,
-                (
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::AccessFlags::TRANSFER_WRITE,
-                ),
-                (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
-            );
+            compute::copy_to_host(dev, cb, &acc, &readback, acc_bytes);
             Ok(())
         })?;
         // The device stores the slice u-major; Slices are v-major.
@@ -601,6 +571,7 @@ pub fn sample_g_built(
     w_nodes: &[f64],
     keep: Option<&[usize]>,
     dir: Option<&std::path::Path>,
+    report: &dyn crate::report::Report,
     progress: &(dyn Fn() + Sync),
 ) -> Result<(Slices, Built)> {
     let precision = build.on(dev);
@@ -618,6 +589,7 @@ pub fn sample_g_built(
         keep,
         dir,
         tag,
+        report,
         &make,
     )?;
     let seconds = start.elapsed().as_secs_f64();
@@ -700,37 +672,7 @@ pub fn fft_rows_device(
             src = 1 - src;
         }
         let from = if src == 0 { &field_a } else { &field_b };
-        compute::barrier(
-            dev,
-            cb,
-            (
-                vk::PipelineStageFlags::COMPUTE_SHADER,
-                vk::AccessFlags::SHADER_WRITE,
-            ),
-            (
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_READ,
-            ),
-        );
-        let region = vk::BufferCopy {
-            src_offset: 0,
-            dst_offset: 0,
-            size: bytes,
-        };
-        // SAFETY: cb is recording; both buffers are live and `bytes` long.
-        unsafe {
-            dev.raw()
-                .cmd_copy_buffer(cb, from.raw, readback.raw, &[region])
-        };
-        compute::barrier(
-            dev,
-            cb,
-            (
-                vk::PipelineStageFlags::TRANSFER,
-                vk::AccessFlags::TRANSFER_WRITE,
-            ),
-            (vk::PipelineStageFlags::HOST, vk::AccessFlags::HOST_READ),
-        );
+        compute::copy_to_host(dev, cb, from, &readback, bytes);
         Ok(())
     })?;
     rows.copy_from_slice(&precision.read(readback.mapped()?));

@@ -708,7 +708,7 @@ pub fn read_header(path: &Path) -> std::result::Result<Header, String> {
 
 /// `diffract cache` options.
 #[derive(Debug, Clone, clap::Args)]
-pub struct CacheArgs {
+pub struct CacheCommandArgs {
     /// What to do.
     #[arg(value_enum, default_value_t = CacheAction::List)]
     pub action: CacheAction,
@@ -727,7 +727,7 @@ pub enum CacheAction {
 }
 
 /// Runs `diffract cache`.
-pub fn run(args: &CacheArgs) -> Result<()> {
+pub fn run(args: &CacheCommandArgs) -> Result<()> {
     let dir = args
         .cache_dir
         .clone()

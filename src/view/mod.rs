@@ -13,11 +13,11 @@ pub mod reload;
 
 use std::path::PathBuf;
 
+use crate::cli::cache::CacheArgs;
+use crate::cli::gpu::GpuArgs;
+use crate::cli::material::MaterialArgs;
+use crate::cli::scene::SceneArgs;
 use crate::gpu::swapchain::Vsync;
-use crate::gpu::StorageFormat;
-use crate::material::MaterialArgs;
-use crate::render::{TableArgs, VariantKind};
-use crate::scene::Scene;
 use crate::{Error, Result};
 
 /// `on` / `off` for `--vsync`.
@@ -30,38 +30,14 @@ pub enum OnOff {
 /// `diffract view`: the scene in a window.
 #[derive(Debug, Clone, clap::Args)]
 pub struct ViewArgs {
-    /// Scene file (TOML); the embedded default scene when omitted.
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Window width in pixels (default: the scene's image width).
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Window height in pixels (default: the scene's image height).
-    #[arg(long)]
-    pub height: Option<u32>,
-    /// Initial exposure (overrides the scene).
-    #[arg(long, allow_negative_numbers = true)]
-    pub exposure: Option<f32>,
-    /// Initial shader variant (V cycles through them).
-    #[arg(long, value_enum, default_value_t = VariantKind::Default)]
-    pub variant: VariantKind,
-    /// Storage format of the DFT terms on the GPU (flss).
-    #[arg(long, value_enum, default_value_t = StorageFormat::Rg32f)]
-    pub storage: StorageFormat,
-    /// Evaluate the BRDF per vertex and interpolate the colour (thesis §1.5.1; flss, nmm,
-    /// pq; V then cycles through those).
-    #[arg(long)]
-    pub per_vertex: bool,
     #[command(flatten)]
-    pub table: TableArgs,
+    pub scene: SceneArgs,
+    #[command(flatten)]
+    pub gpu: GpuArgs,
     #[command(flatten)]
     pub material: MaterialArgs,
-    /// Directory of the DFT term cache (default: $DIFFRACT_CACHE or ~/.cache/diffract).
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
-    /// Do not read or write the term cache.
-    #[arg(long)]
-    pub no_cache: bool,
+    #[command(flatten)]
+    pub cache: CacheArgs,
     /// Recompile glsl/* when it changes and rebuild the pipeline (a compile error keeps the
     /// last good one).
     #[arg(long)]
@@ -134,31 +110,13 @@ pub fn parse_at(s: &str) -> Result<(u32, ScriptAction)> {
 
 /// Runs `diffract view` until the window closes (or `--frames` are done).
 pub fn run(args: &ViewArgs) -> Result<()> {
-    let mut scene = match &args.scene {
-        Some(p) => Scene::load(p)?,
-        None => Scene::default_scene(),
-    };
-    if let Some(e) = args.exposure {
-        if !(e.is_finite() && e > 0.0) {
-            return Err(Error::invalid(
-                "exposure",
-                format!("{e}; must be finite and > 0"),
-            ));
-        }
-        scene.output.exposure = e;
-    }
+    let mut scene = args.scene.load()?;
     let map_exposure = args.map_exposure.unwrap_or(input::DEFAULT_MAP_EXPOSURE);
     if !(map_exposure.is_finite() && map_exposure > 0.0) {
         return Err(Error::invalid(
             "map exposure",
             format!("{map_exposure}; must be finite and > 0"),
         ));
-    }
-    if let Some(w) = args.width {
-        scene.output.width = w;
-    }
-    if let Some(h) = args.height {
-        scene.output.height = h;
     }
     for (what, v) in [
         ("width", scene.output.width),
@@ -180,14 +138,14 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         .iter()
         .map(|a| parse_at(a))
         .collect::<Result<Vec<_>>>()?;
-    crate::render::check_per_vertex(args.per_vertex, false, args.variant)?;
+    args.gpu.check_per_vertex(false, args.gpu.variant)?;
     scene.material = args.material.apply(scene.material.clone());
     let settings = app::Settings {
-        variant: args.variant.resolve(),
-        per_vertex: args.per_vertex,
-        storage: args.storage,
-        table: args.table.options(),
-        cache_dir: crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref()),
+        variant: args.gpu.variant.resolve(),
+        per_vertex: args.gpu.per_vertex,
+        storage: args.gpu.storage,
+        table: args.gpu.table.options(),
+        cache_dir: args.cache.dir(),
         watch: args.watch.then(|| {
             args.glsl_dir
                 .clone()
@@ -199,7 +157,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         },
         frames: args.frames,
         screenshot: args.screenshot.clone(),
-        validation: crate::render::validation_requested(),
+        validation: crate::cli::gpu::validation_requested(),
         script,
         map: args.map,
         map_exposure,
@@ -210,7 +168,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
 /// `diffract view`: the screenshot must be a PNG that can be written and is none of the
 /// files the scene reads.
 pub fn view_args(args: &ViewArgs, scene: &crate::scene::Scene) -> Result<()> {
-    crate::render::table_args(&args.table)?;
+    args.gpu.table.check()?;
     if let Some(p) = &args.screenshot {
         if p.extension().and_then(|e| e.to_str()) != Some("png") {
             return Err(Error::invalid(
@@ -220,7 +178,7 @@ pub fn view_args(args: &ViewArgs, scene: &crate::scene::Scene) -> Result<()> {
         }
         let material = args.material.apply(scene.material.clone());
         crate::guard::check_outputs(
-            &crate::guard::scene_inputs(args.scene.as_deref(), scene, &material.heightfield),
+            &crate::guard::scene_inputs(args.scene.scene.as_deref(), scene, &material.heightfield),
             &[("--screenshot", p.clone())],
         )?;
     }

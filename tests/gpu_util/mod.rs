@@ -5,8 +5,12 @@
 
 pub mod golden;
 
+use std::path::Path;
+
+use diffract::heightfield::HeightField;
 use diffract::material::{Material, PreparedMaterial, Terms};
 use diffract::render::Renderer;
+use diffract::scene::Scene;
 use diffract::spectrum::Expansion;
 use diffract::Error;
 
@@ -144,4 +148,93 @@ pub fn sample_pixels(size: u32, wi: [f64; 3], n: usize) -> Vec<(u32, u32)> {
     px.sort_unstable();
     px.dedup();
     px
+}
+
+/// A 65 µm patch of 130² samples (dH = 0.5 µm) saved as `dir/field.f32`: 13 copies of a
+/// 5 µm ridge along x and 5 copies of a 13 µm wave along y, so both axes are periodic
+/// with 3 taps each (nmm finds a dominant period, pq whole copies of one), with `terms`
+/// fixed terms and a `lambda_step_nm` step.
+pub fn periodic_material(dir: &Path, terms: usize, lambda_step_nm: u32) -> Material {
+    let n = 130;
+    let tau = 2.0 * std::f64::consts::PI;
+    let h = (0..n * n)
+        .map(|i| {
+            let (c, r) = ((i % n) as f64, (i / n) as f64);
+            0.1 * (1.0 + (tau * c / 10.0).sin()) + 0.04 * (1.0 + (tau * r / 26.0).cos())
+        })
+        .collect();
+    let path = dir.join("field.f32");
+    HeightField::new(n, n, 0.5, h).unwrap().save(&path).unwrap();
+    Material {
+        heightfield: path.to_string_lossy().into_owned(),
+        terms: Terms::Fixed(terms),
+        lambda_step_nm,
+        ..Material::default()
+    }
+}
+
+/// The built-in plane (facing +z, tangent +x, so the blazed grating's lines run along y)
+/// seen head-on from `eye_z` on the z axis through a 63² camera; light 30° from the normal
+/// in the xz plane, so several diffraction orders of the 2.5 µm grating cross the middle
+/// row of the image, where v = 0; the default 0.53° sun of 8 directions.
+pub fn plane_scene(eye_z: f64) -> Scene {
+    let text = format!(
+        r#"
+[camera]
+eye = [0.0, 0.0, {eye_z:?}]
+target = [0.0, 0.0, 0.0]
+up = [0.0, 1.0, 0.0]
+fov_y_deg = 35.0
+[light]
+direction = [-0.5, 0.0, -0.8660254037844386]
+intensity = 1.5
+[mesh]
+builtin = "plane"
+[material]
+heightfield = "builtin:blazed"
+terms = 6
+window_radius = 1
+lambda_step_nm = 10
+[output]
+width = 63
+height = 63
+exposure = 20.0
+background = [0.1, 0.2, 0.3]
+"#
+    );
+    Scene::from_toml_str(&text, Path::new("plane.toml")).expect("plane scene")
+}
+
+/// Where the ray of pixel `(i, j)` of a `w`×`h` image (row `j` from the top, through the
+/// pixel's centre) meets the plane z = 0, from the inverse of the camera's view-projection
+/// `inv` (f64): the exact hit a plane scene's pixel shows.
+pub fn plane_hit(inv: &glam::DMat4, i: u32, j: u32, w: u32, h: u32) -> glam::DVec3 {
+    let ndc = |z: f64| {
+        let c = *inv
+            * glam::DVec4::new(
+                2.0 * (i as f64 + 0.5) / w as f64 - 1.0,
+                2.0 * (j as f64 + 0.5) / h as f64 - 1.0,
+                z,
+                1.0,
+            );
+        c.truncate() / c.w
+    };
+    let (near, far) = (ndc(0.0), ndc(1.0));
+    near + (far - near) * (-near.z / (far.z - near.z))
+}
+
+/// A validated headless device, or `None` (skip, with a notice) where the machine has no
+/// Vulkan; under `DIFFRACT_REQUIRE_VULKAN=1` a missing device fails, as [`renderer`].
+pub fn device() -> Option<std::sync::Arc<diffract::gpu::Device>> {
+    match diffract::gpu::Device::new(true) {
+        Ok(d) => Some(d),
+        Err(Error::NoVulkan(msg)) if vulkan_required() => {
+            panic!("DIFFRACT_REQUIRE_VULKAN=1 but {msg}")
+        }
+        Err(Error::NoVulkan(msg)) => {
+            eprintln!("SKIPPED: no Vulkan device on this machine ({msg})");
+            None
+        }
+        Err(e) => panic!("cannot create a validated device: {e}"),
+    }
 }

@@ -471,6 +471,8 @@ pub(crate) struct DrawSetup<'a> {
     /// table (then the shader evaluates the disc's centre once); `None`: a point light, a
     /// map, or a variant that loops over the disc's directions.
     pub disc: Option<DiscKernel>,
+    /// Where warnings and progress go.
+    pub report: &'a dyn crate::report::Report,
 }
 
 impl DrawSetup<'_> {

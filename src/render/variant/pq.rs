@@ -74,11 +74,11 @@ impl Variant for Pq {
         let p = setup.prepared;
         let pq = estimate_periodicity(&p.heightfield, p.material.coherence_um)?;
         if pq.off_lattice > crate::brdf::pq::WARN_OFF_LATTICE {
-            eprintln!(
-                "warning: pq: {:.1}% of the height field's power lies off the {:.4} µm period's lattice (aliased harmonics or irregularity) and is ignored",
+            setup.report.warn(&format!(
+                "pq: {:.1}% of the height field's power lies off the {:.4} µm period's lattice (aliased harmonics or irregularity) and is ignored",
                 100.0 * pq.off_lattice,
                 pq.axes[0].period_um.max(pq.axes[1].period_um)
-            );
+            ));
         }
         if pq.area_error() > 0.02 {
             let worst = pq
@@ -90,13 +90,13 @@ impl Variant for Pq {
                         .total_cmp(&(b.area_ratio() - 1.0).abs())
                 })
                 .unwrap_or(&pq.axes[0]);
-            eprintln!(
-                "warning: pq: {} copies of the {:.3} µm period make a lobe {:.1}% off the coherence window's area (N·L should be 2√π·σs = {:.1} µm)",
+            setup.report.warn(&format!(
+                "pq: {} copies of the {:.3} µm period make a lobe {:.1}% off the coherence window's area (N·L should be 2√π·σs = {:.1} µm)",
                 worst.copies,
                 worst.period_um,
                 100.0 * (worst.area_ratio() - 1.0).abs(),
                 2.0 * std::f64::consts::PI.sqrt() * p.material.coherence_um / 4.0
-            );
+            ));
         }
         let mut flss = prepare_terms(dev, setup)?;
         let [ax, ay] = pq.axes;

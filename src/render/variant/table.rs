@@ -82,15 +82,15 @@ pub(crate) fn prepare<T: GTable + 'static>(
     };
     let (spec, coarsened) = options.spec(kind, material, hi - lo, setup.region)?;
     if let Some(asked) = coarsened {
-        eprintln!(
-            "warning: {kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB",
+        setup.report.warn(&format!(
+            "{kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB",
             spec.region.lo[0],
             spec.region.hi[0],
             spec.region.lo[1],
             spec.region.hi[1],
             spec.texel_uv,
             setup.table.budget_bytes >> 20
-        );
+        ));
     }
     // Leaving out: the build integrates only the wavelengths whose weight matters.
     let (selection, wavelengths) = WavelengthsLeft::of(
@@ -101,6 +101,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let keep = setup.leave_out.then_some(selection.keep.as_slice());
     let lambdas = selection.keep.len() as u64;
     let bar = ProgressBar::new(spec.w_nodes as u64 * lambdas).with_message(format!("{kind} table"));
+    let bar = setup.report.progress(bar);
     bar.set_style(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} (w, λ) planes, {eta} left")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
@@ -115,6 +116,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
         &nodes(&spec),
         keep,
         setup.cache_dir,
+        setup.report,
         &|| bar.inc(1),
     )?;
     bar.finish_and_clear();

@@ -3,68 +3,24 @@
 
 use std::path::PathBuf;
 
-use super::table_build::TableBuild;
-use super::variant::{TableFormat, TableOptions, VariantKind};
-use super::{Picture, Renderer, SceneInputs};
 use crate::brdf::truncation::{Precision, Reach};
-use crate::gpu::StorageFormat;
-use crate::material::MaterialArgs;
+use crate::cli::cache::CacheArgs;
+use crate::cli::gpu::{validation_requested, GpuArgs};
+use crate::cli::material::MaterialArgs;
+use crate::cli::scene::SceneArgs;
+use crate::render::variant::VariantKind;
+use crate::render::{Picture, Renderer, SceneInputs};
 use crate::scene::Scene;
 use crate::{Error, Result};
-
-/// Table options shared by `render`, `profile` and `view`.
-#[derive(Debug, Clone, clap::Args)]
-pub struct TableArgs {
-    /// Table variants: node spacing in u and v (default: half the coherence lobe).
-    #[arg(long)]
-    pub table_texel: Option<f64>,
-    /// Table variants: nodes along w (default: volume 32, chebyshev-w 16, dhillon 12).
-    #[arg(long)]
-    pub table_w_nodes: Option<usize>,
-    /// Table variants: wavelength step of the offline spectral integral (nm).
-    #[arg(long, default_value_t = TableOptions::default().step_nm)]
-    pub table_step_nm: u32,
-    /// Table variants: GPU memory budget (MB); the u/v spacing is coarsened to fit.
-    #[arg(long, default_value_t = 512)]
-    pub table_budget_mb: usize,
-    /// Table variants: texel format (float16 halves the memory; on the default scene the
-    /// picture moves by a ΔE2000 of 0.001).
-    #[arg(long, value_enum, default_value_t = TableFormat::Rgba16f)]
-    pub table_format: TableFormat,
-    /// Table variants: where to build the table (auto: the device when it is a GPU, the
-    /// CPU when Vulkan itself runs on the CPU, e.g. lavapipe).
-    #[arg(long, value_enum, default_value_t = TableBuild::Auto)]
-    pub table_build: TableBuild,
-}
-
-impl TableArgs {
-    pub fn options(&self) -> TableOptions {
-        TableOptions {
-            texel_uv: self.table_texel,
-            w_nodes: self.table_w_nodes,
-            step_nm: self.table_step_nm,
-            budget_bytes: self.table_budget_mb.saturating_mul(1 << 20),
-            format: self.table_format,
-            build: self.table_build,
-        }
-    }
-}
 
 /// `diffract render`: a scene (or a BRDF map) to an image.
 #[derive(Debug, Clone, clap::Args)]
 pub struct RenderArgs {
-    /// Scene file (TOML); the embedded default scene when omitted.
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
+    #[command(flatten)]
+    pub scene: SceneArgs,
     /// Output image: .png (8-bit sRGB) or .exr (linear float).
     #[arg(short, long, default_value = "diffract.png")]
     pub out: PathBuf,
-    /// Image width in pixels (overrides the scene).
-    #[arg(long)]
-    pub width: Option<u32>,
-    /// Image height in pixels (overrides the scene).
-    #[arg(long)]
-    pub height: Option<u32>,
     /// Render a BRDF map (hemisphere of view directions) instead of the scene.
     #[arg(long)]
     pub brdf_map: bool,
@@ -83,30 +39,12 @@ pub struct RenderArgs {
     /// BRDF map: also write an sRGB PNG beside the EXR output.
     #[arg(long)]
     pub png: bool,
-    /// Exposure (linear multiplier before the sRGB curve): overrides the scene's; for BRDF
-    /// maps it scales the PNG only (the EXR keeps the raw values).
-    #[arg(long)]
-    pub exposure: Option<f32>,
-    /// Shader variant (`diffract variants` lists them).
-    #[arg(long, value_enum, default_value_t = VariantKind::Default)]
-    pub variant: VariantKind,
-    /// Storage format of the DFT terms on the GPU (flss).
-    #[arg(long, value_enum, default_value_t = StorageFormat::Rg32f)]
-    pub storage: StorageFormat,
-    /// Evaluate the BRDF per vertex and interpolate the colour (thesis §1.5.1; flss, nmm,
-    /// pq; scenes only: a BRDF map has no vertices).
-    #[arg(long)]
-    pub per_vertex: bool,
     #[command(flatten)]
-    pub table: TableArgs,
+    pub gpu: GpuArgs,
     #[command(flatten)]
     pub material: MaterialArgs,
-    /// Directory of the DFT term cache (default: $DIFFRACT_CACHE or ~/.cache/diffract).
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
-    /// Do not read or write the term cache.
-    #[arg(long)]
-    pub no_cache: bool,
+    #[command(flatten)]
+    pub cache: CacheArgs,
     /// Leave nothing out: every wavelength, every DFT texel of the band (to measure what
     /// leaving out saves). By default what the scene cannot need at the tolerance is left
     /// out and reported on one line.
@@ -117,77 +55,23 @@ pub struct RenderArgs {
     pub verbose: bool,
 }
 
-/// Refuses `--per-vertex` where it cannot apply: on a BRDF map (no vertices) and for a
-/// variant without a per-vertex stage. Checked before the device is opened.
-pub fn check_per_vertex(per_vertex: bool, brdf_map: bool, variant: VariantKind) -> Result<()> {
-    if !per_vertex {
-        return Ok(());
-    }
-    if brdf_map {
-        return Err(Error::invalid(
-            "per-vertex",
-            "a BRDF map has no vertices (every pixel is its own direction); drop --per-vertex or --brdf-map",
-        ));
-    }
-    if variant.per_vertex_file().is_none() {
-        let with: Vec<&str> = VariantKind::ALL
-            .into_iter()
-            .filter(|k| k.per_vertex_file().is_some())
-            .map(VariantKind::name)
-            .collect();
-        return Err(Error::invalid(
-            "per-vertex",
-            format!(
-                "'{}' has no per-vertex evaluation: a table variant's lookup already costs about what a vertex does, so interpolating it would add error and save nothing; use {}",
-                variant.resolve(),
-                with.join(", ")
-            ),
-        ));
-    }
-    Ok(())
-}
-
-/// Whether to enable Vulkan validation: always in debug builds, or with
-/// `DIFFRACT_VALIDATION=1`.
-pub fn validation_requested() -> bool {
-    cfg!(debug_assertions) || std::env::var("DIFFRACT_VALIDATION").is_ok_and(|v| v == "1")
-}
-
 /// Runs `diffract render`: renders, writes the image(s), prints one line with the device,
 /// GPU and wall time.
 pub fn run(args: &RenderArgs) -> Result<()> {
-    let mut scene = match &args.scene {
-        Some(p) => Scene::load(p)?,
-        None => Scene::default_scene(),
-    };
-    if let Some(e) = args.exposure {
-        if !(e.is_finite() && e > 0.0) {
-            return Err(Error::invalid(
-                "exposure",
-                format!("{e}; must be finite and > 0"),
-            ));
-        }
-        scene.output.exposure = e;
-    }
+    let scene = args.scene.load()?;
     crate::image_io::output_format(&args.out)?;
     render_args(args, &scene)?;
     // `default` means the best variant that can draw the request: one wavelength needs
     // flss (the table variants integrate the spectrum offline). Explicit choices stand.
-    let spectral_default = args.variant == VariantKind::Default && args.lambda_nm.is_some();
+    let spectral_default = args.gpu.variant == VariantKind::Default && args.lambda_nm.is_some();
     let variant = if spectral_default {
         VariantKind::Flss
     } else {
-        args.variant
+        args.gpu.variant
     };
-    check_per_vertex(args.per_vertex, args.brdf_map, variant)?;
+    args.gpu.check_per_vertex(args.brdf_map, variant)?;
     if args.lambda_nm.is_some() {
-        variant.check_output(super::OutputMode::MapSpectral)?;
-    }
-    if let Some(w) = args.width {
-        scene.output.width = w;
-    }
-    if let Some(h) = args.height {
-        scene.output.height = h;
+        variant.check_output(crate::render::OutputMode::MapSpectral)?;
     }
     // Every file the user gave is read and checked before the device opens (a bad OBJ
     // or PNG must not wait for Vulkan, nor be hidden by a missing driver); the slow parts
@@ -208,12 +92,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         );
     }
     let mut renderer = Renderer::new(validation_requested())?;
-    renderer.set_storage_format(args.storage);
+    renderer.set_storage_format(args.gpu.storage);
     renderer.set_variant(variant);
-    renderer.set_per_vertex(args.per_vertex);
-    renderer.set_table_options(args.table.options());
+    renderer.set_per_vertex(args.gpu.per_vertex);
+    renderer.set_table_options(args.gpu.table.options());
     renderer.set_leave_out(!args.keep_all);
-    let cache_dir = crate::cachedir::resolve(args.no_cache, args.cache_dir.as_deref());
+    let cache_dir = args.cache.dir();
     renderer.set_cache_dir(cache_dir.clone());
     let prepared = material.prepare_planned_deferred(heightfield, plan, cache_dir.as_deref())?;
     // Table variants show their own bar while they build; the draw after it is short.
@@ -227,9 +111,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     } else {
         let frame = renderer.render_brdf_map(
             &prepared,
-            args.theta_i.unwrap_or(super::DEFAULT_MAP_THETA_I),
+            args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I),
             args.phi_i.unwrap_or(0.0),
-            args.size.unwrap_or(super::DEFAULT_MAP_SIZE),
+            args.size.unwrap_or(crate::render::DEFAULT_MAP_SIZE),
             args.lambda_nm,
         )?;
         write_map(args, &frame)?;
@@ -256,6 +140,25 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         gpu_bytes: frame.variant.gpu_bytes,
         keep_all: args.keep_all,
     };
+    print_result(args, &scene, renderer.device_name(), &frame, &what);
+    let n = renderer.validation_messages();
+    if n > 0 {
+        return Err(Error::Validation(n));
+    }
+    // After the checks: a failed render ends on its one error line.
+    eprintln!("{}", report.line());
+    if args.verbose {
+        for line in report.details() {
+            eprintln!("{line}");
+        }
+    }
+    Ok(())
+}
+
+/// The render's lines on stdout: where the table was built (table variants), then the
+/// device, what was drawn, the output, the variant, GPU and wall time, and the fetches a
+/// pixel costs.
+fn print_result(args: &RenderArgs, scene: &Scene, device: &str, frame: &Picture, what: &str) {
     let gpu = frame
         .gpu_ms
         .map_or("n/a".to_string(), |ms| format!("{ms:.2}"));
@@ -292,7 +195,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     };
     println!(
         "{}: {what} {}×{} → {written}: variant {}: GPU {gpu} ms, wall {:.1} ms (build {:.1} ms, {:.1} MB, {fetches})",
-        renderer.device_name(),
+        device,
         frame.width,
         frame.height,
         v.name,
@@ -300,24 +203,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         v.build_ms,
         v.gpu_bytes as f64 / 1e6,
     );
-    let n = renderer.validation_messages();
-    if n > 0 {
-        return Err(Error::Validation(n));
-    }
-    // After the checks: a failed render ends on its one error line.
-    eprintln!("{}", report.line());
-    if args.verbose {
-        for line in report.details() {
-            eprintln!("{line}");
-        }
-    }
-    Ok(())
 }
 
 /// Writes a BRDF map: an EXR holds the raw channels (XYZ or ρ); a PNG shows XYZ as sRGB
 /// (or ρ as grey). `--png` with an EXR output adds the PNG beside it.
 fn write_map(args: &RenderArgs, frame: &Picture) -> Result<()> {
-    let exposure = args.exposure.unwrap_or(1.0);
+    let exposure = args.scene.exposure.unwrap_or(1.0);
     let viewable = || -> Vec<[f32; 3]> {
         if args.lambda_nm.is_some() {
             frame.rgb.clone()
@@ -386,8 +277,8 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
     if args.brdf_map {
         crate::guard::refuse_flags(
             &[
-                ("--width", args.width.is_some()),
-                ("--height", args.height.is_some()),
+                ("--width", args.scene.width.is_some()),
+                ("--height", args.scene.height.is_some()),
             ],
             "a scene render (without --brdf-map)",
         )?;
@@ -430,8 +321,8 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
             "--brdf-map",
         )?;
         for (what, v) in [
-            ("width", args.width.unwrap_or(scene.output.width)),
-            ("height", args.height.unwrap_or(scene.output.height)),
+            ("width", args.scene.width.unwrap_or(scene.output.width)),
+            ("height", args.scene.height.unwrap_or(scene.output.height)),
         ] {
             if !(1..=8192).contains(&v) {
                 return Err(Error::invalid(
@@ -441,7 +332,7 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
             }
         }
     }
-    table_args(&args.table)?;
+    args.gpu.table.check()?;
     let material = args.material.apply(scene.material.clone());
     material.validate()?;
 
@@ -450,7 +341,7 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
         outputs.push(("--png image", png_sibling));
     }
     crate::guard::check_outputs(
-        &crate::guard::scene_inputs(args.scene.as_deref(), scene, &material.heightfield),
+        &crate::guard::scene_inputs(args.scene.scene.as_deref(), scene, &material.heightfield),
         &outputs,
     )?;
     if !args.brdf_map {
@@ -460,33 +351,6 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
         if let Some(t) = scene.texture.as_ref().filter(|t| !t.is_builtin()) {
             crate::fsutil::check_input_file(&t.path, "texture", crate::fsutil::MAX_PNG_BYTES)?;
         }
-    }
-    Ok(())
-}
-
-/// The table variants' options (`--table-*`), checked the same way by every command that
-/// takes them, whichever variant is drawn: a spacing above zero, a `w` node count the
-/// table supports, a wavelength step that divides the visible range, a budget of at least
-/// 1 MB.
-pub fn table_args(t: &TableArgs) -> Result<()> {
-    use crate::brdf::table::MAX_NODES_W;
-    if let Some(texel) = t.table_texel {
-        crate::guard::positive("table texel", texel, "")?;
-    }
-    if let Some(n) = t.table_w_nodes {
-        if !(2..=MAX_NODES_W).contains(&n) {
-            return Err(Error::invalid(
-                "table w nodes",
-                format!("{n}; expected 2..={MAX_NODES_W}"),
-            ));
-        }
-    }
-    crate::colour::ColourTable::new(t.table_step_nm)?;
-    if t.table_budget_mb == 0 {
-        return Err(Error::invalid(
-            "table budget",
-            "0 MB; expected at least 1 MB",
-        ));
     }
     Ok(())
 }

@@ -1,0 +1,372 @@
+//! Offscreen pictures: BRDF maps and scene frames drawn into an offscreen target, timed,
+//! and read back as linear values ([`Picture`]). The last map's pass and target are kept
+//! and reused while nothing they were built for changes.
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use ash::vk;
+
+use super::params::{colour_weights, OutputMode};
+use super::pass::PassOptions;
+use super::pass::{MapView, ScenePass};
+use super::region::{load_scene_mesh, region_contains, scene_region};
+use super::variant::VariantStats;
+use super::{Renderer, SceneInputs, MAX_MAP_SIZE};
+use crate::brdf;
+use crate::brdf::table::Region;
+use crate::material::PreparedMaterial;
+use crate::scene::Scene;
+use crate::{Error, Result};
+
+use crate::gpu::frames::Frames;
+use crate::gpu::target::OffscreenTarget;
+
+/// One rendered picture read back from an offscreen target: linear values, row-major from
+/// the top row, with the GPU and wall time it took.
+#[derive(Debug, Clone)]
+pub struct Picture {
+    pub width: u32,
+    pub height: u32,
+    /// Linear sRGB (scenes), XYZ (BRDF maps) or `ρ_λ` in all channels (spectral maps).
+    pub rgb: Vec<[f32; 3]>,
+    /// GPU time of the draw from timestamps; `None` where the queue has none.
+    pub gpu_ms: Option<f64>,
+    /// Wall time of the whole call: variant preparation and pipeline creation (unless
+    /// reused from the previous frame), draw and readback.
+    pub wall_ms: f64,
+    /// The variant that drew it.
+    pub variant: VariantStats,
+}
+
+impl Picture {
+    /// Pixel `(x, y)`, `y` from the top.
+    pub fn at(&self, x: u32, y: u32) -> [f32; 3] {
+        self.rgb[(y * self.width + x) as usize]
+    }
+}
+
+/// What a BRDF map pass is built for: the objects of a [`MapPass`] are reused while
+/// none of these change (a new `θi`, `φi` or `λ` only rewrites the uniform block).
+#[derive(Debug, Clone, PartialEq)]
+struct MapKey {
+    /// Address of the prepared variant the descriptor set points at (the pass holds an
+    /// `Arc` of it, so the address cannot be reused while the key lives).
+    variant: usize,
+    output: OutputMode,
+    options: PassOptions,
+    size: u32,
+    /// The colour table as uploaded (`λ` and weights).
+    colour: Vec<[f32; 4]>,
+}
+
+/// The last BRDF map's objects: pass (pipeline, descriptor set, buffers), offscreen target
+/// and its frame (command buffer, fence, timestamps). Creating and destroying them for every
+/// map cost time (most of lavapipe's 135 ms a 16² frame went to the pipeline) and, with the
+/// validation layer on, ~11 KB of its bookkeeping a frame (README: soak).
+pub(super) struct MapPass {
+    key: MapKey,
+    frames: Frames,
+    pass: ScenePass,
+    target: OffscreenTarget,
+}
+
+impl Renderer {
+    /// A BRDF map (thesis §5): an S×S image of the hemisphere of view directions, pixel
+    /// `(i, j)` (row `j` from the top) at `x = 2(i+½)/S − 1`, `y = 1 − 2(j+½)/S`,
+    /// `ωr = (x, y, √(1−x²−y²))`, black outside the unit disk; light from `(θi, φi)`.
+    /// Channels: linear XYZ, or `ρ_λ` in all three with `lambda_nm` (flss only).
+    pub fn render_brdf_map(
+        &mut self,
+        prepared: &PreparedMaterial,
+        theta_i_deg: f64,
+        phi_i_deg: f64,
+        size: u32,
+        lambda_nm: Option<f64>,
+    ) -> Result<Picture> {
+        let start = Instant::now();
+        check_map_args(theta_i_deg, phi_i_deg, size, lambda_nm)?;
+        let wi = brdf::direction(theta_i_deg, phi_i_deg);
+        let output = if lambda_nm.is_some() {
+            OutputMode::MapSpectral
+        } else {
+            OutputMode::MapXyz
+        };
+        // The shader sees ωi in float32: the table must cover what it computes from it.
+        let wi32 = wi.map(|c| c as f32 as f64);
+        let region = Region::brdf_map(wi32).widened(1e-5);
+        self.prepare_variant(prepared, region, output, None)?;
+        let mut params = self.params(prepared);
+        params.map_wi = [
+            wi32[0] as f32,
+            wi32[1] as f32,
+            wi32[2] as f32,
+            lambda_nm.map_or(0.0, |l| (l * 1e-3) as f32),
+        ];
+        params.map_info = [size as f32, 0.0, 0.0, 0.0];
+        let options = PassOptions {
+            fresnel: prepared.shading.fresnel,
+            shadowing: prepared.shading.shadowing,
+            texture_blending: false,
+        };
+        let Some((_, variant)) = &self.prepared else {
+            return Err(Error::invalid("variant", "no variant prepared"));
+        };
+        let key = MapKey {
+            variant: Arc::as_ptr(variant) as *const () as usize,
+            output,
+            options,
+            size,
+            colour: colour_weights(prepared, variant.as_ref()),
+        };
+        // Taken out while it draws: a failed frame drops it rather than leave a pass in an
+        // unknown state for the next one.
+        let mut map = match self.map.take() {
+            Some(m) if m.key == key => m,
+            old => {
+                // The old objects go before the new ones are made.
+                drop(old);
+                let target = OffscreenTarget::new(&self.dev, size, size)?;
+                let pass = self.build_pass(
+                    prepared,
+                    params,
+                    output,
+                    options,
+                    None,
+                    [0.0; 4],
+                    None,
+                    target.render_pass(),
+                )?;
+                MapPass {
+                    key,
+                    frames: Frames::single(&self.dev, "brdf map frame")?,
+                    pass,
+                    target,
+                }
+            }
+        };
+        map.pass.params = params;
+        let mut frame = self.draw(&map.pass, &map.target, &mut map.frames)?;
+        self.map = Some(map);
+        frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(frame)
+    }
+
+    /// Renders `scene`'s mesh with the diffraction shader (thesis Algorithms 2–4) using
+    /// `prepared` as the material (callers prepare `scene.material`, possibly overridden).
+    /// Pixels are linear sRGB already multiplied by the light intensity, `cosθi` and the
+    /// scene's exposure; uncovered pixels hold the background colour as given.
+    pub fn render_scene(&mut self, scene: &Scene, prepared: &PreparedMaterial) -> Result<Picture> {
+        let inputs = SceneInputs::load(scene, true)?;
+        self.render_scene_with(scene, &inputs, prepared)
+    }
+
+    /// [`render_scene`](Self::render_scene) with the scene's files already loaded.
+    pub fn render_scene_with(
+        &mut self,
+        scene: &Scene,
+        inputs: &SceneInputs,
+        prepared: &PreparedMaterial,
+    ) -> Result<Picture> {
+        let start = Instant::now();
+        let out = &scene.output;
+        let options = PassOptions {
+            fresnel: prepared.shading.fresnel,
+            shadowing: prepared.shading.shadowing,
+            texture_blending: true,
+        };
+        let target = OffscreenTarget::new(&self.dev, out.width, out.height)?;
+        let uploads = self.upload_scene(scene, inputs, options)?;
+        let pass = self.scene_pass_of(
+            scene,
+            &inputs.mesh,
+            uploads,
+            prepared,
+            options,
+            target.render_pass(),
+            out.aspect(),
+        )?;
+        let mut frames = Frames::single(&self.dev, "diffraction frame")?;
+        let mut frame = self.draw(&pass, &target, &mut frames)?;
+        frame.wall_ms = start.elapsed().as_secs_f64() * 1e3;
+        Ok(frame)
+    }
+
+    /// `scene` as `diffract render` writes it, at the output size: drawn at the supersampled
+    /// size ([`crate::scene::Output::render_size`]) with unit exposure, box-filtered in linear
+    /// light, then exposed and, with `tone`, tone-mapped ([`crate::scene::Output::resolve`]);
+    /// without `tone` (EXR) it stays linear after the exposure. The background is drawn
+    /// divided by the exposure, so it comes out as given (before the tone curve).
+    /// `inputs`: the scene's files already loaded ([`SceneInputs`]), else they are loaded here.
+    pub fn render_output(
+        &mut self,
+        scene: &Scene,
+        inputs: Option<&SceneInputs>,
+        prepared: &PreparedMaterial,
+        tone: bool,
+    ) -> Result<Picture> {
+        let out = &scene.output;
+        let (rw, rh) = out.render_size();
+        let mut big = scene.clone();
+        big.output.width = rw;
+        big.output.height = rh;
+        big.output.exposure = 1.0;
+        big.output.background = out.background.map(|c| c / out.exposure);
+        let mut frame = match inputs {
+            Some(inputs) => self.render_scene_with(&big, inputs, prepared)?,
+            None => self.render_scene(&big, prepared)?,
+        };
+        frame.rgb = if tone {
+            out.resolve(&frame.rgb)?
+        } else {
+            let (_, _, px) =
+                crate::image_io::box_downsample(rw, rh, &frame.rgb, out.supersample.max(1))?;
+            px.into_iter()
+                .map(|p| p.map(|c| c * out.exposure))
+                .collect()
+        };
+        frame.width = out.width;
+        frame.height = out.height;
+        Ok(frame)
+    }
+
+    /// The viewer's BRDF map (thesis §5, as [`Renderer::render_brdf_map`] draws it) as a pass
+    /// for `render_pass`: light from `map.wi` (tangent frame, `z ≥ 0`), drawn into the
+    /// top-left `map.size`² pixels of whatever target it is recorded into, as displayable
+    /// colour: the shader turns the map's XYZ into linear sRGB and multiplies it by
+    /// `map.exposure`
+    /// (`OUTPUT_MODE` = MODE_MAP_DISPLAY) and the sRGB target applies the transfer curve, as
+    /// `render --brdf-map --png --exposure E` does on the CPU. Move the light and resize with
+    /// [`ScenePass::set_map`]. Table variants are prepared for the map's region joined with
+    /// the view of `beside` (the mesh drawn next to the map), so that the two passes share
+    /// one table and neither makes the other rebuild it.
+    pub fn brdf_map_pass(
+        &mut self,
+        prepared: &PreparedMaterial,
+        map: MapView,
+        options: PassOptions,
+        beside: Option<&Scene>,
+        render_pass: vk::RenderPass,
+    ) -> Result<ScenePass> {
+        let MapView { wi, size, exposure } = map;
+        if size == 0 || size > MAX_MAP_SIZE {
+            return Err(Error::invalid(
+                "BRDF map size",
+                format!("{size}; expected 1..={MAX_MAP_SIZE} pixels"),
+            ));
+        }
+        if !(wi.iter().all(|c| c.is_finite()) && wi[2] >= 0.0) {
+            return Err(Error::invalid(
+                "BRDF map light",
+                format!("{wi:?}; expected a finite direction with z ≥ 0"),
+            ));
+        }
+        let wi32 = wi.map(|c| c as f32 as f64);
+        let mut region = Region::brdf_map(wi32).widened(1e-5);
+        if let Some(scene) = beside {
+            let mesh = load_scene_mesh(scene)?;
+            if let Some(r) = scene_region(scene, &mesh, None, false) {
+                region = Region {
+                    lo: std::array::from_fn(|a| region.lo[a].min(r.lo[a])),
+                    hi: std::array::from_fn(|a| region.hi[a].max(r.hi[a])),
+                };
+            }
+        }
+        self.prepare_variant(prepared, region, OutputMode::MapDisplay, None)?;
+        let mut params = self.params(prepared);
+        params.map_wi = [wi32[0] as f32, wi32[1] as f32, wi32[2] as f32, 0.0];
+        params.map_info = [size as f32, 0.0, 0.0, 0.0];
+        params.lighting[1] = exposure;
+        let options = PassOptions {
+            texture_blending: false,
+            ..options
+        };
+        self.build_pass(
+            prepared,
+            params,
+            OutputMode::MapDisplay,
+            options,
+            None,
+            [0.0; 4],
+            None,
+            render_pass,
+        )
+    }
+
+    /// Whether the prepared table covers a BRDF map under light `wi` (tangent frame), so a
+    /// [`Renderer::brdf_map_pass`] built now would reuse it (always true for flss).
+    pub fn covers_brdf_map(&self, wi: [f64; 3]) -> bool {
+        let Some((key, _)) = &self.prepared else {
+            return false;
+        };
+        let Some(built) = key.region else {
+            return true;
+        };
+        let need = Region::brdf_map(wi.map(|c| c as f32 as f64)).widened(1e-5);
+        region_contains(&built.map(f64::from_bits), &need)
+    }
+
+    /// Records `pass` into the offscreen `target` as a frame of `frames` (timed when the
+    /// queue has timestamps), submits, waits and reads the linear result back.
+    pub(super) fn draw(
+        &self,
+        pass: &ScenePass,
+        target: &OffscreenTarget,
+        frames: &mut Frames,
+    ) -> Result<Picture> {
+        let cb = frames.begin()?.cb;
+        pass.record(cb, &target.target());
+        frames.end_timing();
+        target.record_readback(cb);
+        frames.submit(&[], &[])?;
+        let gpu_ms = frames.wait()?;
+        let rgb = target
+            .read_rgba()?
+            .into_iter()
+            .map(|p| [p[0], p[1], p[2]])
+            .collect();
+        Ok(Picture {
+            width: target.extent.width,
+            height: target.extent.height,
+            rgb,
+            gpu_ms,
+            wall_ms: 0.0,
+            variant: pass.stats.clone(),
+        })
+    }
+}
+
+/// Range checks of a BRDF map's arguments.
+fn check_map_args(
+    theta_i_deg: f64,
+    phi_i_deg: f64,
+    size: u32,
+    lambda_nm: Option<f64>,
+) -> Result<()> {
+    if size == 0 || size > MAX_MAP_SIZE {
+        return Err(Error::invalid(
+            "BRDF map size",
+            format!("{size}; expected 1..={MAX_MAP_SIZE} pixels"),
+        ));
+    }
+    if !(theta_i_deg.is_finite() && (0.0..=90.0).contains(&theta_i_deg)) {
+        return Err(Error::invalid(
+            "theta-i",
+            format!("{theta_i_deg}°; expected 0..=90° from the normal"),
+        ));
+    }
+    if !phi_i_deg.is_finite() {
+        return Err(Error::invalid("phi-i", format!("{phi_i_deg}°")));
+    }
+    let lo = crate::colour::LAMBDA_MIN_NM as f64;
+    let hi = crate::colour::LAMBDA_MAX_NM as f64;
+    if let Some(l) = lambda_nm {
+        if !(l.is_finite() && (lo..=hi).contains(&l)) {
+            return Err(Error::invalid(
+                "wavelength",
+                format!("{l} nm; expected {lo}..={hi} nm"),
+            ));
+        }
+    }
+    Ok(())
+}
