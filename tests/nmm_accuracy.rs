@@ -109,7 +109,12 @@ fn nmm_beats_flss_at_5nm_on_a_1d_grating() {
         e.nmm, e.flss5
     );
     // Measured 7.5e-4; 13 samples over ±4σν (before) gave 1.28e-3; FLSS at 5 nm 2.05e-3.
-    assert!(e.nmm <= e.flss5, "nmm {:e} vs flss 5 nm {:e}", e.nmm, e.flss5);
+    assert!(
+        e.nmm <= e.flss5,
+        "nmm {:e} vs flss 5 nm {:e}",
+        e.nmm,
+        e.flss5
+    );
     assert!(e.nmm < 1.0e-3, "nmm {:e}", e.nmm);
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -124,6 +129,11 @@ fn nmm_beats_flss_at_5nm_on_the_elaphe_field() {
     );
     // NMM sees only the light near the orders: 2.95e-2 (13 samples over ±4σν gave
     // 2.90e-2); FLSS at 5 nm misses lines between its wavelengths: 7.66e-2.
-    assert!(e.nmm <= e.flss5, "nmm {:e} vs flss 5 nm {:e}", e.nmm, e.flss5);
+    assert!(
+        e.nmm <= e.flss5,
+        "nmm {:e} vs flss 5 nm {:e}",
+        e.nmm,
+        e.flss5
+    );
     assert!(e.nmm < 3.0e-2, "nmm {:e}", e.nmm);
 }

@@ -367,7 +367,11 @@ mod tests {
             Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
             Err(e) => panic!("reading the FIFO: {e}"),
         }
-        assert!(received.is_empty(), "the FIFO received {} bytes", received.len());
+        assert!(
+            received.is_empty(),
+            "the FIFO received {} bytes",
+            received.len()
+        );
         let meta = std::fs::symlink_metadata(&path).unwrap();
         assert!(meta.is_file() && !meta.file_type().is_fifo());
         // The file that replaced it is the table: the next call loads it.

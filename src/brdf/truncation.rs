@@ -344,7 +344,8 @@ fn erfc(x: f64) -> f64 {
     let t = 1.0 / (1.0 + 0.327_591_1 * x);
     let poly = t
         * (0.254_829_592
-            + t * (-0.284_496_736 + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+            + t * (-0.284_496_736
+                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
     poly * (-x * x).exp()
 }
 
@@ -360,7 +361,7 @@ fn erfc(x: f64) -> f64 {
 /// The default `R = 2` at `σt ≈ 0.64` (a 65 µm patch) gives 6e-5; the thesis's `R = 1`
 /// gives 9e-2.
 pub fn window_truncation(sigma_texels: f64, radius: usize) -> f64 {
-    if !(sigma_texels > 0.0) {
+    if sigma_texels.is_nan() || sigma_texels <= 0.0 {
         return 0.0;
     }
     let r = radius as f64 / sigma_texels;
@@ -484,20 +485,18 @@ pub fn plan_terms(
             radius_for(geometry.sigma_texels, tolerance)
         )
     });
-    let base = |expansion, terms, auto, a, truncation, rounding, warnings: Vec<String>| {
-        TermPlan {
-            expansion,
-            terms,
-            auto,
-            tolerance,
-            precision,
-            reach: *reach,
-            a,
-            truncation,
-            rounding,
-            window,
-            warnings: window_warning.iter().cloned().chain(warnings).collect(),
-        }
+    let base = |expansion, terms, auto, a, truncation, rounding, warnings: Vec<String>| TermPlan {
+        expansion,
+        terms,
+        auto,
+        tolerance,
+        precision,
+        reach: *reach,
+        a,
+        truncation,
+        rounding,
+        window,
+        warnings: window_warning.iter().cloned().chain(warnings).collect(),
     };
     match terms {
         Terms::Fixed(t) => {
@@ -778,7 +777,8 @@ mod tests {
         let thesis = plan(1);
         assert_eq!(thesis.warnings.len(), 1, "{:?}", thesis.warnings);
         assert!(
-            thesis.warnings[0].contains("--window-radius 1") && thesis.warnings[0].contains("R = 2"),
+            thesis.warnings[0].contains("--window-radius 1")
+                && thesis.warnings[0].contains("R = 2"),
             "{}",
             thesis.warnings[0]
         );
