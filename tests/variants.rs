@@ -195,8 +195,8 @@ fn table_specs_refuse_nonsense_and_oversized_builds() {
 
 /// NMM on a 1D grating whose period divides the patch (1.625 µm: 40 periods in 65 µm)
 /// against FLSS with the same terms and taps at 1 nm. All the light off specular sits on
-/// the orders, and NMM integrates each line over ±4σ of the window (it drops e^-16 of it)
-/// with 13 samples where FLSS takes a 1 nm trapezoid: the two agree to 1%, so the stated
+/// the orders, and NMM integrates each line over ±2.5σ of the window (it drops 4e-4 of it)
+/// with 9 samples where FLSS takes a 1 nm trapezoid: the two agree to 1%, so the stated
 /// tolerance is 1% rel L2 over the plane of incidence. Without the Jacobian λ²/(|u|d)
 /// (the thesis's code, which normalised per pixel instead) the same comparison fails by far.
 #[test]

@@ -358,4 +358,91 @@ mod tests {
         assert_ne!(k, key(&hf, 60.0, &spec, &w));
         let _ = std::fs::remove_dir_all(&dir);
     }
+
+    /// Runs `f` on another thread and fails (instead of hanging) when it takes a minute.
+    fn within_a_minute<T: Send + 'static>(f: impl FnOnce() -> T + Send + 'static) -> T {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let _ = tx.send(f());
+        });
+        rx.recv_timeout(std::time::Duration::from_secs(60))
+            .expect("the table cache hung on its own path")
+    }
+
+    /// A FIFO or a symbolic link left at a `gtable-*.bin` path: the table is built (the
+    /// FIFO is not a table), the cache file is replaced through a temporary file and a
+    /// rename, nothing is written into the FIFO or through the link, and nothing hangs
+    /// (opening a FIFO with no reader for writing, or with no writer for reading, would).
+    #[cfg(unix)]
+    #[test]
+    fn a_fifo_or_link_at_the_cache_path_is_replaced_not_written_into() {
+        use std::io::Read;
+        use std::os::unix::fs::{FileTypeExt, OpenOptionsExt};
+        let (hf, spec, w) = setup();
+        let dir = std::env::temp_dir().join(format!("diffract-gtab-fifo-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join(format!("gtable-{:016x}.bin", key(&hf, 65.0, &spec, &w)));
+
+        // A FIFO, with a reader waiting on it that would see anything written into it.
+        let c = std::ffi::CString::new(path.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path.
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o600) }, 0, "mkfifo");
+        let mut reader = std::fs::File::options()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(&path)
+            .unwrap();
+        let built = {
+            let (hf, spec, w, dir) = (hf.clone(), spec, w.clone(), dir.clone());
+            within_a_minute(move || {
+                let builds = std::sync::atomic::AtomicUsize::new(0);
+                sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| {
+                    builds.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                })
+                .unwrap();
+                builds.into_inner()
+            })
+        };
+        assert!(built > 0, "a FIFO was taken for a table");
+        let mut received = Vec::new();
+        match reader.read_to_end(&mut received) {
+            Ok(_) => {}
+            Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {}
+            Err(e) => panic!("reading the FIFO: {e}"),
+        }
+        assert!(
+            received.is_empty(),
+            "the FIFO received {} bytes",
+            received.len()
+        );
+        let meta = std::fs::symlink_metadata(&path).unwrap();
+        assert!(meta.is_file() && !meta.file_type().is_fifo());
+        // The file that replaced it is the table: the next call loads it.
+        within_a_minute({
+            let (hf, spec, w, dir) = (hf.clone(), spec, w.clone(), dir.clone());
+            move || {
+                sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| {
+                    panic!("the replaced cache file must load")
+                })
+                .unwrap()
+            }
+        });
+
+        // A symbolic link to a file of the user's: the link is replaced, the file kept.
+        std::fs::remove_file(&path).unwrap();
+        let victim = dir.join("notes.txt");
+        std::fs::write(&victim, b"keep me").unwrap();
+        std::os::unix::fs::symlink(&victim, &path).unwrap();
+        within_a_minute({
+            let (hf, spec, w, dir) = (hf.clone(), spec, w.clone(), dir.clone());
+            move || sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| ()).unwrap()
+        });
+        assert_eq!(std::fs::read(&victim).unwrap(), b"keep me");
+        assert!(!std::fs::symlink_metadata(&path)
+            .unwrap()
+            .file_type()
+            .is_symlink());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
 }

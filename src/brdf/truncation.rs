@@ -15,7 +15,12 @@
 //!   times the unit roundoff and the taps accumulated, plus the float lookup position
 //!   (`q ≈ N/2 + 2N·dH/λ` rounded, against a Gaussian of width `σt`) and the phase `k·w`.
 //!
-//! Both grow with `k|w|`, so the plan is made for the largest reachable `|w|` (2 in general;
+//! A third source does not depend on `T`: the window's Gaussian (std `σt` texels) is
+//! gathered over `(2R+1)²` taps only ([`window_truncation`]). It takes its share of the
+//! tolerance before `T` is chosen, and a radius that alone exceeds the tolerance is warned
+//! about (more terms cannot fix it).
+//!
+//! Both series errors grow with `k|w|`, so the plan is made for the largest reachable `|w|` (2 in general;
 //! `1 + cosθi` for a BRDF map at fixed `θi`) and the shortest wavelength (380 nm).
 
 use crate::brdf::bessel;
@@ -314,20 +319,63 @@ pub struct TermPlan {
     pub truncation: f64,
     /// Rounding estimate on `|ΔP̂|`.
     pub rounding: f64,
+    /// Estimated error of `|P̂|²` from the window radius `R` ([`window_truncation`]).
+    pub window: f64,
     /// `warning:` lines for stderr (without the prefix).
     pub warnings: Vec<String>,
 }
 
 impl TermPlan {
-    /// Expected bound on the error of `|P̂|²` (= error of `ρ/C`): `2δ + δ²`.
+    /// Expected bound on the error of `|P̂|²` (= error of `ρ/C`): `2δ + δ²` of the series'
+    /// error `δ` on `P̂`, plus the window radius's share.
     pub fn error_bound(&self) -> f64 {
-        power_error(self.truncation + self.rounding)
+        power_error(self.truncation + self.rounding) + self.window
     }
 
     /// Whether the expected error is within the tolerance.
     pub fn meets_tolerance(&self) -> bool {
         self.error_bound() <= self.tolerance
     }
+}
+
+/// `erfc(x)` for `x ≥ 0` (Abramowitz & Stegun 7.1.26, absolute error ≤ 1.5e-7; enough
+/// for an error estimate).
+fn erfc(x: f64) -> f64 {
+    let t = 1.0 / (1.0 + 0.327_591_1 * x);
+    let poly = t
+        * (0.254_829_592
+            + t * (-0.284_496_736
+                + t * (1.421_413_741 + t * (-1.453_152_027 + t * 1.061_405_429))));
+    poly * (-x * x).exp()
+}
+
+/// Estimated error of `|P̂|²` (relative to a mirror's specular value) from gathering the
+/// Gaussian window of std `σt` texels over the `2R+1` taps around `floor(q)` per axis only.
+/// The light a lookup should see but the taps leave out depends on the spectrum; the
+/// estimate takes the worse of its two extremes:
+/// - a line spectrum (a grating's orders): a line just beyond `R` texels from the lookup
+///   has `|P̂|² = g(R)² = exp(−R²/σt²)` and is drawn black;
+/// - a continuous spectrum (measured skin): the share of the window's power `g²` beyond
+///   `±R` on either axis, `1 − (1 − erfc(R/σt))²`.
+///
+/// The default `R = 2` at `σt ≈ 0.64` (a 65 µm patch) gives 6e-5; the thesis's `R = 1`
+/// gives 9e-2.
+pub fn window_truncation(sigma_texels: f64, radius: usize) -> f64 {
+    if sigma_texels.is_nan() || sigma_texels <= 0.0 {
+        return 0.0;
+    }
+    let r = radius as f64 / sigma_texels;
+    let line = (-r * r).exp();
+    let c = erfc(r);
+    let continuum = 1.0 - (1.0 - c) * (1.0 - c);
+    line.max(continuum)
+}
+
+/// The smallest radius whose [`window_truncation`] meets `tolerance` (at most 16).
+fn radius_for(sigma_texels: f64, tolerance: f64) -> usize {
+    (0..=16)
+        .find(|&r| window_truncation(sigma_texels, r) <= tolerance)
+        .unwrap_or(16)
 }
 
 /// Error of `|P̂|²` from an error `δ` of `P̂` with `|P̂| ≤ 1`.
@@ -417,7 +465,27 @@ pub fn plan_terms(
             format!("{tolerance}; must be in (0, 1) (error of ρ/C relative to a mirror's specular peak)"),
         ));
     }
-    let base = |expansion, terms, auto, a, truncation, rounding, warnings| TermPlan {
+    // The window radius's share comes first: the series gets what is left (all of the
+    // tolerance, with a warning, when the radius alone exceeds it).
+    let window = window_truncation(geometry.sigma_texels, geometry.window_radius);
+    let series_tolerance = if window < tolerance {
+        tolerance - window
+    } else {
+        tolerance
+    };
+    let window_warning = (window >= tolerance).then(|| {
+        format!(
+            "--window-radius {}: the window (std {:.2} texels) cut at R = {} alone leaves an \
+             error of ρ/C up to {} (tolerance {tolerance:.0e}); more terms cannot fix it, \
+             R = {} meets it",
+            geometry.window_radius,
+            geometry.sigma_texels,
+            geometry.window_radius,
+            fmt_err(window),
+            radius_for(geometry.sigma_texels, tolerance)
+        )
+    });
+    let base = |expansion, terms, auto, a, truncation, rounding, warnings: Vec<String>| TermPlan {
         expansion,
         terms,
         auto,
@@ -427,7 +495,8 @@ pub fn plan_terms(
         a,
         truncation,
         rounding,
-        warnings,
+        window,
+        warnings: window_warning.iter().cloned().chain(warnings).collect(),
     };
     match terms {
         Terms::Fixed(t) => {
@@ -450,7 +519,7 @@ pub fn plan_terms(
                 ));
             }
             let mut plan = base(expansion, t, false, a, tr, ro, Vec::new());
-            if !plan.meets_tolerance() {
+            if power_error(tr + ro) > series_tolerance {
                 plan.warnings.push(format!(
                     "--terms {t} with {expansion}: expected error of ρ/C up to {} \
                      (tolerance {tolerance:.0e}; truncation {}, {precision} rounding {}, \
@@ -467,16 +536,17 @@ pub fn plan_terms(
         }
         Terms::Auto => {
             if let Some((t, a, tr, ro)) =
-                smallest_terms(expansion, geometry, reach, precision, tolerance)
+                smallest_terms(expansion, geometry, reach, precision, series_tolerance)
             {
                 return Ok(base(expansion, t, true, a, tr, ro, Vec::new()));
             }
             let alt = other(expansion);
             let (a_pref, tr_pref, ro_pref) =
                 budget(expansion, MAX_TERMS, geometry, reach, precision);
-            if let Some((t, a, tr, ro)) = smallest_terms(alt, geometry, reach, precision, tolerance)
+            if let Some((t, a, tr, ro)) =
+                smallest_terms(alt, geometry, reach, precision, series_tolerance)
             {
-                let why = if tr_pref.is_finite() && power_error(tr_pref) <= tolerance {
+                let why = if tr_pref.is_finite() && power_error(tr_pref) <= series_tolerance {
                     format!(
                         "its {precision} rounding (≈ {} at k|w|·h = {a_pref:.1}) exceeds",
                         fmt_err(power_error(ro_pref))
@@ -676,5 +746,46 @@ mod tests {
             "{:?}",
             fixed.warnings
         );
+    }
+
+    /// The window radius is in the budget: on a 65 µm patch (σt ≈ 0.64 texels) the thesis's
+    /// R = 1 alone exceeds the default tolerance, so the plan says so and its error bound is above the tolerance; the
+    /// default R = 2 takes a small share and the plan stays silent.
+    #[test]
+    fn the_window_radius_is_in_the_budget() {
+        let sigma = 704.0 * (65.0 / 704.0) / (2.0 * std::f64::consts::PI * 65.0 / 4.0);
+        let r1 = window_truncation(sigma, 1);
+        let r2 = window_truncation(sigma, 2);
+        assert!((2e-2..0.2).contains(&r1), "R = 1: {r1:e}");
+        assert!(r2 < 1e-4, "R = 2: {r2:e}");
+        assert!(window_truncation(sigma, 3) < r2);
+        let plan = |radius| {
+            plan_terms(
+                Expansion::Chebyshev,
+                Terms::Auto,
+                1e-3,
+                &Geometry {
+                    sigma_texels: sigma,
+                    window_radius: radius,
+                    ..geometry(0.1, 0.1)
+                },
+                &Reach::ALL,
+                Precision::F32,
+            )
+            .unwrap()
+        };
+        let thesis = plan(1);
+        assert_eq!(thesis.warnings.len(), 1, "{:?}", thesis.warnings);
+        assert!(
+            thesis.warnings[0].contains("--window-radius 1")
+                && thesis.warnings[0].contains("R = 2"),
+            "{}",
+            thesis.warnings[0]
+        );
+        assert!(!thesis.meets_tolerance() && thesis.error_bound() >= r1);
+        let default = plan(2);
+        assert!(default.warnings.is_empty(), "{:?}", default.warnings);
+        assert!(default.meets_tolerance(), "{:e}", default.error_bound());
+        assert_eq!(default.window, r2);
     }
 }
