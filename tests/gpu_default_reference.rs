@@ -21,8 +21,8 @@ use std::path::Path;
 use clap::Parser;
 use diffract::brdf::reference;
 use diffract::brdf::truncation::{Precision, Reach};
+use diffract::cli::render::RenderArgs;
 use diffract::colour::{delta_e2000, xyz_to_lab, ColourTable};
-use diffract::render::RenderArgs;
 use diffract::scene::Scene;
 use gpu_util::*;
 
@@ -58,9 +58,9 @@ fn the_default_configuration_matches_the_reference_on_a_map() {
     let (heightfield, plan) = material
         .load_planned(&Reach::ALL, Precision::F32)
         .expect("default material");
-    r.set_storage_format(args.storage);
-    r.set_variant(args.variant);
-    r.set_table_options(args.table.options());
+    r.set_storage_format(args.gpu.storage);
+    r.set_variant(args.gpu.variant);
+    r.set_table_options(args.gpu.table.options());
     r.set_leave_out(!args.keep_all);
     let cache = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-output/default-ref-cache");
     std::fs::create_dir_all(&cache).unwrap();

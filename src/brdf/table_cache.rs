@@ -397,9 +397,17 @@ mod tests {
             let (hf, spec, w, dir) = (hf.clone(), spec, w.clone(), dir.clone());
             within_a_minute(move || {
                 let builds = std::sync::atomic::AtomicUsize::new(0);
-                sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| {
-                    builds.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                })
+                sample_g_cached(
+                    &hf,
+                    65.0,
+                    &spec,
+                    &w,
+                    Some(&dir),
+                    &crate::report::Stderr,
+                    &|| {
+                        builds.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                    },
+                )
                 .unwrap();
                 builds.into_inner()
             })
@@ -422,9 +430,15 @@ mod tests {
         within_a_minute({
             let (hf, spec, w, dir) = (hf.clone(), spec, w.clone(), dir.clone());
             move || {
-                sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| {
-                    panic!("the replaced cache file must load")
-                })
+                sample_g_cached(
+                    &hf,
+                    65.0,
+                    &spec,
+                    &w,
+                    Some(&dir),
+                    &crate::report::Stderr,
+                    &|| panic!("the replaced cache file must load"),
+                )
                 .unwrap()
             }
         });
@@ -436,7 +450,18 @@ mod tests {
         std::os::unix::fs::symlink(&victim, &path).unwrap();
         within_a_minute({
             let (hf, spec, w, dir) = (hf.clone(), spec, w.clone(), dir.clone());
-            move || sample_g_cached(&hf, 65.0, &spec, &w, Some(&dir), &|| ()).unwrap()
+            move || {
+                sample_g_cached(
+                    &hf,
+                    65.0,
+                    &spec,
+                    &w,
+                    Some(&dir),
+                    &crate::report::Stderr,
+                    &|| (),
+                )
+                .unwrap()
+            }
         });
         assert_eq!(std::fs::read(&victim).unwrap(), b"keep me");
         assert!(!std::fs::symlink_metadata(&path)
