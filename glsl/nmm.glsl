@@ -1,9 +1,9 @@
 // Variant `nmm` (thesis §1.5.2 done right, MODEL §7): only the wavelengths whose lookup
 // lands near a diffraction order of the grating, λ = d·|t|/ν for ν within ±2.5σν of an integer
 // n ≥ 1 (t = u or v, d the period along that axis), 9 samples 0.625σν apart (trapezoid), each
-// weighted by the Jacobian |dλ/dν| = λ²/(|t|·d) so the sum stays the spectral integral, and
-// only where the window reaches the order across the axis; near specular (the zeroth order
-// covers every λ) the full spectrum. P̂ is FLSS's (same terms and taps).
+// weighted by the Jacobian |dλ/dν| = λ²/(|t|·d) so the sum stays the spectral integral; near
+// specular (the zeroth order covers every λ) the full spectrum. P̂ is FLSS's (same terms and
+// taps).
 // Mirrors brdf::nmm::{plan, xyz}.
 // Defines diffractionXyz(); nmm.frag adds main() (shade.glsl), nmm_vertex.vert the vertex stage.
 #ifndef NMM_GLSL
@@ -17,8 +17,6 @@ layout(set = 0, binding = 4, std140) uniform NmmInfo {
     vec4 extent; // x, y: patch size N·dH (µm)
     vec4 sigma;  // x, y: Gaussian window std σt (texels)
     vec4 lambdaRange; // x, y: shortest and longest wavelength sampled (nm; the kept ones)
-    vec4 order; // xy: the grating's peak (cycles per patch, signed); zw: how far the light of
-                // the orders along x, y spreads across them (bins per order)
 } nmm;
 
 // CIE·D65 density per nm, 1 nm apart from 380 nm (xyz).
@@ -43,16 +41,6 @@ float halfWidth(int a) {
     return LINE_SIGMAS * nmm.sigma[a] * nmm.period[a] / nmm.extent[a];
 }
 
-// Whether the window around the lookup at λ reaches order n of the orders along axis a
-// across that axis: within n·spread + R + 1 bins of the order's position ±n·f there.
-bool reachesAcross(vec2 uv, int a, float n, float lambdaNm) {
-    int b = 1 - a;
-    float sgn = (uv[a] < 0.0) == (nmm.order[a] < 0.0) ? 1.0 : -1.0;
-    float lookup = uv[b] * nmm.extent[b] / (lambdaNm * 1e-3);
-    float reach = n * nmm.order[2 + a] + float(WINDOW_RADIUS) + 1.0;
-    return abs(lookup - sgn * n * nmm.order[b]) <= reach;
-}
-
 // Whether λ lies on a sampled line of an order along u (v-order samples there would count
 // twice).
 bool countedAlongU(vec2 uv, float lambdaNm) {
@@ -62,7 +50,7 @@ bool countedAlongU(vec2 uv, float lambdaNm) {
     }
     float nu = d * abs(uv.x) * 1e3 / lambdaNm;
     float n = floor(nu + 0.5);
-    return n >= 1.0 && abs(nu - n) <= halfWidth(0) && reachesAcross(uv, 0, n, lambdaNm);
+    return n >= 1.0 && abs(nu - n) <= halfWidth(0);
 }
 
 vec3 nmmXyz(vec3 uvw) {
@@ -83,9 +71,6 @@ vec3 nmmXyz(vec3 uvw) {
             for (int j = -HALF_SAMPLES; j <= HALF_SAMPLES; ++j) {
                 float lambda = d * t * 1e3 / (float(n) + float(j) * dnu);
                 if (lambda < lambdaLo || lambda > lambdaHi) {
-                    continue;
-                }
-                if (!reachesAcross(uvw.xy, a, float(n), lambda)) {
                     continue;
                 }
                 if (a == 1 && countedAlongU(uvw.xy, lambda)) {

@@ -2,9 +2,7 @@
 //! GPU (the shader follows `brdf::nmm` sample for sample; tests/gpu_variants.rs holds the
 //! two together): on a 1D grating and on the measured-like Elaphe field, at directions on
 //! the orders, between them and off the plane of incidence, NMM's colour must be at least
-//! as close to the reference as FLSS's at 5 nm, and within a stated bound. The directions
-//! off the plane include some where NMM skips an order whose light no tap of the window
-//! reaches (`brdf::nmm::Grating::cross_spread`), so a skip that dropped light would show.
+//! as close to the reference as FLSS's at 5 nm, and within a stated bound.
 
 use diffract::brdf::{direction, model, nmm, reference, Shading};
 use diffract::colour::ColourTable;

@@ -33,9 +33,6 @@ pub const LINE_SIGMAS: f64 = 2.5;
 /// little more of the light between orders, which NMM does not model).
 pub const HALF_SAMPLES: i32 = 4;
 
-/// Share of the power near the grating's peak that [`Grating::cross_spread`] keeps.
-const CROSS_SHARE: f64 = 1.0 - 1e-4;
-
 /// The estimated grating.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Grating {
@@ -45,13 +42,6 @@ pub struct Grating {
     pub peak_share: f64,
     /// Frequency of the peak in cycles per patch (sub-bin refined).
     pub peak_cycles: [f64; 2],
-    /// How far (in bins, per order) the light of the orders along axis `a` spreads along the
-    /// other axis: the half-width around the peak, across it, holding [`CROSS_SHARE`] of
-    /// the height spectrum's power in the peak's three columns (rows for `a = 1`). 0 for
-    /// a perfect 1D grating; a measured field's finger segments spread it. Order `n` is
-    /// sampled only where the lookup lies within `n·spread + R + 1` bins of the order
-    /// across the axis (beyond that no tap of the window reaches it).
-    pub cross_spread: [f64; 2],
 }
 
 /// Estimates the period from the strongest non-DC peak of the power spectrum of the
@@ -147,41 +137,10 @@ pub fn estimate_grating(hf: &HeightField) -> Result<Grating> {
     let fy = refine(at.1, power(at.0, at.1 - 1), p0, power(at.0, at.1 + 1));
     let (lx, ly) = hf.extent_um();
     let period = |f: f64, l: f64| (f != 0.0).then(|| l / f.abs());
-    // Across axis a (along b = 1 − a): the power of the peak's three lines (and of its
-    // mirror image) by distance from the peak, then the radius that holds CROSS_SHARE.
-    let n_ab = [nx as i64, ny as i64];
-    let cross_spread = [0usize, 1].map(|a| {
-        let b = 1 - a;
-        let reach = n_ab[b] / 2;
-        let at_ab = [at.0, at.1];
-        let mut by_distance = vec![0.0; reach as usize + 1];
-        for off in -reach..=reach {
-            for da in -1..=1 {
-                for sign in [1i64, -1] {
-                    let mut m = [0i64; 2];
-                    m[a] = sign * at_ab[a] + da;
-                    m[b] = sign * (at_ab[b] + off);
-                    if m != [0, 0] {
-                        by_distance[off.unsigned_abs() as usize] += power(m[0], m[1]);
-                    }
-                }
-            }
-        }
-        let all: f64 = by_distance.iter().sum();
-        let mut held = 0.0;
-        for (r, p) in by_distance.iter().enumerate() {
-            held += p;
-            if held >= CROSS_SHARE * all {
-                return r as f64;
-            }
-        }
-        reach as f64
-    });
     Ok(Grating {
         period_um: [period(fx, lx), period(fy, ly)],
         peak_share: share,
         peak_cycles: [fx, fy],
-        cross_spread,
     })
 }
 
@@ -197,31 +156,6 @@ pub struct Sample {
 /// `σν = σt·d/L`.
 fn half_width(d_um: f64, sigma_texels: f64, extent_um: f64) -> f64 {
     LINE_SIGMAS * sigma_texels * d_um / extent_um
-}
-
-/// Whether the window around the lookup of `(u, v)` at `λ` reaches order `n` of the orders
-/// along `axis` across that axis: the lookup lies within `n·cross_spread + R + 1` bins of
-/// the order's position `±n·f` along the other axis (the sign that matches the lookup
-/// along `axis`). Beyond that the order's light is out of every tap.
-fn reaches_across(
-    grating: &Grating,
-    window: &Window,
-    extent_um: [f64; 2],
-    uv: [f64; 2],
-    axis: usize,
-    n: f64,
-    lambda_nm: f64,
-) -> bool {
-    let b = 1 - axis;
-    let f = grating.peak_cycles;
-    let sign = if (uv[axis] < 0.0) == (f[axis] < 0.0) {
-        1.0
-    } else {
-        -1.0
-    };
-    let lookup = uv[b] * extent_um[b] / (lambda_nm * 1e-3);
-    let reach = n * grating.cross_spread[axis] + window.radius as f64 + 1.0;
-    (lookup - sign * n * f[b]).abs() <= reach
 }
 
 /// The wavelengths NMM samples for the pixel with `(u, v)`, or `None` near specular, where
@@ -258,9 +192,6 @@ pub fn plan(
                 let nu = n as f64 + j as f64 * dnu;
                 let lambda = d * t * 1e3 / nu;
                 if !(lmin..=lmax).contains(&lambda) {
-                    continue;
-                }
-                if !reaches_across(grating, window, extent_um, uv, axis, n as f64, lambda) {
                     continue;
                 }
                 if axis == 1 && counted_along_u(grating, window, extent_um, uv, lambda) {
@@ -320,9 +251,7 @@ fn counted_along_u(
     };
     let nu = d * uv[0].abs() * 1e3 / lambda_nm;
     let n = nu.round();
-    n >= 1.0
-        && (nu - n).abs() <= half_width(d, window.sigma_texels[0], extent[0])
-        && reaches_across(grating, window, extent, uv, 0, n, lambda_nm)
+    n >= 1.0 && (nu - n).abs() <= half_width(d, window.sigma_texels[0], extent[0])
 }
 
 /// CIE·D65 density per nm at `λ` (linear between the 1 nm samples), normalised like
@@ -458,7 +387,6 @@ mod tests {
             period_um: [Some(1.5), None],
             peak_share: 1.0,
             peak_cycles: [40.0, 0.0],
-            cross_spread: [0.0, 0.0],
         };
         let w = Window::new(400, 400, 0.15, 65.0, 2).unwrap();
         let ext = [60.0, 60.0];

@@ -26,9 +26,6 @@ struct NmmInfoUbo {
     sigma: [f32; 4],
     /// x, y: shortest and longest wavelength sampled (nm): the kept ones when leaving out.
     lambda_range: [f32; 4],
-    /// xy: the grating's peak (cycles per patch, signed); zw: the cross spread of the
-    /// orders along x, y (bins per order).
-    order: [f32; 4],
 }
 
 // SAFETY: repr(C) of f32 arrays: no padding.
@@ -99,12 +96,6 @@ impl Variant for Nmm {
                     0.0,
                 ],
             },
-            order: [
-                grating.peak_cycles[0] as f32,
-                grating.peak_cycles[1] as f32,
-                grating.cross_spread[0] as f32,
-                grating.cross_spread[1] as f32,
-            ],
         };
         let info = Buffer::with_data(
             dev,
