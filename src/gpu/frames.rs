@@ -326,6 +326,16 @@ impl Frames {
         self.retired_total += 1;
     }
 
+    /// Retires an object that a queued presentation may still use (an old swapchain with its
+    /// semaphores): presentation signals no fence, so the object is kept until the next
+    /// submission, queued after those presentations, has completed. Until then (a minimised
+    /// window submits nothing) it stays; teardown waits for the device.
+    pub fn retire_after_present<T: 'static>(&mut self, obj: T) {
+        self.retired
+            .push_back((Some(self.submitted), Box::new(obj)));
+        self.retired_total += 1;
+    }
+
     /// Objects waiting for their frames.
     pub fn awaiting_release(&self) -> usize {
         self.retired.len()

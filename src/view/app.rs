@@ -366,7 +366,7 @@ impl Viewer {
                     if old.format != sc.format {
                         self.rebuild = true;
                     }
-                    self.frames.retire(old);
+                    self.frames.retire_after_present(old);
                     true
                 }
             },
