@@ -141,7 +141,7 @@ fn rank_order(values: &[f64]) -> Vec<u32> {
         for &(k, _) in &order {
             count[digit(k) + 1] += 1;
         }
-        if count[1..].iter().any(|&c| c == order.len()) {
+        if count[1..].contains(&order.len()) {
             // Every key has this digit: the pass would not move anything.
             shift += BITS;
             continue;
