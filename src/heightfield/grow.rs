@@ -36,6 +36,7 @@ pub const GROW_ITERATIONS: usize = 6;
 /// Grows `sample` into an `n × n` field with the same `dH` (module docs). `n` must be at
 /// least the sample's larger side (a grown field is never smaller than its sample).
 pub fn grow(sample: &HeightField, n: usize, seed: u64) -> Result<HeightField> {
+    use rayon::prelude::*;
     let (sx, sy) = (sample.nx(), sample.ny());
     if sx < 4 || sy < 4 {
         return Err(Error::invalid(
@@ -79,14 +80,14 @@ pub fn grow(sample: &HeightField, n: usize, seed: u64) -> Result<HeightField> {
     fft.forward(&mut current);
     let mut heights = vec![0.0; n * n];
     for _ in 0..=GROW_ITERATIONS {
-        for (z, &a) in current.iter_mut().zip(&amplitude) {
+        current.par_iter_mut().zip(&amplitude).for_each(|(z, &a)| {
             let m = z.norm();
             *z = if m > 0.0 {
                 *z * (a / m)
             } else {
                 Complex64::new(a, 0.0)
             };
-        }
+        });
         fft.inverse(&mut current);
         for (h, z) in heights.iter_mut().zip(&current) {
             *h = z.re;
@@ -113,12 +114,12 @@ fn match_histogram(values: &mut [f64], sorted_target: &[f64]) {
     }
 }
 
-/// The indices of `values` in increasing order (`f64::total_cmp`), ties by index: a stable
-/// least-significant-digit radix sort of the values' order-preserving bit patterns, 11 bits
-/// a pass (a comparison sort of a million values dominated growing).
+/// The indices of `values` in increasing order (`f64::total_cmp`), ties by index: each value's
+/// order-preserving bit pattern and its index packed into one 128-bit key (so every key is
+/// distinct and the order total), sorted in parallel (a comparison sort of `(value, index)`
+/// pairs on one core dominated growing).
 fn rank_order(values: &[f64]) -> Vec<u32> {
-    const BITS: u32 = 11;
-    const BUCKETS: usize = 1 << BITS;
+    use rayon::prelude::*;
     // total_cmp's order as unsigned integers: negatives flipped whole, positives' sign set.
     let key = |x: f64| {
         let b = x.to_bits();
@@ -128,36 +129,13 @@ fn rank_order(values: &[f64]) -> Vec<u32> {
             b | 1 << 63
         }
     };
-    let mut order: Vec<(u64, u32)> = values
-        .iter()
-        .zip(0u32..)
-        .map(|(&x, i)| (key(x), i))
+    let mut keys: Vec<u128> = values
+        .par_iter()
+        .zip(0..values.len() as u32)
+        .map(|(&x, i)| (u128::from(key(x)) << 32) | u128::from(i))
         .collect();
-    let mut next = order.clone();
-    let mut shift = 0;
-    while shift < 64 {
-        let digit = |k: u64| ((k >> shift) as usize) & (BUCKETS - 1);
-        let mut count = vec![0usize; BUCKETS + 1];
-        for &(k, _) in &order {
-            count[digit(k) + 1] += 1;
-        }
-        if count[1..].contains(&order.len()) {
-            // Every key has this digit: the pass would not move anything.
-            shift += BITS;
-            continue;
-        }
-        for d in 0..BUCKETS {
-            count[d + 1] += count[d];
-        }
-        for &(k, i) in &order {
-            let at = &mut count[digit(k)];
-            next[*at] = (k, i);
-            *at += 1;
-        }
-        std::mem::swap(&mut order, &mut next);
-        shift += BITS;
-    }
-    order.into_iter().map(|(_, i)| i).collect()
+    keys.par_sort_unstable();
+    keys.into_par_iter().map(|k| k as u32).collect()
 }
 
 /// A square 2D complex FFT (rows, then columns through a transpose). `forward` is the `−i`
