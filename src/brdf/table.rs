@@ -359,11 +359,16 @@ impl PhaseSpectrum {
         }
     }
 
+    /// Texels the Gaussian window reaches on each side of a lookup along `axis`: 6σt, up.
+    fn reach(&self, axis: usize) -> i64 {
+        (6.0 * self.sigma[axis]).ceil() as i64
+    }
+
     /// Shifted texels `[lo, hi]` the window of lookups over `t ∈ [t0, t1]` (u or v) reads
     /// along `axis`, for every wavelength in `lambda_um`.
     fn texel_span(&self, axis: usize, t: [f64; 2], lambda_um: [f64; 2]) -> [i64; 2] {
         let n = [self.nx, self.ny][axis];
-        let r = (6.0 * self.sigma[axis]).ceil() as i64;
+        let r = self.reach(axis);
         let q = |t: f64, l: f64| ((n / 2) as f64 + t * n as f64 * self.dh_um / l).floor() as i64;
         let all = [
             q(t[0], lambda_um[0]),
@@ -484,8 +489,7 @@ impl PhaseSpectrum {
             .iter()
             .map(|v| (ny / 2) as f64 + v * ny as f64 * self.dh_um / lambda_um)
             .collect();
-        let rx = (6.0 * self.sigma[0]).ceil() as i64;
-        let ry = (6.0 * self.sigma[1]).ceil() as i64;
+        let (rx, ry) = (self.reach(0), self.reach(1));
         let cx0 = qx[0].floor() as i64 - rx;
         let cx1 = qx[qx.len() - 1].floor() as i64 + rx;
         let cy0 = qy[0].floor() as i64 - ry;
@@ -658,8 +662,7 @@ impl PhaseSpectrum {
     ) {
         let [cx0, cy0] = g.t0;
         let [cols, _] = g.size;
-        let rx = (6.0 * self.sigma[0]).ceil() as i64;
-        let ry = (6.0 * self.sigma[1]).ceil() as i64;
+        let (rx, ry) = (self.reach(0), self.reach(1));
         let rows = g.size[1];
 
         // Separable Gaussian window: first along x for every needed row, then along y. The
@@ -676,15 +679,13 @@ impl PhaseSpectrum {
             starts.push((a - rx - cx0) as usize);
             gx.extend((a - rx..=a + rx).map(|t| [gauss(t as f64 - q, self.sigma[0]); 2]));
         }
-        let pairs = |z: &[Complex64]| -> Vec<[f64; 2]> { z.iter().map(|z| [z.re, z.im]).collect() };
-        let spectrum = pairs(spectrum);
         let mut xpass = vec![[0.0f64; 2]; rows * nu];
         for (line, out) in spectrum.chunks_exact(cols).zip(xpass.chunks_exact_mut(nu)) {
             for ((o, &start), gw) in out.iter_mut().zip(&starts).zip(gx.chunks_exact(taps)) {
                 let mut sum = [0.0f64; 2];
                 for (x, gk) in line[start..start + taps].iter().zip(gw) {
-                    sum[0] += x[0] * gk[0];
-                    sum[1] += x[1] * gk[1];
+                    sum[0] += x.re * gk[0];
+                    sum[1] += x.im * gk[1];
                 }
                 *o = sum;
             }
