@@ -128,9 +128,8 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let table = assemble(spec.region, samples)?;
     let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
     gpu.stats.table_build = Some(built.to_string());
-    gpu.disc_prefiltered = setup.disc.is_some();
-    gpu.stats.disc_prefiltered = gpu.disc_prefiltered;
-    if gpu.disc_prefiltered {
+    gpu.stats.disc_prefiltered = setup.disc.is_some();
+    if gpu.stats.disc_prefiltered {
         gpu.stats.name.push_str(" sun's disc pre-filtered");
     }
     // The table's size does not depend on the wavelengths: the saving is build time.
@@ -150,8 +149,6 @@ struct TableGpu {
     stats: VariantStats,
     model: Option<Box<dyn GTable>>,
     left_out: Option<LeftOut>,
-    /// The table holds the light's disc: one evaluation per fragment.
-    disc_prefiltered: bool,
     terms: u32,
     info: Buffer,
     sampler: Sampler,
@@ -269,7 +266,6 @@ impl TableGpu {
         Ok(Self {
             model: None,
             left_out: None,
-            disc_prefiltered: false,
             stats: VariantStats {
                 name: format!(
                     "{kind} K={} {nu}×{nv} texel {:.4} dλ={} {format:?}",
@@ -321,7 +317,7 @@ impl PreparedVariant for TableGpu {
 
     fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
         spec[9] = self.terms;
-        spec[10] = self.disc_prefiltered as u32;
+        spec[10] = self.stats.disc_prefiltered as u32;
     }
 
     fn stats(&self) -> VariantStats {
