@@ -146,6 +146,18 @@ impl HeightField {
                 (lo.min(h), hi.max(h))
             })
     }
+    /// The same field with every height multiplied by `factor` (finite, ≥ 0): the
+    /// structure `factor` times as tall.
+    pub fn scaled(&self, factor: f64) -> Result<Self> {
+        if !(factor.is_finite() && factor >= 0.0) {
+            return Err(Error::invalid(
+                "height scale",
+                format!("{factor}; must be finite and ≥ 0"),
+            ));
+        }
+        let heights = self.heights_um.iter().map(|h| h * factor).collect();
+        Self::new(self.nx, self.ny, self.dh_um, heights)
+    }
     /// Largest deviation from the mean, `max|h − mean|` (the Taylor bound of MODEL §4).
     pub fn max_deviation(&self) -> f64 {
         let m = self.mean();

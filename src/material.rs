@@ -247,7 +247,21 @@ impl Material {
     ) -> Result<(HeightField, TermPlan)> {
         self.validate()?;
         let heightfield = HeightField::load_source(&self.heightfield, self.dh_um, self.h_max_um)?;
-        let plan = self.plan(&heightfield, reach, precision)?;
+        let plan = self.plan_loaded(&heightfield, reach, precision)?;
+        Ok((heightfield, plan))
+    }
+
+    /// [`load_planned`](Self::load_planned)'s plan for a height field already loaded (the
+    /// viewer's material edits scale a loaded field): resolves the plan, prints its warnings
+    /// and the Nyquist warning, and refuses a stack over the memory limit.
+    pub fn plan_loaded(
+        &self,
+        heightfield: &HeightField,
+        reach: &Reach,
+        precision: Precision,
+    ) -> Result<TermPlan> {
+        self.validate()?;
+        let plan = self.plan(heightfield, reach, precision)?;
         for w in &plan.warnings {
             eprintln!("warning: {w}");
         }
@@ -255,8 +269,8 @@ impl Material {
         if let Some(w) = heightfield.nyquist_warning(req.lambda_min_um) {
             eprintln!("warning: {w}");
         }
-        spectrum::cache::check_memory(&heightfield, &req)?;
-        Ok((heightfield, plan))
+        spectrum::cache::check_memory(heightfield, &req)?;
+        Ok(plan)
     }
 
     /// Builds the prepared material from a loaded height field and a resolved plan.

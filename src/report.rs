@@ -16,6 +16,11 @@ pub trait Report: Send + Sync {
     /// Shows `bar` (already sized, named and styled by the caller) while the work advances;
     /// the caller increments and finishes it.
     fn progress(&self, bar: ProgressBar) -> ProgressBar;
+    /// Long work (a table build) calls this between its steps. A report whose owner no
+    /// longer wants the result (a viewer closing while a table builds) stops the work here
+    /// by unwinding with [`std::panic::resume_unwind`], which runs no panic hook; the
+    /// owner catches it where it started the work. Does nothing by default.
+    fn checkpoint(&self) {}
 }
 
 /// The command line's report: lines on stderr, bars on stderr while it is a terminal.

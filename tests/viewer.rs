@@ -5,7 +5,8 @@
 //! a window resized (and minimised) during the run recreates its swapchain and the next
 //! screenshot has the new size. Also: synthetic mouse and key input drives the controls;
 //! no display → one `error:` line; a shader edit with a syntax error reports file:line and
-//! keeps the last good SPIR-V.
+//! keeps the last good SPIR-V; a material edit rebuilds the table in the background while
+//! frames go on, and the picture after it is the edited material's.
 //!
 //! Needs `Xvfb` (the `xvfb` package, installed by `.ci/run`). Without it the window tests
 //! print SKIPPED and return; with `DIFFRACT_REQUIRE_XVFB=1` they fail instead.
@@ -16,11 +17,16 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
+use diffract::brdf::truncation::{Precision, Reach};
 use diffract::colour::{linear_to_srgb8, xyz_to_linear_srgb};
+use diffract::heightfield::HeightField;
 use diffract::image_io;
 use diffract::render::VariantKind;
 use diffract::scene::Scene;
-use diffract::view::input::{tangent_frame_at_view, Controls, Effect, ViewState, HELP};
+use diffract::view::input::{
+    tangent_frame_at_view, Controls, Effect, MaterialEdit, ViewState, HELP, MATERIAL_STEP,
+    SHIPPED_FIELDS,
+};
 use diffract::view::reload::ShaderReload;
 use glam::Vec3;
 use gpu_util::*;
@@ -487,8 +493,45 @@ fn synthetic_input_drives_the_controls() {
     assert_eq!(c.key(&key("p")), Effect::Screenshot);
     assert_eq!(c.key(&key("q")), Effect::Quit);
     assert_eq!(c.key(&Key::Named(NamedKey::Escape)), Effect::Quit);
-    assert_eq!(c.key(&key("z")), Effect::None);
+    assert_eq!(c.key(&key("y")), Effect::None);
     assert_eq!(c.key(&Key::Named(NamedKey::Tab)), Effect::None);
+
+    // Z / X scale the heights, K / L the coherence length (by 1.25 a step, upper case
+    // too), N cycles the scene's own field and every shipped one; each asks for a material.
+    assert_eq!(c.material, MaterialEdit::default());
+    let material_line = |e: Effect| match e {
+        Effect::Material(line) => line,
+        other => panic!("a material key gave {other:?}"),
+    };
+    assert!(material_line(c.key(&key("x"))).contains("height ×1.2500"));
+    assert!(material_line(c.key(&key("X"))).contains("height ×1.5625"));
+    assert!(material_line(c.key(&key("z"))).contains("height ×1.2500"));
+    assert_eq!(c.material.height_steps, 1);
+    assert!((c.material.height_scale() - MATERIAL_STEP).abs() < 1e-12);
+    assert!(material_line(c.key(&key("k"))).contains("coherence length ×0.8000"));
+    assert!(material_line(c.key(&key("L"))).contains("coherence length ×1.0000"));
+    assert!(material_line(c.key(&key("l"))).contains("coherence length ×1.2500"));
+    assert_eq!(c.material.coherence_steps, 1);
+    let mut fields = vec![c.material.heightfield("scene.png").to_string()];
+    for _ in 0..=SHIPPED_FIELDS.len() {
+        let line = material_line(c.key(&key("n")));
+        let field = c.material.heightfield("scene.png").to_string();
+        assert!(
+            line.contains(&field) || (field == "scene.png" && line.contains("scene's own")),
+            "{line} names {field}"
+        );
+        fields.push(field);
+    }
+    assert_eq!(fields.first(), fields.last(), "N wraps around: {fields:?}");
+    for f in SHIPPED_FIELDS {
+        assert!(fields.iter().any(|g| g == f), "{f} reached: {fields:?}");
+    }
+    assert!(HELP.contains("coherence length") && HELP.contains("next height field"));
+    // The height and coherence edits stayed through the field changes.
+    assert_eq!(
+        (c.material.height_steps, c.material.coherence_steps),
+        (1, 1)
+    );
 }
 
 /// The map's light is the scene light in the tangent frame of the surface the camera looks
@@ -852,5 +895,116 @@ fn variant_switch_and_resize_in_flight_make_no_idle_wait() {
     );
     let (w, h, _) = image_io::read_png_rgb8(&shot).expect("screenshot PNG");
     assert_eq!((w, h), (64, 40));
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// `X` (heights ×1.25) pressed on the second settled frame of the default variant (a
+/// table): the material loads and its table builds on worker threads while the window keeps
+/// presenting frames (the viewer counts them); the first frame came from a coarse table
+/// before the real one. The screenshot after the edit equals the offscreen render of the
+/// scene with every height ×1.25, and differs from the unedited render by more.
+#[test]
+fn material_edit_rebuilds_in_the_background_while_frames_go_on() {
+    let Some(x) = Xvfb::start() else { return };
+    let dir = temp_dir("material-edit");
+    let shot = dir.join("taller.png");
+    let scene_path = rainbow_scene_path();
+    let stdout = run_view(
+        &x,
+        &dir,
+        &[
+            "--scene",
+            scene_path.to_str().unwrap(),
+            "--vsync",
+            "off",
+            "--frames",
+            "4",
+            "--at",
+            "1:x",
+            "--screenshot",
+            shot.to_str().unwrap(),
+        ],
+    );
+    assert!(
+        stdout.contains("(a coarse table first)") && stdout.contains("coarse table ready"),
+        "the first frames come from a coarse table:\n{stdout}"
+    );
+    assert!(stdout.contains("height ×1.2500"), "{stdout}");
+    assert!(
+        stdout.contains("material loaded: builtin:blazed"),
+        "{stdout}"
+    );
+    // The builds: the first (after its coarse stand-in) and the edit's.
+    let meanwhile: Vec<u32> = stdout
+        .lines()
+        .filter(|l| l.starts_with("build ready in "))
+        .map(|l| {
+            l.split("; ")
+                .nth(1)
+                .and_then(|t| t.split(' ').next())
+                .and_then(|n| n.parse().ok())
+                .unwrap_or_else(|| panic!("{l}"))
+        })
+        .collect();
+    assert_eq!(meanwhile.len(), 2, "two builds:\n{stdout}");
+    assert!(
+        meanwhile[1] >= 2,
+        "frames presented while the edited table built: {}\n{stdout}",
+        meanwhile[1]
+    );
+    let (w, h, px) = image_io::read_png_rgb8(&shot).expect("screenshot PNG");
+    let actual = crop(&px, w, (0, 0, w, h));
+
+    let scene = Scene::load(&scene_path).expect("scene");
+    let m = &scene.material;
+    let hf = HeightField::load_source(&m.heightfield, m.dh_um, m.h_max_um)
+        .and_then(|hf| hf.scaled(MATERIAL_STEP))
+        .expect("scaled field");
+    let plan = m
+        .plan_loaded(&hf, &Reach::ALL, Precision::F32)
+        .expect("plan");
+    let taller = m.prepare_planned(hf, plan, None).expect("taller material");
+    let Some(mut r) = renderer() else { return };
+    r.set_variant(VariantKind::Default.resolve());
+    r.set_leave_out(true);
+    let edited = r.render_scene(&scene, &taller).expect("offscreen render");
+    let unedited = r
+        .render_scene(&scene, &prepare(&scene.material))
+        .expect("offscreen render");
+    assert_no_validation(&r);
+    let to_edited = image_io::compare_images(&actual, &through_srgb8(&edited.rgb));
+    let to_unedited = image_io::compare_images(&actual, &through_srgb8(&unedited.rgb));
+    eprintln!(
+        "after the edit: against the taller render {to_edited}; against the unedited {to_unedited}"
+    );
+    assert!(
+        to_unedited.mean_delta_e > 2.0 * to_edited.mean_delta_e.max(0.05),
+        "the edit changed the picture towards the taller render: {to_edited} vs {to_unedited}"
+    );
+    check_close(
+        "viewer after the height edit",
+        &actual,
+        &through_srgb8(&edited.rgb),
+        (w, h),
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// Closing the window while the default scene's first table builds (`Q` before the first
+/// frame) stops the build at its next step: the viewer exits cleanly, every object of the
+/// half-built table destroyed (validation on), and no build is reported ready.
+#[test]
+fn closing_during_a_build_stops_it_cleanly() {
+    let Some(x) = Xvfb::start() else { return };
+    let dir = temp_dir("close-while-building");
+    let stdout = run_view(&x, &dir, &["--vsync", "off", "--at", "0:q"]);
+    assert!(
+        stdout.contains("building chebyshev-w in the background"),
+        "{stdout}"
+    );
+    assert!(
+        !stdout.contains("build ready"),
+        "the quit came before the build finished:\n{stdout}"
+    );
     let _ = std::fs::remove_dir_all(&dir);
 }

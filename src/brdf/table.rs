@@ -1190,7 +1190,7 @@ fn spline(
 }
 
 /// A stored representation of `G` with its CPU model.
-pub trait GTable: Sync {
+pub trait GTable: Send + Sync {
     /// The region the table covers.
     fn region(&self) -> &Region;
     /// `G(u, v, w)` as the representation interpolates it (in f64), before the clamp to

@@ -13,6 +13,7 @@
 //! [`Target`](crate::gpu::target::Target) and does not know whether it draws
 //! offscreen or into a window.
 
+mod background;
 mod offscreen;
 mod params;
 mod pass;
@@ -25,6 +26,7 @@ use std::sync::Arc;
 
 use ash::vk;
 
+pub use background::{Arrived, BuildProgress, Readiness};
 pub use offscreen::Picture;
 pub(crate) use params::{OutputMode, ParamsUbo, MAX_TERMS};
 pub use pass::{MapView, PassOptions, ScenePass};
@@ -37,11 +39,12 @@ use crate::gpu::{shaders, Device, StorageFormat};
 use crate::material::PreparedMaterial;
 use crate::scene::Scene;
 use crate::{Error, Result};
+use background::{Background, BuildOptions};
 use offscreen::MapPass;
 use pass::MeshBuffers;
 use record::Transforms;
 use region::{load_scene_mesh, region_contains, scene_disc, scene_region, widen};
-use variant::{DrawSetup, PreparedVariant};
+use variant::PreparedVariant;
 
 /// Largest BRDF map side.
 pub const MAX_MAP_SIZE: u32 = 4096;
@@ -97,6 +100,32 @@ struct PreparedKey {
     disc: Option<[u64; 4]>,
 }
 
+/// Largest change of a disc footprint's covariance (relative, Frobenius) for which a table
+/// pre-filtered with one still serves the other while the viewer moves the light: the
+/// footprint's width then moves by about half of it, 10 %.
+const DISC_TOLERANCE: f64 = 0.2;
+
+/// Whether two disc keys are the same or, both present, within [`DISC_TOLERANCE`].
+fn discs_close(a: Option<[u64; 4]>, b: Option<[u64; 4]>) -> bool {
+    let cov = |k: [u64; 4]| {
+        let [a, b, c, d] = k.map(f64::from_bits);
+        DiscKernel {
+            axes: [[a, b], [c, d]],
+        }
+        .covariance()
+    };
+    match (a, b) {
+        (None, None) => true,
+        (Some(a), Some(b)) => {
+            let (ca, cb) = (cov(a), cov(b));
+            let norm = |m: [[f64; 2]; 2]| m.iter().flatten().map(|x| x * x).sum::<f64>().sqrt();
+            let diff = [0, 1].map(|i| [0, 1].map(|j| ca[i][j] - cb[i][j]));
+            norm(diff) <= DISC_TOLERANCE * norm(ca).max(norm(cb))
+        }
+        _ => false,
+    }
+}
+
 /// A scene's files and their device copies, kept by the renderer so later scene passes of
 /// the same mesh and texture (the viewer's switches) neither read nor upload them again.
 struct SceneUploads {
@@ -129,6 +158,9 @@ pub struct Renderer {
     /// Where warnings and progress of the work go (stderr unless the owner says otherwise).
     report: Arc<dyn crate::report::Report>,
     prepared: Option<(PreparedKey, Arc<dyn PreparedVariant>)>,
+    /// A variant build on a worker thread (the viewer's); declared after `prepared` so it
+    /// is stopped and joined before the device goes.
+    background: Option<Background>,
     /// Table variants: when positive, built for the needed region widened by this much and
     /// reused while later regions fall inside it (the viewer); 0: built for exactly the region.
     region_margin: f64,
@@ -173,6 +205,7 @@ impl Renderer {
             cache_dir: None,
             report: Arc::new(crate::report::Stderr),
             prepared: None,
+            background: None,
             region_margin: 0.0,
             table_region: None,
             shader_overrides: Default::default(),
@@ -441,15 +474,19 @@ impl Renderer {
         }
         // `render` (no covering margin) fits the table to what its frame shows and, for the
         // table variants, pre-filters the sun's disc into it; the viewer keeps every lit
-        // vertex and the per-direction loop (its BRDF map shares the table).
+        // vertex, and the disc its build chose ([`Renderer::prepare_in_background`]: none
+        // while the BRDF map, which shares the table, is shown).
         let fitted = self.region_margin == 0.0;
         let disc = if fitted && !self.per_vertex && self.variant.is_table() {
             scene_disc(scene, mesh, aspect)
+        } else if !fitted {
+            self.prepared_disc()
         } else {
             None
         };
-        let region = scene_region(scene, mesh, fitted.then_some(aspect), disc.is_some())
-            .unwrap_or(Region::ALL);
+        // The triangles in the camera's frame: `render` fits its table to them, the viewer
+        // covers them with a margin.
+        let region = scene_region(scene, mesh, Some(aspect), disc.is_some()).unwrap_or(Region::ALL);
         self.prepare_variant(prepared, region, OutputMode::Mesh, disc)?;
         let mut params = self.params(prepared);
         let eye = scene.camera.eye;
@@ -488,6 +525,32 @@ impl Renderer {
         output: OutputMode,
         disc: Option<DiscKernel>,
     ) -> Result<()> {
+        let Some((key, region)) = self.plan_variant(prepared, region, output, disc)? else {
+            return Ok(());
+        };
+        // Free the old resources (and the map pass that points at them) before building new
+        // ones.
+        self.map = None;
+        self.prepared = None;
+        let options = self.build_options(region, output, disc);
+        let built = self
+            .variant
+            .implementation()
+            .prepare(&self.dev, &options.setup(prepared, self.report.as_ref()))?;
+        self.prepared = Some((key, Arc::from(built)));
+        Ok(())
+    }
+
+    /// What [`Renderer::prepare_variant`] would build: `None` when the prepared variant
+    /// already serves `region` (the same key, or with a covering margin a region that holds
+    /// it), else the key and the region to build for.
+    fn plan_variant(
+        &self,
+        prepared: &PreparedMaterial,
+        region: Region,
+        output: OutputMode,
+        disc: Option<DiscKernel>,
+    ) -> Result<Option<(PreparedKey, Region)>> {
         self.variant.check_output(output)?;
         let region = self.table_region.unwrap_or(region);
         let per_region = self.variant.implementation().reads_region(self.leave_out);
@@ -524,42 +587,57 @@ impl Renderer {
                 [a[0][0], a[0][1], a[1][0], a[1][1]].map(f64::to_bits)
             }),
         };
-        if self.prepared.as_ref().is_some_and(|(k, _)| *k == key) {
-            return Ok(());
-        }
-        if covering {
-            if let Some((k, _)) = &self.prepared {
-                let same_but_region = PreparedKey {
-                    region: k.region,
-                    ..key.clone()
-                } == *k;
-                if same_but_region
-                    && k.region
-                        .is_some_and(|r| region_contains(&r.map(f64::from_bits), &needed))
-                {
-                    return Ok(());
-                }
+        if let Some((k, _)) = &self.prepared {
+            if *k == key {
+                return Ok(None);
+            }
+            // Covering: another region that holds this one, and a disc footprint close to
+            // this one, serve as well.
+            let same_but_region = PreparedKey {
+                region: k.region,
+                disc: k.disc,
+                ..key.clone()
+            } == *k;
+            if covering
+                && same_but_region
+                && discs_close(k.disc, key.disc)
+                && k.region
+                    .is_some_and(|r| region_contains(&r.map(f64::from_bits), &needed))
+            {
+                return Ok(None);
             }
         }
-        // Free the old resources (and the map pass that points at them) before building new
-        // ones.
-        self.map = None;
-        self.prepared = None;
-        let setup = DrawSetup {
-            prepared,
+        Ok(Some((key, region)))
+    }
+
+    /// The disc footprint the prepared variant holds (a table with the sun's disc
+    /// pre-filtered).
+    fn prepared_disc(&self) -> Option<DiscKernel> {
+        let bits = self.prepared.as_ref()?.0.disc?;
+        let [a, b, c, d] = bits.map(f64::from_bits);
+        Some(DiscKernel {
+            axes: [[a, b], [c, d]],
+        })
+    }
+
+    /// The settings a variant is built with, owned (a background build takes them to its
+    /// thread).
+    fn build_options(
+        &self,
+        region: Region,
+        output: OutputMode,
+        disc: Option<DiscKernel>,
+    ) -> BuildOptions {
+        BuildOptions {
             region,
             output,
             storage: self.storage,
-            table: &self.table,
+            table: self.table,
             keep_model: self.keep_models,
-            cache_dir: self.cache_dir.as_deref(),
+            cache_dir: self.cache_dir.clone(),
             leave_out: self.leave_out,
             disc,
-            report: self.report.as_ref(),
-        };
-        let built = self.variant.implementation().prepare(&self.dev, &setup)?;
-        self.prepared = Some((key, Arc::from(built)));
-        Ok(())
+        }
     }
 
     /// Uploads a scene texture's pixels (sRGB bytes) into an `R8G8B8A8_SRGB` image, so

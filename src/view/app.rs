@@ -2,7 +2,9 @@
 //! ([`Frames`]) for the next frame in flight, acquires a swapchain image, records the
 //! renderer's passes into it, submits and presents. Rebuilt passes and replaced swapchains
 //! are retired through the layer's deferred release: the frame path never waits for the
-//! device to be idle. Also the layout of the mesh beside its BRDF map, the title's
+//! device to be idle. Tables, DFT terms and edited materials are built on worker threads
+//! ([`Renderer::prepare_in_background`], [`MaterialLoader`]): the window keeps drawing
+//! what it has (at start, a coarse table) and the title shows the build's progress. Also the layout of the mesh beside its BRDF map, the title's
 //! statistics, screenshots, hot reload and the hidden `--at` test hook. What an input means
 //! is [`super::input`]'s.
 
@@ -20,6 +22,7 @@ use winit::raw_window_handle::{HasDisplayHandle, HasWindowHandle};
 use winit::window::{Window, WindowId};
 
 use super::input::{tangent_frame_at_view, Controls, Effect, ViewState, HELP};
+use super::material::MaterialLoader;
 use super::reload::ShaderReload;
 use super::ScriptAction;
 use crate::brdf::truncation::{Precision, Reach};
@@ -29,7 +32,9 @@ use crate::gpu::swapchain::{Acquired, Presented, Recreated, Surface, Swapchain, 
 use crate::gpu::{Device, Instance, StorageFormat};
 use crate::material::PreparedMaterial;
 use crate::mesh::Mesh;
-use crate::render::{MapView, PassOptions, Renderer, ScenePass, TableOptions, VariantKind};
+use crate::render::{
+    MapView, PassOptions, Readiness, Renderer, ScenePass, TableOptions, VariantKind,
+};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -56,6 +61,8 @@ pub(super) struct Settings {
     /// Start with the BRDF map beside the mesh.
     pub map: bool,
     pub map_exposure: f32,
+    /// When the command started (the first frame's delay is measured from it).
+    pub started: Instant,
 }
 
 /// Opens the display, prepares the material, runs the event loop.
@@ -71,6 +78,11 @@ pub(super) fn run(scene: Scene, settings: Settings) -> Result<()> {
     // The DFT terms wait for a variant that reads them (`V` to flss, nmm or pq): the
     // table variants build from the height field.
     let (heightfield, plan) = scene.material.load_planned(&Reach::ALL, Precision::F32)?;
+    let loader = MaterialLoader::new(
+        scene.material.clone(),
+        settings.cache_dir.clone(),
+        &heightfield,
+    );
     let prepared = scene.material.prepare_planned_deferred(
         heightfield,
         plan,
@@ -78,7 +90,7 @@ pub(super) fn run(scene: Scene, settings: Settings) -> Result<()> {
     )?;
     let mut app = App {
         scene,
-        prepared,
+        start: Some((Arc::new(prepared), loader)),
         settings,
         viewer: None,
         error: None,
@@ -105,7 +117,8 @@ pub(super) fn run(scene: Scene, settings: Settings) -> Result<()> {
 
 struct App {
     scene: Scene,
-    prepared: PreparedMaterial,
+    /// The material and its loader, until the viewer takes them.
+    start: Option<(Arc<PreparedMaterial>, MaterialLoader)>,
     settings: Settings,
     viewer: Option<Viewer>,
     error: Option<Error>,
@@ -113,10 +126,10 @@ struct App {
 
 impl ApplicationHandler for App {
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
-        if self.viewer.is_some() {
+        let Some((prepared, loader)) = self.start.take() else {
             return;
-        }
-        match Viewer::new(event_loop, &self.scene, &self.settings, &self.prepared) {
+        };
+        match Viewer::new(event_loop, &self.scene, &self.settings, prepared, loader) {
             Ok(v) => {
                 println!("{HELP}");
                 self.viewer = Some(v);
@@ -146,12 +159,11 @@ impl ApplicationHandler for App {
             }
             WindowEvent::RedrawRequested => {
                 v.run_script(event_loop);
-                v.frame(&self.scene, &self.prepared, &self.settings)
-                    .map(|done| {
-                        if done {
-                            event_loop.exit();
-                        }
-                    })
+                v.frame(&self.scene, &self.settings).map(|done| {
+                    if done {
+                        event_loop.exit();
+                    }
+                })
             }
             WindowEvent::ModifiersChanged(m) => {
                 v.controls.modifiers(m.state());
@@ -210,13 +222,28 @@ struct Viewer {
     controls: Controls,
     /// The scene's mesh in world space: the map's tangent frame is read from it.
     mesh: Mesh,
-    /// `--at` actions not yet run, by frame index.
+    /// The material the controls ask for (the newest edit loaded).
+    material: Arc<PreparedMaterial>,
+    /// The material of the prepared variant the passes draw: `material` once its build
+    /// has arrived.
+    shown: Arc<PreparedMaterial>,
+    /// Loads edited materials on a worker thread.
+    loader: MaterialLoader,
+    /// The current build: when it started and the frames presented since.
+    build: Option<(Instant, u32)>,
+    /// `--at` actions not yet run, by settled frame index.
     script: Vec<(u32, ScriptAction)>,
     /// `--at N:minimise=K`: the window counts as zero-sized for K more redraws.
     fake_minimised: u32,
     /// The last recreation saw a zero extent (printed once).
     minimised: bool,
+    /// Settled frames: presented while nothing was building or loading. `--frames` and the
+    /// `--at` indices count these, so a screenshot shows the finished table.
     frames_done: u32,
+    /// Every frame presented.
+    presented: u32,
+    /// When the command started.
+    opened: Instant,
     needs_recreate: bool,
     view_changed: bool,
     rebuild: bool,
@@ -252,7 +279,8 @@ impl Viewer {
         event_loop: &ActiveEventLoop,
         scene: &Scene,
         settings: &Settings,
-        prepared: &PreparedMaterial,
+        prepared: Arc<PreparedMaterial>,
+        loader: MaterialLoader,
     ) -> Result<Self> {
         let mesh = scene.mesh.load()?;
         let out = &scene.output;
@@ -300,10 +328,16 @@ impl Viewer {
             reload: None,
             controls,
             mesh,
+            shown: Arc::clone(&prepared),
+            material: prepared,
+            loader,
+            build: None,
             script: settings.script.clone(),
             fake_minimised: 0,
             minimised: false,
             frames_done: 0,
+            presented: 0,
+            opened: settings.started,
             needs_recreate: false,
             view_changed: false,
             rebuild: true,
@@ -330,7 +364,7 @@ impl Viewer {
             viewer.reload = Some(reload);
         }
         viewer.recreate_swapchain(settings.vsync)?;
-        viewer.rebuild_pass(scene, prepared)?;
+        // The first frame starts the variant's build (a coarse table first).
         Ok(viewer)
     }
 
@@ -393,19 +427,19 @@ impl Viewer {
         Ok(ok)
     }
 
-    /// Rebuilds the pass (variant, switches, shaders or a table that no longer covers the
-    /// view). The old pass is kept when the new one fails (e.g. a reloaded shader that does
-    /// not link).
-    fn rebuild_pass(&mut self, scene: &Scene, prepared: &PreparedMaterial) -> Result<()> {
-        // The map first: table variants then prepare one table for the map and the mesh,
-        // which the mesh pass reuses.
+    /// Rebuilds the passes for the prepared variant (variant, switches, shaders, a table
+    /// that arrived). The old pass is kept when the new one fails (e.g. a reloaded shader
+    /// that does not link).
+    fn rebuild_pass(&mut self, scene: &Scene) -> Result<()> {
+        let prepared = Arc::clone(&self.shown);
+        // The map first: its table also serves the mesh beside it.
         if self.controls.map {
-            self.build_map(scene, prepared);
+            self.build_map(scene, &prepared);
         }
         let Some(sc) = &self.swapchain else {
             return Ok(());
         };
-        let aspect = sc.extent.width as f32 / sc.extent.height as f32;
+        let aspect = mesh_aspect(sc.extent, self.controls.map);
         let render_pass = sc.render_pass();
         let state = &self.controls.state;
         let view = state.apply(scene);
@@ -417,16 +451,15 @@ impl Viewer {
         let start = Instant::now();
         let built = self
             .renderer
-            .scene_pass(&view, prepared, options, render_pass, aspect);
+            .scene_pass(&view, &prepared, options, render_pass, aspect);
         match built {
             Ok(mut pass) => {
                 pass.set_view(&view.camera, &view.light, aspect, state.exposure);
                 let s = pass.stats();
                 println!(
-                    "variant {}: pass built in {:.0} ms (table build {:.0} ms, {:.1} MB)",
+                    "variant {}: pass built in {:.0} ms ({:.1} MB)",
                     s.name,
                     start.elapsed().as_secs_f64() * 1e3,
-                    s.build_ms,
                     s.gpu_bytes as f64 / 1e6
                 );
                 // Frames in flight may still draw with the old pass.
@@ -440,7 +473,124 @@ impl Viewer {
             Err(e) => return Err(e),
         }
         self.rebuild = false;
+        Ok(())
+    }
+
+    /// Takes what the workers finished (an edited material, a variant build) and brings the
+    /// passes up to date without blocking: when the prepared variant serves the view, the
+    /// wanted material and the map, the passes that need it are rebuilt now (pipelines
+    /// only); otherwise a background build starts (or goes on) and the old passes draw
+    /// until it arrives.
+    fn update_passes(&mut self, scene: &Scene) -> Result<()> {
+        match self.loader.poll() {
+            None => {}
+            Some(Ok((edit, material))) => {
+                println!(
+                    "material loaded: {} (peak-to-valley {:.4} µm, coherence length {:.2} µm)",
+                    material.material.heightfield,
+                    {
+                        let (lo, hi) = material.heightfield.range();
+                        hi - lo
+                    },
+                    material.material.coherence_um
+                );
+                debug_assert_eq!(edit, self.loader.current());
+                self.material = Arc::new(material);
+            }
+            Some(Err(e)) => {
+                eprintln!("error: {e} (keeping the material shown)");
+                self.controls.material = self.loader.current();
+            }
+        }
+        match self.renderer.poll_background() {
+            Ok(None) => {}
+            Ok(Some(arrived)) => {
+                let frames = self.build.map_or(0, |(_, n)| n);
+                println!(
+                    "{} ready in {:.0} ms; {frames} frames presented meanwhile",
+                    if arrived.coarse {
+                        "coarse table"
+                    } else {
+                        "build"
+                    },
+                    arrived.ms
+                );
+                if !arrived.coarse {
+                    self.build = None;
+                }
+                self.shown = arrived.material;
+                self.rebuild = true;
+            }
+            Err(e) => {
+                self.build = None;
+                if self.pass.is_none() {
+                    return Err(e);
+                }
+                eprintln!("error: {e} (keeping the previous pass)");
+                // Not retried until something changes.
+                self.material = Arc::clone(&self.shown);
+                self.rebuild = false;
+            }
+        }
+        let material_changed = !Arc::ptr_eq(&self.shown, &self.material);
+        let map_missing = self.controls.map && self.map_pass.is_none();
+        if !(self.rebuild
+            || self.view_changed
+            || material_changed
+            || map_missing
+            || self.pass.is_none())
+        {
+            return Ok(());
+        }
         self.view_changed = false;
+        let view = self.controls.state.apply(scene);
+        let map_wi = self.controls.map.then(|| self.map_wi());
+        let coarse_first = self.pass.is_none();
+        let aspect = self
+            .swapchain
+            .as_ref()
+            .map_or(1.0, |sc| mesh_aspect(sc.extent, self.controls.map));
+        let readiness = match self.renderer.prepare_in_background(
+            &view,
+            aspect,
+            &self.material,
+            map_wi,
+            coarse_first,
+        ) {
+            Ok(r) => r,
+            Err(e) if self.pass.is_some() => {
+                eprintln!("error: {e} (keeping the previous pass)");
+                self.material = Arc::clone(&self.shown);
+                self.rebuild = false;
+                return Ok(());
+            }
+            Err(e) => return Err(e),
+        };
+        match readiness {
+            Readiness::Building => {
+                if self.build.is_none() {
+                    println!(
+                        "building {} in the background{}",
+                        self.controls.variant.name(),
+                        if coarse_first && self.controls.variant.is_table() {
+                            " (a coarse table first)"
+                        } else {
+                            ""
+                        }
+                    );
+                    self.build = Some((Instant::now(), 0));
+                }
+            }
+            Readiness::Ready => {
+                self.shown = Arc::clone(&self.material);
+                if self.rebuild || material_changed || self.pass.is_none() {
+                    self.rebuild_pass(scene)?;
+                } else if map_missing {
+                    let prepared = Arc::clone(&self.shown);
+                    self.build_map(scene, &prepared);
+                }
+            }
+        }
         Ok(())
     }
 
@@ -471,12 +621,7 @@ impl Viewer {
     }
 
     /// Draws one frame. `Ok(true)` when `--frames` are done.
-    fn frame(
-        &mut self,
-        scene: &Scene,
-        prepared: &PreparedMaterial,
-        settings: &Settings,
-    ) -> Result<bool> {
+    fn frame(&mut self, scene: &Scene, settings: &Settings) -> Result<bool> {
         self.poll_reload();
         if self.needs_recreate && !self.recreate_swapchain(settings.vsync)? {
             // Minimised: nothing to draw; do not spin the event loop at full speed.
@@ -486,28 +631,20 @@ impl Viewer {
         if self.swapchain.is_none() && !self.recreate_swapchain(settings.vsync)? {
             return Ok(false);
         }
+        self.update_passes(scene)?;
+        let settled = !(self.renderer.building() || self.loader.loading());
+        if self.pass.is_none() {
+            // Nothing to draw before the first build arrives; the title says how far it is.
+            self.update_title(false);
+            std::thread::sleep(Duration::from_millis(5));
+            return Ok(false);
+        }
         let Some(sc) = &self.swapchain else {
             return Ok(false);
         };
         let (mesh_rect, map_rect) = layout(sc.extent, self.controls.map);
-        let aspect = mesh_rect.extent.width as f32 / mesh_rect.extent.height as f32;
+        let aspect = mesh_aspect(sc.extent, self.controls.map);
         let map_wi = self.controls.map.then(|| self.map_wi());
-        if self.view_changed && !self.rebuild {
-            // Rebuild only when the view (or the map's light) left the region the tables
-            // (or flss's uploaded texels) cover; flss keeping every texel always covers it.
-            let covered = self
-                .renderer
-                .covers_view(&self.controls.state.apply(scene))?
-                && map_wi.is_none_or(|wi| self.renderer.covers_brdf_map(wi));
-            if !covered {
-                self.rebuild = true;
-            }
-        }
-        if self.rebuild || self.pass.is_none() {
-            self.rebuild_pass(scene, prepared)?;
-        } else if self.controls.map && self.map_pass.is_none() {
-            self.build_map(scene, prepared);
-        }
         let state = &self.controls.state;
         let view = state.apply(scene);
         let Some(pass) = &mut self.pass else {
@@ -522,8 +659,6 @@ impl Viewer {
             }
             _ => None,
         };
-        self.view_changed = false;
-
         let frame = self.frames.begin()?;
         if let Some(ms) = frame.previous_gpu_ms {
             self.stats.add_gpu(ms, &mut self.totals);
@@ -541,7 +676,7 @@ impl Viewer {
                 return Ok(false);
             }
         };
-        let last = settings.frames.is_some_and(|n| self.frames_done + 1 >= n);
+        let last = settled && settings.frames.is_some_and(|n| self.frames_done + 1 >= n);
         let shot = if last {
             settings.screenshot.clone()
         } else {
@@ -583,12 +718,24 @@ impl Viewer {
         }
         // Only made for a screenshot, whose frame was waited for above.
         drop(readback);
-        self.frames_done += 1;
+        if self.presented == 0 {
+            println!(
+                "first frame presented {:.0} ms after start",
+                self.opened.elapsed().as_secs_f64() * 1e3
+            );
+        }
+        self.presented += 1;
+        if settled {
+            self.frames_done += 1;
+        }
+        if let Some((_, n)) = &mut self.build {
+            *n += 1;
+        }
         match self.totals.0 {
             None => self.totals.0 = Some(Instant::now()),
             Some(_) => self.totals.1 += 1,
         }
-        self.update_title();
+        self.update_title(true);
         Ok(last)
     }
 
@@ -631,8 +778,12 @@ impl Viewer {
         );
     }
 
-    fn update_title(&mut self) {
-        self.stats.frames += 1;
+    /// The title, twice a second: the variant, GPU time and frame rate, and while a build
+    /// runs how far it is. `presented`: this call follows a presented frame.
+    fn update_title(&mut self, presented: bool) {
+        if presented {
+            self.stats.frames += 1;
+        }
         let elapsed = self.stats.since.elapsed().as_secs_f64();
         if elapsed < 0.5 {
             return;
@@ -652,8 +803,23 @@ impl Viewer {
             .map_or(self.controls.variant.name().to_string(), |p| {
                 p.stats().name.clone()
             });
-        self.window
-            .set_title(&format!("diffract — {name} — GPU {gpu} — {fps:.1} fps"));
+        let building = match self.renderer.background_progress() {
+            Some(p) => {
+                let pct = p
+                    .steps
+                    .filter(|&(_, total)| total > 0)
+                    .map_or(String::new(), |(done, total)| {
+                        format!(" {:.0}%", 100.0 * done as f64 / total as f64)
+                    });
+                let coarse = if p.coarse { " (coarse)" } else { "" };
+                format!(" — building {}{coarse}{pct}, {:.0} s", p.what, p.seconds)
+            }
+            None if self.loader.loading() => " — loading the material".to_string(),
+            None => String::new(),
+        };
+        self.window.set_title(&format!(
+            "diffract — {name}{building} — GPU {gpu} — {fps:.1} fps"
+        ));
         self.stats = TitleStats {
             since: Instant::now(),
             frames: 0,
@@ -671,6 +837,13 @@ impl Viewer {
                 println!("{what}");
                 self.renderer.set_variant(self.controls.variant);
                 self.rebuild = true;
+            }
+            Effect::Material(what) => {
+                println!("{what}");
+                if let Err(e) = self.loader.want(self.controls.material) {
+                    eprintln!("error: {e}");
+                    self.controls.material = self.loader.current();
+                }
             }
             Effect::Map => {
                 println!("BRDF map {}", if self.controls.map { "on" } else { "off" });
@@ -831,6 +1004,12 @@ fn layout(extent: vk::Extent2D, map: bool) -> (vk::Rect2D, Option<vk::Rect2D>) {
         },
     };
     (mesh, Some(map))
+}
+
+/// Width over height of the mesh's part of a target of `extent`.
+fn mesh_aspect(extent: vk::Extent2D, map: bool) -> f32 {
+    let mesh = layout(extent, map).0.extent;
+    mesh.width as f32 / mesh.height.max(1) as f32
 }
 
 /// Writes the read-back swapchain texels (already sRGB-encoded) to a PNG.

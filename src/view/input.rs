@@ -1,6 +1,7 @@
 //! What the mouse and keys change: an orbit camera (left drag orbits, right drag moves the
 //! light, middle drag or shift+left pans, wheel zooms), the light direction, exposure,
-//! variant, feature switches and the BRDF map beside the mesh. Pure state, no Vulkan and no
+//! variant, feature switches, the BRDF map beside the mesh and the material (the
+//! structure's height, the coherence length, the height field). Pure state, no Vulkan and no
 //! window: [`Controls`] takes winit's events (or a test's synthetic ones) and says what
 //! changed ([`Effect`]); the app applies it.
 
@@ -20,8 +21,53 @@ diffract view — keys and mouse
   arrow keys       move the light            + / -         exposure ×1.25 / ÷1.25
   V                next shader variant       F / S / T     toggle Fresnel / shadowing / texture
   B                BRDF map beside the mesh  [ / ]         map exposure ÷1.25 / ×1.25
-  P                screenshot (PNG)          H             this help
-  Esc / Q          quit";
+  Z / X            height ÷1.25 / ×1.25      K / L         coherence length ÷1.25 / ×1.25
+  N                next height field         P             screenshot (PNG)
+  H                this help                 Esc / Q       quit
+  (a material edit rebuilds the table in the background; the title shows its progress)";
+
+/// The height fields `N` cycles through after the scene's own: the synthetic gratings and
+/// the measured Elaphe crop grown to the default patch.
+pub const SHIPPED_FIELDS: [&str; 5] = [
+    "builtin:blazed",
+    "builtin:sinusoidal",
+    "builtin:elaphe",
+    "builtin:xenopeltis",
+    "builtin:elaphe-grown",
+];
+
+/// Factor of the height and coherence steps (`Z`/`X`, `K`/`L`).
+pub const MATERIAL_STEP: f64 = 1.25;
+
+/// The material edits of the viewer, relative to the scene's material: the heights are
+/// multiplied by `1.25^height_steps`, the coherence length by `1.25^coherence_steps`, and
+/// `field` picks the height field (0: the scene's own, then [`SHIPPED_FIELDS`]).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct MaterialEdit {
+    pub height_steps: i32,
+    pub coherence_steps: i32,
+    pub field: usize,
+}
+
+impl MaterialEdit {
+    /// The factor on every height.
+    pub fn height_scale(&self) -> f64 {
+        MATERIAL_STEP.powi(self.height_steps)
+    }
+
+    /// The factor on the coherence length.
+    pub fn coherence_scale(&self) -> f64 {
+        MATERIAL_STEP.powi(self.coherence_steps)
+    }
+
+    /// The height field: `own` (the scene's) or a shipped one.
+    pub fn heightfield<'a>(&self, own: &'a str) -> &'a str {
+        match self.field {
+            0 => own,
+            i => SHIPPED_FIELDS[(i - 1) % SHIPPED_FIELDS.len()],
+        }
+    }
+}
 
 /// Exposure of the BRDF map without `--map-exposure`: a BRDF is much smaller than the
 /// radiance a scene's exposure is chosen for (the README's map figures use 30 to 300).
@@ -63,6 +109,9 @@ pub enum Effect {
     View,
     /// The variant or a feature switch changed: the pass is rebuilt. The line says what.
     Rebuild(String),
+    /// The material changed ([`Controls::material`]): it is loaded and its table built in
+    /// the background. The line says what.
+    Material(String),
     /// `B`: the BRDF map beside the mesh was switched on or off ([`Controls::map`]).
     Map,
     /// `H`: print [`HELP`].
@@ -84,6 +133,8 @@ pub struct Controls {
     /// Mesh frames are evaluated per vertex: `V` cycles only the variants that have a
     /// vertex stage.
     pub per_vertex: bool,
+    /// The material edits so far.
+    pub material: MaterialEdit,
     /// Left, right, middle.
     buttons: [bool; 3],
     shift: bool,
@@ -97,6 +148,7 @@ impl Controls {
             variant: variant.resolve(),
             map: false,
             per_vertex: false,
+            material: MaterialEdit::default(),
             buttons: [false; 3],
             shift: false,
             cursor: None,
@@ -120,6 +172,7 @@ impl Controls {
                 "]" => s.map_exposure *= EXPOSURE_STEP,
                 "[" => s.map_exposure /= EXPOSURE_STEP,
                 "h" => return Effect::Help,
+                "z" | "x" | "k" | "l" | "n" => return self.edit_material(c),
                 "p" => return Effect::Screenshot,
                 "b" => {
                     self.map = !self.map;
@@ -152,6 +205,29 @@ impl Controls {
             _ => return Effect::None,
         }
         Effect::View
+    }
+
+    /// `Z`/`X` (height), `K`/`L` (coherence length), `N` (height field).
+    fn edit_material(&mut self, key: &str) -> Effect {
+        let m = &mut self.material;
+        let line = match key.to_lowercase().as_str() {
+            "z" | "x" => {
+                m.height_steps += if key.eq_ignore_ascii_case("x") { 1 } else { -1 };
+                format!("height ×{:.4} of the field's own", m.height_scale())
+            }
+            "k" | "l" => {
+                m.coherence_steps += if key.eq_ignore_ascii_case("l") { 1 } else { -1 };
+                format!("coherence length ×{:.4}", m.coherence_scale())
+            }
+            _ => {
+                m.field = (m.field + 1) % (SHIPPED_FIELDS.len() + 1);
+                match m.field {
+                    0 => "height field → the scene's own".to_string(),
+                    _ => format!("height field → {}", m.heightfield("")),
+                }
+            }
+        };
+        Effect::Material(line)
     }
 
     /// The modifier keys held (shift + left drag pans).

@@ -9,6 +9,7 @@
 
 mod app;
 pub mod input;
+mod material;
 pub mod reload;
 
 use std::path::PathBuf;
@@ -110,6 +111,7 @@ pub fn parse_at(s: &str) -> Result<(u32, ScriptAction)> {
 
 /// Runs `diffract view` until the window closes (or `--frames` are done).
 pub fn run(args: &ViewArgs) -> Result<()> {
+    let started = std::time::Instant::now();
     let mut scene = args.scene.load()?;
     let map_exposure = args.map_exposure.unwrap_or(input::DEFAULT_MAP_EXPOSURE);
     if !(map_exposure.is_finite() && map_exposure > 0.0) {
@@ -161,6 +163,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         script,
         map: args.map,
         map_exposure,
+        started,
     };
     app::run(scene, settings)
 }

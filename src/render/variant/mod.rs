@@ -529,7 +529,7 @@ pub(crate) trait Variant: Sync {
 /// A variant's GPU resources for one material and region. A variant built on another's
 /// resources (nmm and pq on flss's terms) returns them from [`PreparedVariant::base`], and
 /// every method it does not override answers from there.
-pub(crate) trait PreparedVariant {
+pub(crate) trait PreparedVariant: Send + Sync {
     /// The resources this one extends, if any.
     fn base(&self) -> Option<&dyn PreparedVariant> {
         None

@@ -117,7 +117,10 @@ pub(crate) fn prepare<T: GTable + 'static>(
         keep,
         setup.cache_dir,
         setup.report,
-        &|| bar.inc(1),
+        &|| {
+            setup.report.checkpoint();
+            bar.inc(1)
+        },
     )?;
     bar.finish_and_clear();
     // The sun's disc, convolved into every slice: the shader then evaluates the disc's
