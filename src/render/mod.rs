@@ -442,20 +442,6 @@ impl Renderer {
         Ok((Arc::new(buffers), texture))
     }
 
-    /// Whether the prepared table covers what `scene`'s view needs, so a pass built now
-    /// would reuse it (always true for flss, which reads the whole band).
-    pub fn covers_view(&self, scene: &Scene) -> Result<bool> {
-        let Some((key, _)) = &self.prepared else {
-            return Ok(false);
-        };
-        let Some(built) = key.region else {
-            return Ok(true);
-        };
-        let mesh = load_scene_mesh(scene)?;
-        let need = scene_region(scene, &mesh, None, false).unwrap_or(Region::ALL);
-        Ok(region_contains(&built.map(f64::from_bits), &need))
-    }
-
     #[allow(clippy::too_many_arguments)]
     fn scene_pass_of(
         &mut self,

@@ -10,7 +10,7 @@ use ash::vk;
 use super::params::{colour_weights, OutputMode};
 use super::pass::PassOptions;
 use super::pass::{MapView, ScenePass};
-use super::region::{load_scene_mesh, region_contains, scene_region};
+use super::region::{load_scene_mesh, scene_region};
 use super::variant::VariantStats;
 use super::{Renderer, SceneInputs, MAX_MAP_SIZE};
 use crate::brdf;
@@ -291,19 +291,6 @@ impl Renderer {
             None,
             render_pass,
         )
-    }
-
-    /// Whether the prepared table covers a BRDF map under light `wi` (tangent frame), so a
-    /// [`Renderer::brdf_map_pass`] built now would reuse it (always true for flss).
-    pub fn covers_brdf_map(&self, wi: [f64; 3]) -> bool {
-        let Some((key, _)) = &self.prepared else {
-            return false;
-        };
-        let Some(built) = key.region else {
-            return true;
-        };
-        let need = Region::brdf_map(wi.map(|c| c as f32 as f64)).widened(1e-5);
-        region_contains(&built.map(f64::from_bits), &need)
     }
 
     /// Records `pass` into the offscreen `target` as a frame of `frames` (timed when the

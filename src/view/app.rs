@@ -231,6 +231,9 @@ struct Viewer {
     loader: MaterialLoader,
     /// The current build: when it started and the frames presented since.
     build: Option<(Instant, u32)>,
+    /// The last request was answered `Building` and nothing changed since: the next frames
+    /// do not ask again.
+    waiting: bool,
     /// `--at` actions not yet run, by settled frame index.
     script: Vec<(u32, ScriptAction)>,
     /// `--at N:minimise=K`: the window counts as zero-sized for K more redraws.
@@ -332,6 +335,7 @@ impl Viewer {
             material: prepared,
             loader,
             build: None,
+            waiting: false,
             script: settings.script.clone(),
             fake_minimised: 0,
             minimised: false,
@@ -399,6 +403,7 @@ impl Viewer {
                     // A new format means a new render pass: the pipelines are rebuilt.
                     if old.format != sc.format {
                         self.rebuild = true;
+                        self.waiting = false;
                     }
                     self.frames.retire_after_present(old);
                     true
@@ -408,6 +413,7 @@ impl Viewer {
                 Some(sc) => {
                     self.swapchain = Some(sc);
                     self.rebuild = true;
+                    self.waiting = false;
                     true
                 }
                 None => false,
@@ -496,6 +502,7 @@ impl Viewer {
                 );
                 debug_assert_eq!(edit, self.loader.current());
                 self.material = Arc::new(material);
+                self.waiting = false;
             }
             Some(Err(e)) => {
                 eprintln!("error: {e} (keeping the material shown)");
@@ -520,6 +527,7 @@ impl Viewer {
                 }
                 self.shown = arrived.material;
                 self.rebuild = true;
+                self.waiting = false;
             }
             Err(e) => {
                 self.build = None;
@@ -534,12 +542,12 @@ impl Viewer {
         }
         let material_changed = !Arc::ptr_eq(&self.shown, &self.material);
         let map_missing = self.controls.map && self.map_pass.is_none();
-        if !(self.rebuild
+        let due = self.rebuild
             || self.view_changed
             || material_changed
             || map_missing
-            || self.pass.is_none())
-        {
+            || self.pass.is_none();
+        if !due || (self.waiting && !self.view_changed) {
             return Ok(());
         }
         self.view_changed = false;
@@ -568,6 +576,7 @@ impl Viewer {
         };
         match readiness {
             Readiness::Building => {
+                self.waiting = true;
                 if self.build.is_none() {
                     println!(
                         "building {} in the background{}",
@@ -611,6 +620,7 @@ impl Viewer {
                     println!("shaders recompiled");
                     self.renderer.set_shader_overrides(spirv.clone());
                     self.rebuild = true;
+                    self.waiting = false;
                 }
                 Err(msg) => {
                     eprintln!("{msg}\nshader reload failed: keeping the last good pipeline")
@@ -837,6 +847,7 @@ impl Viewer {
                 println!("{what}");
                 self.renderer.set_variant(self.controls.variant);
                 self.rebuild = true;
+                self.waiting = false;
             }
             Effect::Material(what) => {
                 println!("{what}");
@@ -847,6 +858,7 @@ impl Viewer {
             }
             Effect::Map => {
                 println!("BRDF map {}", if self.controls.map { "on" } else { "off" });
+                self.waiting = false;
                 if !self.controls.map {
                     // Frames in flight may still read the map's objects.
                     if let Some(old) = self.map_pass.take() {
