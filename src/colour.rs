@@ -166,6 +166,18 @@ pub fn xyz_to_linear_srgb(xyz: [f64; 3]) -> [f64; 3] {
     [0, 1, 2].map(|r| m[r][0] * xyz[0] + m[r][1] * xyz[1] + m[r][2] * xyz[2])
 }
 
+/// Linear sRGB → XYZ (D65 white), no clamping: the exact inverse of [`XYZ_TO_SRGB`], so
+/// linear white `(1, 1, 1)` lands on `Y = 1`.
+pub fn linear_srgb_to_xyz(rgb: [f64; 3]) -> [f64; 3] {
+    static INVERSE: std::sync::OnceLock<glam::DMat3> = std::sync::OnceLock::new();
+    let m = INVERSE.get_or_init(|| {
+        glam::DMat3::from_cols_array_2d(&XYZ_TO_SRGB)
+            .transpose()
+            .inverse()
+    });
+    (*m * glam::DVec3::from(rgb)).to_array()
+}
+
 /// The sRGB transfer curve (IEC 61966-2-1) of a linear value, clamped to [0, 1] first.
 /// NaN maps to 0 so it can never reach an output.
 pub fn srgb_encode(linear: f64) -> f64 {

@@ -205,12 +205,10 @@ fn percentile(v: &mut [f64], q: f64) -> f64 {
     v[rank - 1]
 }
 
-/// CIELAB of a linear sRGB colour, through the exact inverse of [`colour::XYZ_TO_SRGB`] so
-/// that linear white `(1,1,1)` lands on `L* = 100`.
+/// CIELAB of a linear sRGB colour ([`colour::linear_srgb_to_xyz`]: linear white `(1,1,1)`
+/// lands on `L* = 100`).
 fn linear_srgb_to_lab(rgb: [f32; 3]) -> [f64; 3] {
-    let m = glam::DMat3::from_cols_array_2d(&colour::XYZ_TO_SRGB).transpose();
-    let xyz = m.inverse() * glam::DVec3::new(rgb[0] as f64, rgb[1] as f64, rgb[2] as f64);
-    colour::xyz_to_lab(xyz.to_array())
+    colour::xyz_to_lab(colour::linear_srgb_to_xyz(rgb.map(f64::from)))
 }
 
 /// Compares two linear sRGB images pixel by pixel. Any non-finite value, and a size
