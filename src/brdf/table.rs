@@ -86,6 +86,14 @@ impl Region {
         .clamped()
     }
 
+    /// The smallest box holding this one and `other`.
+    pub fn union(&self, other: &Region) -> Region {
+        Region {
+            lo: std::array::from_fn(|a| self.lo[a].min(other.lo[a])),
+            hi: std::array::from_fn(|a| self.hi[a].max(other.hi[a])),
+        }
+    }
+
     fn clamped(self) -> Region {
         let mut r = self;
         for a in 0..3 {

@@ -192,11 +192,12 @@ pub enum Readiness {
 impl Renderer {
     /// Makes the prepared variant serve `scene`'s view at `aspect` (and, with `map_wi`, a
     /// BRDF map beside it under that light) for `material`, without blocking: `Ready` when
-    /// it already does; without the map, a table variant holds the sun's disc
-    /// pre-filtered, as `render`'s does (while a footprint within 20 % of the view's serves); otherwise a build starts on a worker thread (`coarse_first`: a coarse
-    /// table first, for a window with nothing to show yet) and `Building` is returned. A
-    /// build already running goes on; a new one starts once it has arrived and if it is
-    /// still needed then. Only for a renderer with a covering margin (the viewer).
+    /// it already does; otherwise a build starts on a worker thread (`coarse_first`: a
+    /// coarse table first, for a window with nothing to show yet) and `Building` is
+    /// returned. Without the map, a table variant holds the sun's disc pre-filtered, as
+    /// `render`'s does (a footprint within 20 % of the view's still serves). A build
+    /// already running goes on; a new one starts once it has arrived and if it is still
+    /// needed then. Only for a renderer with a covering margin (the viewer).
     pub fn prepare_in_background(
         &mut self,
         scene: &Scene,
@@ -205,7 +206,7 @@ impl Renderer {
         map_wi: Option<[f64; 3]>,
         coarse_first: bool,
     ) -> Result<Readiness> {
-        let mesh = region::load_scene_mesh(scene)?;
+        let mesh = self.scene_mesh(scene)?;
         let disc = if map_wi.is_none() && !self.per_vertex && self.variant.is_table() {
             region::scene_disc(scene, &mesh, aspect)
         } else {
@@ -219,11 +220,7 @@ impl Renderer {
         let mut output = OutputMode::Mesh;
         if let Some(wi) = map_wi {
             self.variant.check_output(OutputMode::MapDisplay)?;
-            let map = Region::brdf_map(wi.map(|c| c as f32 as f64)).widened(1e-5);
-            need = Region {
-                lo: std::array::from_fn(|a| need.lo[a].min(map.lo[a])),
-                hi: std::array::from_fn(|a| need.hi[a].max(map.hi[a])),
-            };
+            need = need.union(&Region::brdf_map(wi.map(|c| c as f32 as f64)).widened(1e-5));
             output = OutputMode::MapDisplay;
         }
         let Some((key, region)) = self.plan_variant(material, need, output, disc)? else {
@@ -235,6 +232,7 @@ impl Renderer {
         let options = self.build_options(region, output, disc);
         let coarse =
             (coarse_first && self.variant.is_table()).then(|| options.coarse(&material.material));
+        let coarse_building = coarse.is_some();
         let progress = Arc::new(Progress {
             inner: Arc::clone(&self.report),
             bar: Mutex::new(None),
@@ -280,7 +278,7 @@ impl Renderer {
             released: false,
             progress,
             started: Instant::now(),
-            coarse: coarse_first && self.variant.is_table(),
+            coarse: coarse_building,
             handle: Some(handle),
         });
         Ok(Readiness::Building)

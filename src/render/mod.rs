@@ -442,6 +442,15 @@ impl Renderer {
         Ok((Arc::new(buffers), texture))
     }
 
+    /// `scene`'s mesh: the one the last scene pass loaded, while the scene names the same
+    /// mesh (the viewer asks on every view change), else loaded now.
+    fn scene_mesh(&self, scene: &Scene) -> Result<std::borrow::Cow<'_, crate::mesh::Mesh>> {
+        match &self.scene_uploads {
+            Some(u) if u.key.0 == scene.mesh => Ok(std::borrow::Cow::Borrowed(&u.inputs.mesh)),
+            _ => load_scene_mesh(scene).map(std::borrow::Cow::Owned),
+        }
+    }
+
     #[allow(clippy::too_many_arguments)]
     fn scene_pass_of(
         &mut self,

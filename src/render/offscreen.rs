@@ -10,7 +10,7 @@ use ash::vk;
 use super::params::{colour_weights, OutputMode};
 use super::pass::PassOptions;
 use super::pass::{MapView, ScenePass};
-use super::region::{load_scene_mesh, scene_region};
+use super::region::scene_region;
 use super::variant::VariantStats;
 use super::{Renderer, SceneInputs, MAX_MAP_SIZE};
 use crate::brdf;
@@ -264,12 +264,8 @@ impl Renderer {
         let wi32 = wi.map(|c| c as f32 as f64);
         let mut region = Region::brdf_map(wi32).widened(1e-5);
         if let Some(scene) = beside {
-            let mesh = load_scene_mesh(scene)?;
-            if let Some(r) = scene_region(scene, &mesh, None, false) {
-                region = Region {
-                    lo: std::array::from_fn(|a| region.lo[a].min(r.lo[a])),
-                    hi: std::array::from_fn(|a| region.hi[a].max(r.hi[a])),
-                };
+            if let Some(r) = scene_region(scene, &*self.scene_mesh(scene)?, None, false) {
+                region = region.union(&r);
             }
         }
         self.prepare_variant(prepared, region, OutputMode::MapDisplay, None)?;
