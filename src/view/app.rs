@@ -229,8 +229,8 @@ struct Viewer {
     shown: Arc<PreparedMaterial>,
     /// Loads edited materials on a worker thread.
     loader: MaterialLoader,
-    /// The current build: when it started and the frames presented since.
-    build: Option<(Instant, u32)>,
+    /// While a build runs: the frames presented since it started.
+    build: Option<u32>,
     /// The last request was answered `Building` and nothing changed since: the next frames
     /// do not ask again.
     waiting: bool,
@@ -490,7 +490,7 @@ impl Viewer {
     fn update_passes(&mut self, scene: &Scene) -> Result<()> {
         match self.loader.poll() {
             None => {}
-            Some(Ok((edit, material))) => {
+            Some(Ok(material)) => {
                 println!(
                     "material loaded: {} (peak-to-valley {:.4} µm, coherence length {:.2} µm)",
                     material.material.heightfield,
@@ -500,7 +500,6 @@ impl Viewer {
                     },
                     material.material.coherence_um
                 );
-                debug_assert_eq!(edit, self.loader.current());
                 self.material = Arc::new(material);
                 self.waiting = false;
             }
@@ -512,7 +511,7 @@ impl Viewer {
         match self.renderer.poll_background() {
             Ok(None) => {}
             Ok(Some(arrived)) => {
-                let frames = self.build.map_or(0, |(_, n)| n);
+                let frames = self.build.unwrap_or(0);
                 println!(
                     "{} ready in {:.0} ms; {frames} frames presented meanwhile",
                     if arrived.coarse {
@@ -534,10 +533,7 @@ impl Viewer {
                 if self.pass.is_none() {
                     return Err(e);
                 }
-                eprintln!("error: {e} (keeping the previous pass)");
-                // Not retried until something changes.
-                self.material = Arc::clone(&self.shown);
-                self.rebuild = false;
+                self.keep_shown(&e);
             }
         }
         let material_changed = !Arc::ptr_eq(&self.shown, &self.material);
@@ -567,9 +563,7 @@ impl Viewer {
         ) {
             Ok(r) => r,
             Err(e) if self.pass.is_some() => {
-                eprintln!("error: {e} (keeping the previous pass)");
-                self.material = Arc::clone(&self.shown);
-                self.rebuild = false;
+                self.keep_shown(&e);
                 return Ok(());
             }
             Err(e) => return Err(e),
@@ -578,16 +572,20 @@ impl Viewer {
             Readiness::Building => {
                 self.waiting = true;
                 if self.build.is_none() {
+                    let coarse = self
+                        .renderer
+                        .background_progress()
+                        .is_some_and(|p| p.coarse);
                     println!(
                         "building {} in the background{}",
                         self.controls.variant.name(),
-                        if coarse_first && self.controls.variant.is_table() {
+                        if coarse {
                             " (a coarse table first)"
                         } else {
                             ""
                         }
                     );
-                    self.build = Some((Instant::now(), 0));
+                    self.build = Some(0);
                 }
             }
             Readiness::Ready => {
@@ -601,6 +599,14 @@ impl Viewer {
             }
         }
         Ok(())
+    }
+
+    /// A failed build or request: the passes and material shown stay, and nothing is asked
+    /// again until something changes.
+    fn keep_shown(&mut self, e: &Error) {
+        eprintln!("error: {e} (keeping the previous pass)");
+        self.material = Arc::clone(&self.shown);
+        self.rebuild = false;
     }
 
     /// Polls the watched glsl directory (twice a second); a successful compile rebuilds the
@@ -738,7 +744,7 @@ impl Viewer {
         if settled {
             self.frames_done += 1;
         }
-        if let Some((_, n)) = &mut self.build {
+        if let Some(n) = &mut self.build {
             *n += 1;
         }
         match self.totals.0 {

@@ -92,10 +92,10 @@ impl MaterialLoader {
         Ok(())
     }
 
-    /// A finished load, if any: the material and its edit. A failed load (a field that
+    /// A finished load, if any. A failed load (a field that
     /// cannot be planned at this height, say) is an error; the controls' edit is then taken
     /// back to the material still shown. The next wanted edit starts loading.
-    pub fn poll(&mut self) -> Option<Result<(MaterialEdit, PreparedMaterial)>> {
+    pub fn poll(&mut self) -> Option<Result<PreparedMaterial>> {
         if !self.running.as_ref()?.1.is_finished() {
             return None;
         }
@@ -113,7 +113,7 @@ impl MaterialLoader {
         if let Err(e) = self.start() {
             return Some(Err(e));
         }
-        Some(result.map(|m| (edit, m)))
+        Some(result)
     }
 
     /// The edit of the material handed out last (what the controls go back to after an
