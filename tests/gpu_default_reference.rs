@@ -16,22 +16,10 @@
 
 mod gpu_util;
 
-use std::path::Path;
-
-use clap::Parser;
 use diffract::brdf::reference;
-use diffract::brdf::truncation::{Precision, Reach};
-use diffract::cli::render::RenderArgs;
 use diffract::colour::{delta_e2000, xyz_to_lab, ColourTable};
 use diffract::scene::Scene;
 use gpu_util::*;
-
-/// `render`'s command line with nothing given: its defaults, exactly.
-#[derive(Parser)]
-struct Cli {
-    #[command(flatten)]
-    render: RenderArgs,
-}
 
 /// ΔE2000 p99 the default may differ from the reference by (the goal of the default;
 /// measured on lavapipe: 0.61 over 299 pixels, mean 0.12, max 0.69).
@@ -48,26 +36,12 @@ fn chroma_hue(lab: [f64; 3]) -> (f64, f64) {
 #[test]
 fn the_default_configuration_matches_the_reference_on_a_map() {
     let Some(mut r) = renderer() else { return };
-    let args = Cli::parse_from(["diffract"]).render;
     let scene = Scene::default_scene();
     // The sun of the default scene is 60° up and travels across the body: on the top of
     // the body that is 30° from the normal.
     let towards = scene.light.towards_light();
     assert!((towards.y - 0.866).abs() < 1e-3, "{towards:?}");
-    let material = args.material.apply(scene.material.clone());
-    let (heightfield, plan) = material
-        .load_planned(&Reach::ALL, Precision::F32)
-        .expect("default material");
-    r.set_storage_format(args.gpu.storage);
-    r.set_variant(args.gpu.variant);
-    r.set_table_options(args.gpu.table.options());
-    r.set_leave_out(!args.keep_all);
-    let cache = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-output/default-ref-cache");
-    std::fs::create_dir_all(&cache).unwrap();
-    r.set_cache_dir(Some(cache.clone()));
-    let prepared = material
-        .prepare_planned(heightfield, plan, Some(&cache))
-        .expect("prepare");
+    let prepared = as_render_defaults(&mut r, &scene.material, "default-ref-cache");
     let frame = r
         .render_brdf_map(&prepared, THETA_I, PHI_I, SIZE, None)
         .expect("default map");

@@ -209,6 +209,14 @@ background = [0.1, 0.2, 0.3]
 /// pixel's centre) meets the plane z = 0, from the inverse of the camera's view-projection
 /// `inv` (f64): the exact hit a plane scene's pixel shows.
 pub fn plane_hit(inv: &glam::DMat4, i: u32, j: u32, w: u32, h: u32) -> glam::DVec3 {
+    let (near, far) = pixel_ray(inv, i, j, w, h);
+    near + (far - near) * (-near.z / (far.z - near.z))
+}
+
+/// The world points on the near and far planes under the centre of pixel `(i, j)` of a
+/// `w×h` frame, through `inv`, the inverse of the camera's view-projection (Vulkan clip
+/// space: row 0 at the top, depth 0 to 1).
+pub fn pixel_ray(inv: &glam::DMat4, i: u32, j: u32, w: u32, h: u32) -> (glam::DVec3, glam::DVec3) {
     let ndc = |z: f64| {
         let c = *inv
             * glam::DVec4::new(
@@ -219,8 +227,41 @@ pub fn plane_hit(inv: &glam::DMat4, i: u32, j: u32, w: u32, h: u32) -> glam::DVe
             );
         c.truncate() / c.w
     };
-    let (near, far) = (ndc(0.0), ndc(1.0));
-    near + (far - near) * (-near.z / (far.z - near.z))
+    (ndc(0.0), ndc(1.0))
+}
+
+/// `render`'s command line with nothing given.
+#[derive(clap::Parser)]
+struct RenderDefaults {
+    #[command(flatten)]
+    render: diffract::cli::render::RenderArgs,
+}
+
+/// Sets up `r` and prepares `material` exactly as `diffract render` does with no options
+/// (its variant, storage, table options, leaving out, the material flags' defaults), with
+/// the tables cached in `target/test-output/<cache>` so a rerun skips their build.
+pub fn as_render_defaults(r: &mut Renderer, material: &Material, cache: &str) -> PreparedMaterial {
+    use clap::Parser;
+    let args = RenderDefaults::parse_from(["diffract"]).render;
+    let material = args.material.apply(material.clone());
+    let (heightfield, plan) = material
+        .load_planned(
+            &diffract::brdf::truncation::Reach::ALL,
+            diffract::brdf::truncation::Precision::F32,
+        )
+        .expect("default material");
+    r.set_storage_format(args.gpu.storage);
+    r.set_variant(args.gpu.variant);
+    r.set_table_options(args.gpu.table.options());
+    r.set_leave_out(!args.keep_all);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("target/test-output")
+        .join(cache);
+    std::fs::create_dir_all(&dir).unwrap();
+    r.set_cache_dir(Some(dir.clone()));
+    material
+        .prepare_planned(heightfield, plan, Some(&dir))
+        .expect("prepare")
 }
 
 /// A validated headless device, or `None` (skip, with a notice) where the machine has no
