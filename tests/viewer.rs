@@ -15,6 +15,7 @@ mod gpu_util;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::{Duration, Instant};
 
 use diffract::brdf::truncation::{Precision, Reach};
@@ -55,9 +56,16 @@ struct Xvfb {
 
 impl Xvfb {
     /// `None` (after printing SKIPPED) when Xvfb is not installed.
+    ///
+    /// Tests run on parallel threads of one process, so each call takes its own display
+    /// number from a counter; and a server counts as started only when the display's lock
+    /// file names this child. (Seeing the socket alone is not enough: it may belong to a
+    /// server another test started on the same number, which dies with that test.)
     fn start() -> Option<Xvfb> {
-        let base = 50 + (std::process::id() % 200);
-        for n in base..base + 20 {
+        static NEXT: AtomicU32 = AtomicU32::new(0);
+        let base = 50 + (std::process::id() % 200) * 20;
+        for _ in 0..40 {
+            let n = base + NEXT.fetch_add(1, Ordering::Relaxed) % 4000;
             if Path::new(&format!("/tmp/.X11-unix/X{n}")).exists()
                 || Path::new(&format!("/tmp/.X{n}-lock")).exists()
             {
@@ -90,9 +98,12 @@ impl Xvfb {
                 display: format!(":{n}"),
             };
             let socket = format!("/tmp/.X11-unix/X{n}");
+            let lock = format!("/tmp/.X{n}-lock");
+            let pid = x.child.id().to_string();
             let start = Instant::now();
             while start.elapsed() < Duration::from_secs(20) {
-                if Path::new(&socket).exists() {
+                let ours = std::fs::read_to_string(&lock).is_ok_and(|l| l.trim() == pid);
+                if ours && Path::new(&socket).exists() {
                     return Some(x);
                 }
                 if let Ok(Some(_)) = x.child.try_wait() {
@@ -100,7 +111,7 @@ impl Xvfb {
                 }
                 std::thread::sleep(Duration::from_millis(50));
             }
-            let _ = x.child.kill();
+            // `x` drops here: the child is killed and reaped
         }
         panic!("Xvfb is installed but no display could be started");
     }
