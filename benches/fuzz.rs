@@ -129,7 +129,7 @@ fn main() {
         window_radius: 1,
         full_band: false,
     };
-    cache::terms_cached(&hf, &req, Some(&dir)).unwrap();
+    cache::terms_cached(&hf, &req, Some(&dir), &diffract::report::Stderr).unwrap();
     let key = cache::cache_key(&hf, &req);
     let cache_seed = std::fs::read(dir.join(format!("terms-{key:016x}.bin"))).unwrap();
 

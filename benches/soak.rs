@@ -45,7 +45,9 @@ fn main() {
         lambda_step_nm: 20,
         ..Material::default()
     };
-    let prepared = material.prepare(None).expect("material");
+    let prepared = material
+        .prepare(None, &diffract::report::Stderr)
+        .expect("material");
     let validation = env_or("SOAK_VALIDATION", 1) != 0;
     let rebuild = env_or("SOAK_REBUILD", 0) != 0;
     let mut renderer = Renderer::new(validation).expect("Vulkan device");

@@ -433,6 +433,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         cache.as_deref(),
         &crate::brdf::truncation::Reach::brdf_map(args.theta_i),
         crate::brdf::truncation::Precision::F64,
+        &crate::report::Stderr,
     )?;
     let spin = crate::progress::spinner("grating equation");
     let r = grating_equation(&p, args.theta_i, args.azimuth, &lambdas, args.step_deg)?;

@@ -7,6 +7,7 @@ use crate::brdf::truncation::{self, Geometry, Precision, Reach, TermPlan};
 use crate::brdf::Shading;
 use crate::colour::ColourTable;
 use crate::heightfield::HeightField;
+use crate::report::Report;
 use crate::spectrum::{self, Expansion, TermRequest, TermStack, Window};
 use crate::{Error, Result};
 
@@ -121,7 +122,9 @@ impl PreparedMaterial {
     /// The term stack, computed (or loaded from the cache) on the first call when the
     /// material was prepared with deferred terms
     /// ([`Material::prepare_planned_deferred`]).
-    pub fn load_terms(&self) -> Result<&TermStack> {
+    /// A corrupt or stale cache file, or one that cannot be written, is a warning to
+    /// `report`: the terms are recomputed and still correct.
+    pub fn load_terms(&self, report: &dyn Report) -> Result<&TermStack> {
         if let Some(stack) = self.stack.stack.get() {
             return Ok(stack);
         }
@@ -132,6 +135,7 @@ impl PreparedMaterial {
             &self.heightfield,
             &req,
             self.stack.cache_dir.as_deref(),
+            report,
         )?;
         Ok(self.stack.stack.get_or_init(|| stack))
     }
@@ -219,10 +223,14 @@ impl Material {
 
     /// Loads the height field, computes (or loads from `cache_dir`) the cropped terms, and
     /// builds the window and colour table, planned for every direction (`|w| ≤ 2`) in
-    /// float32, the GPU's precision. Prints the Nyquist warning and the plan's warnings
-    /// (an expansion switch, an explicit `T` above the tolerance) to stderr.
-    pub fn prepare(&self, cache_dir: Option<&std::path::Path>) -> Result<PreparedMaterial> {
-        self.prepare_for(cache_dir, &Reach::ALL, Precision::F32)
+    /// float32, the GPU's precision. The Nyquist warning and the plan's warnings (an
+    /// expansion switch, an explicit `T` above the tolerance) go to `report`.
+    pub fn prepare(
+        &self,
+        cache_dir: Option<&std::path::Path>,
+        report: &dyn Report,
+    ) -> Result<PreparedMaterial> {
+        self.prepare_for(cache_dir, &Reach::ALL, Precision::F32, report)
     }
 
     /// [`prepare`](Self::prepare) for a known reach (e.g. [`Reach::brdf_map`]) and precision.
@@ -231,43 +239,46 @@ impl Material {
         cache_dir: Option<&std::path::Path>,
         reach: &Reach,
         precision: Precision,
+        report: &dyn Report,
     ) -> Result<PreparedMaterial> {
-        let (heightfield, plan) = self.load_planned(reach, precision)?;
-        self.prepare_planned(heightfield, plan, cache_dir)
+        let (heightfield, plan) = self.load_planned(reach, precision, report)?;
+        self.prepare_planned(heightfield, plan, cache_dir, report)
     }
 
     /// The cheap first half of [`prepare_for`](Self::prepare_for): validates the numbers,
-    /// loads the height field, resolves the plan (printing its warnings and the Nyquist
-    /// warning) and refuses a stack over the memory limit, all without computing a term.
+    /// loads the height field, resolves the plan (its warnings and the Nyquist warning go to
+    /// `report`) and refuses a stack over the memory limit, all without computing a term.
     /// Commands call it before opening the device, so bad input never waits for Vulkan.
     pub fn load_planned(
         &self,
         reach: &Reach,
         precision: Precision,
+        report: &dyn Report,
     ) -> Result<(HeightField, TermPlan)> {
         self.validate()?;
         let heightfield = HeightField::load_source(&self.heightfield, self.dh_um, self.h_max_um)?;
-        let plan = self.plan_loaded(&heightfield, reach, precision)?;
+        let plan = self.plan_loaded(&heightfield, reach, precision, report)?;
         Ok((heightfield, plan))
     }
 
     /// [`load_planned`](Self::load_planned)'s plan for a height field already loaded (the
-    /// viewer's material edits scale a loaded field): resolves the plan, prints its warnings
+    /// viewer's material edits scale a loaded field): resolves the plan, reports its warnings
     /// and the Nyquist warning, and refuses a stack over the memory limit.
     pub fn plan_loaded(
         &self,
         heightfield: &HeightField,
         reach: &Reach,
         precision: Precision,
+        report: &dyn Report,
     ) -> Result<TermPlan> {
         self.validate()?;
         let plan = self.plan(heightfield, reach, precision)?;
         for w in &plan.warnings {
-            eprintln!("warning: {w}");
+            report.warn(w);
         }
         let req = self.term_request(plan.expansion, plan.terms);
         if let Some(w) = heightfield.nyquist_warning(req.lambda_min_um) {
-            eprintln!("warning: {w}");
+            report.warn(&w);
         }
         spectrum::cache::check_memory(heightfield, &req)?;
         Ok(plan)
@@ -279,9 +290,10 @@ impl Material {
         heightfield: HeightField,
         plan: TermPlan,
         cache_dir: Option<&std::path::Path>,
+        report: &dyn Report,
     ) -> Result<PreparedMaterial> {
         let prepared = self.prepare_planned_deferred(heightfield, plan, cache_dir)?;
-        prepared.load_terms()?;
+        prepared.load_terms(report)?;
         Ok(prepared)
     }
 

@@ -48,6 +48,9 @@ pub struct Mesh {
     /// Three indices per triangle, each `< vertices.len()`.
     pub indices: Vec<u32>,
     pub name: String,
+    /// What loading repaired (zero-area triangles dropped, zero-length normals replaced),
+    /// one line each: the command that loaded the mesh reports them as warnings.
+    pub repairs: Vec<String>,
 }
 
 /// Geometry before normals and tangents are derived: what a file or a generator provides.
@@ -111,8 +114,8 @@ impl Mesh {
 
     /// Loads a Wavefront OBJ (polygons are triangulated, all objects/groups are merged into
     /// one mesh, materials are ignored). Normals and UVs are optional; see the module docs for
-    /// how missing ones are filled in. Zero-area triangles are dropped with a warning on
-    /// stderr. Errors name the file and the line, triangle or vertex at fault.
+    /// how missing ones are filled in. Zero-area triangles are dropped and said in
+    /// [`Mesh::repairs`]. Errors name the file and the line, triangle or vertex at fault.
     pub fn load_obj(path: &Path) -> Result<Mesh> {
         let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
         let text = std::str::from_utf8(&bytes).map_err(|e| {
@@ -498,6 +501,7 @@ impl Mesh {
                 "{} (scales, roll ±{roll_deg}°, pitch ±{pitch_deg}°)",
                 self.name
             ),
+            repairs: self.repairs.clone(),
         };
         for facet in self.indices.chunks(6) {
             let corner = |i: &u32| self.vertices[*i as usize];
@@ -705,6 +709,7 @@ fn build_generated(name: &str, raw: RawMesh) -> Mesh {
             vertices: Vec::new(),
             indices: Vec::new(),
             name: name.to_string(),
+            repairs: Vec::new(),
         }
     })
 }
@@ -773,11 +778,12 @@ fn finish(name: String, raw: RawMesh, origin: &Path) -> Result<Mesh> {
         )));
     }
     let dropped = total - kept.len() / 3;
+    let mut repairs = Vec::new();
     if dropped > 0 {
-        eprintln!(
-            "warning: {}: dropped {dropped} of {total} triangles with zero area",
+        repairs.push(format!(
+            "{}: dropped {dropped} of {total} triangles with zero area",
             origin.display()
-        );
+        ));
     }
 
     // Keep only referenced vertices, in their original order.
@@ -800,10 +806,14 @@ fn finish(name: String, raw: RawMesh, origin: &Path) -> Result<Mesh> {
 
     // Rounded to f32 before deriving tangents, so a mesh and its OBJ round trip (which
     // stores f32 normals) get bit-identical tangents.
-    let normals: Vec<DVec3> = vertex_normals(&positions, &given_normals, &indices, origin)
-        .into_iter()
-        .map(|n| v3(f3(n)))
-        .collect();
+    let (normals, replaced) = vertex_normals(&positions, &given_normals, &indices);
+    if replaced > 0 {
+        repairs.push(format!(
+            "{}: {replaced} zero-length normal(s) replaced by smooth normals",
+            origin.display()
+        ));
+    }
+    let normals: Vec<DVec3> = normals.into_iter().map(|n| v3(f3(n))).collect();
     let tangents = vertex_tangents(&positions, &normals, &uvs, &indices);
 
     let vertices = (0..nverts)
@@ -818,17 +828,18 @@ fn finish(name: String, raw: RawMesh, origin: &Path) -> Result<Mesh> {
         vertices,
         indices,
         name,
+        repairs,
     })
 }
 
 /// Unit normals: the given ones where they are non-zero, else area-weighted smooth normals
 /// averaged over every vertex at the same position (so UV seams do not show as creases).
+/// Also returns how many given normals had zero length and were replaced.
 fn vertex_normals(
     positions: &[DVec3],
     given: &[Option<[f32; 3]>],
     indices: &[u32],
-    origin: &Path,
-) -> Vec<DVec3> {
+) -> (Vec<DVec3>, usize) {
     let n = positions.len();
     let mut group_of = vec![0usize; n];
     let mut groups: HashMap<[u32; 3], usize> = HashMap::new();
@@ -871,13 +882,7 @@ fn vertex_normals(
                 .unwrap_or(DVec3::Z)
         })
         .collect();
-    if replaced > 0 {
-        eprintln!(
-            "warning: {}: {replaced} zero-length normal(s) replaced by smooth normals",
-            origin.display()
-        );
-    }
-    normals
+    (normals, replaced)
 }
 
 /// Tangents `[x, y, z, w]` per vertex (module docs): area-weighted unit `∂P/∂u` and `∂P/∂v`
@@ -1045,6 +1050,19 @@ mod tests {
         let d = std::env::temp_dir().join(format!("diffract-mesh-{tag}-{}", std::process::id()));
         std::fs::create_dir_all(&d).unwrap();
         d
+    }
+
+    #[test]
+    fn repairs_are_listed_for_the_command_to_report() {
+        // A zero-area triangle (1, 2, 4 are collinear) and a zero-length given normal.
+        let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 2 0 0\nvn 0 0 1\nvn 0 0 0\n\
+                   f 1//1 2//2 3//1\nf 1//1 2//1 4//1\n";
+        let m = Mesh::from_obj_str(obj, Path::new("bad.obj")).unwrap();
+        assert_eq!(m.triangle_count(), 1);
+        assert_eq!(m.repairs.len(), 2, "{:?}", m.repairs);
+        assert!(m.repairs[0].contains("dropped 1 of 2 triangles with zero area"));
+        assert!(m.repairs[1].contains("1 zero-length normal(s) replaced"));
+        assert!(Mesh::builtin("snake").unwrap().repairs.is_empty());
     }
 
     fn check_frames(m: &Mesh) {

@@ -353,7 +353,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
             renderer.set_leave_out(false);
             let prepared = reference
                 .material(&setup.base)
-                .prepare(setup.cache_dir.as_deref())?;
+                .prepare(setup.cache_dir.as_deref(), &crate::report::Stderr)?;
             renderer.set_variant(VariantKind::Flss);
             renderer.set_storage_format(StorageFormat::Rg32f);
             renderer.set_per_vertex(false);
@@ -374,7 +374,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
     for variant in &setup.variants {
         progress.set_message(format!("profile: {}", variant.name));
         let material = variant.material(&setup.base);
-        let prepared = material.prepare(setup.cache_dir.as_deref())?;
+        let prepared = material.prepare(setup.cache_dir.as_deref(), &crate::report::Stderr)?;
         renderer.set_variant(variant.kind);
         renderer.set_storage_format(variant.storage);
         renderer.set_table_options(variant.table);

@@ -385,7 +385,7 @@ fn model_cell(
     lambda: f64,
     shading: &crate::brdf::Shading,
 ) -> Result<CellResult> {
-    let p = m.prepare_planned(hf.clone(), plan.clone(), None)?;
+    let p = m.prepare_planned(hf.clone(), plan.clone(), None, &crate::report::Stderr)?;
     let dirs = probes(theta_i, lambda, spec.period_um);
     let t = p.terms();
     let (e, worst) = max_error(
@@ -409,7 +409,7 @@ fn gpu_cell(
     lambda: f64,
     shading: &crate::brdf::Shading,
 ) -> Result<CellResult> {
-    let p = m.prepare_planned(hf.clone(), plan.clone(), None)?;
+    let p = m.prepare_planned(hf.clone(), plan.clone(), None, &crate::report::Stderr)?;
     let pixels = gpu_spectral_map(renderer, &p, theta_i, spec.map_size, lambda)?;
     // What the shader saw: ωi and λ rounded to float32.
     let wi32 = direction(theta_i, 0.0).map(|c| c as f32 as f64);

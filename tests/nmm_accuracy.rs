@@ -81,7 +81,7 @@ fn prepared(heightfield: String) -> PreparedMaterial {
         heightfield,
         ..Material::default()
     }
-    .prepare(None)
+    .prepare(None, &diffract::report::Stderr)
     .unwrap()
 }
 

@@ -351,7 +351,7 @@ fn grating_equation_experiment_recovers_the_blazed_period() {
         window_radius: 3,
         ..Default::default()
     };
-    let p = material.prepare(None).unwrap();
+    let p = material.prepare(None, &diffract::report::Stderr).unwrap();
     let r =
         diffract::eval::grating_equation(&p, 75.0, 0.0, &[400.0, 480.0, 560.0, 640.0, 700.0], 0.01)
             .unwrap();

@@ -46,7 +46,7 @@ fn pq_matches_flss_at_1nm_on_a_grating_whose_period_divides_the_patch() {
         lambda_step_nm: 1,
         ..Material::default()
     };
-    let p = material.prepare(None).unwrap();
+    let p = material.prepare(None, &diffract::report::Stderr).unwrap();
     let t = p.terms();
     let g = pq::estimate_periodicity(&p.heightfield, material.coherence_um).unwrap();
     assert_eq!(g.axes[0].copies_in_patch, 40);

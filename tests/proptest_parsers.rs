@@ -46,7 +46,7 @@ fn valid_cache() -> (Vec<u8>, u64) {
         full_band: false,
     };
     let d = dir().join("cache");
-    let stack = cache::terms_cached(&hf, &req, Some(&d)).unwrap();
+    let stack = cache::terms_cached(&hf, &req, Some(&d), &diffract::report::Stderr).unwrap();
     let key = cache::cache_key(&hf, &req);
     let p = d.join(format!("terms-{key:016x}.bin"));
     assert!(cache::load(&p, key).is_ok());

@@ -58,7 +58,7 @@ fn why_tall_taylor_default_now_switches_to_chebyshev_and_is_right() {
     // sinusoid gave 37498 where the reference gives 0.0054.
     for src in ["builtin:sinusoidal", "builtin:elaphe"] {
         let m = material(src, Some(2.0), Expansion::Taylor, Terms::Auto);
-        let p = m.prepare(None).unwrap();
+        let p = m.prepare(None, &diffract::report::Stderr).unwrap();
         assert_eq!(p.plan.expansion, Expansion::Chebyshev, "{src}");
         assert_eq!(p.stack.expansion, Expansion::Chebyshev);
         assert!(
@@ -120,7 +120,10 @@ fn why_chebyshev_at_5_um_is_refused_with_the_limit_and_what_to_change() {
         Expansion::Chebyshev,
         Terms::Auto,
     );
-    let e = m.prepare(None).unwrap_err().to_string();
+    let e = m
+        .prepare(None, &diffract::report::Stderr)
+        .unwrap_err()
+        .to_string();
     assert!(!e.contains('\n'), "{e}");
     for want in ["64 terms", "peak-to-valley", "tolerance"] {
         assert!(e.contains(want), "`{e}` lacks `{want}`");
@@ -170,7 +173,10 @@ fn why_overflowing_inputs_are_rejected_with_one_line() {
         terms: Terms::Fixed(20),
         ..Material::default()
     };
-    one_line(tall.prepare(None).unwrap_err(), "overflows float32");
+    one_line(
+        tall.prepare(None, &diffract::report::Stderr).unwrap_err(),
+        "overflows float32",
+    );
 }
 
 #[test]
@@ -190,7 +196,9 @@ fn why_smallest_pixel_size_gives_zero_off_specular_in_model_and_reference() {
         .to_string();
     assert!(e.contains("larger patch"), "{e}");
     let plan = m.plan(&hf, &Reach::ALL, Precision::F64).unwrap();
-    let p = m.prepare_planned(hf.clone(), plan, None).unwrap();
+    let p = m
+        .prepare_planned(hf.clone(), plan, None, &diffract::report::Stderr)
+        .unwrap();
     let wi = direction(30.0, 0.0);
     for t in [0.0, 10.0, 50.0] {
         let wr = direction(t, 180.0);
@@ -252,7 +260,9 @@ fn why_grazing_limit_is_continuous_at_exactly_90_degrees() {
         ..Material::default()
     };
     let plan = m.plan(&hf, &Reach::ALL, Precision::F32).unwrap();
-    let p = m.prepare_planned(hf.clone(), plan, None).unwrap();
+    let p = m
+        .prepare_planned(hf.clone(), plan, None, &diffract::report::Stderr)
+        .unwrap();
     let (wi, wr) = (direction(90.0, 0.0), direction(90.0, 180.0));
     let a = model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, 500.0);
     let b = reference::rho(&hf, m.coherence_um, &p.shading, wi, wr, 500.0);
@@ -322,7 +332,9 @@ fn why_grating_experiment_finds_the_ridge_period_on_a_non_tiling_crop_in_x_and_y
         let hf = crop(&full, 99, seam, transpose);
         let crop_nm = 99.0 * hf.dh_um() * 1e3;
         let plan = m.plan(&hf, &Reach::brdf_map(75.0), Precision::F64).unwrap();
-        let p = m.prepare_planned(hf, plan, None).unwrap();
+        let p = m
+            .prepare_planned(hf, plan, None, &diffract::report::Stderr)
+            .unwrap();
         let r = diffract::eval::grating_equation(
             &p,
             75.0,
@@ -538,7 +550,9 @@ fn grating_experiment_finds_the_ridge_period_on_whole_and_fractional_crops() {
             );
             assert!(diffract::eval::ridge_period_um(&hf, 30.0).is_none());
             let plan = m.plan(&hf, &Reach::brdf_map(75.0), Precision::F64).unwrap();
-            let p = m.prepare_planned(hf, plan, None).unwrap();
+            let p = m
+                .prepare_planned(hf, plan, None, &diffract::report::Stderr)
+                .unwrap();
             let r = diffract::eval::grating_equation(&p, 75.0, 0.0, &[450.0, 550.0, 650.0], 0.02)
                 .unwrap();
             println!(

@@ -217,7 +217,7 @@ fn nmm_matches_flss_at_1nm_on_a_grating_and_needs_its_jacobian() {
         lambda_step_nm: 1,
         ..Material::default()
     };
-    let p = material.prepare(None).unwrap();
+    let p = material.prepare(None, &diffract::report::Stderr).unwrap();
     let t = p.terms();
     let g = nmm::estimate_grating(&p.heightfield).unwrap();
     let d = g.period_um[0].unwrap();

@@ -972,9 +972,11 @@ fn material_edit_rebuilds_in_the_background_while_frames_go_on() {
         .and_then(|hf| hf.scaled(MATERIAL_STEP))
         .expect("scaled field");
     let plan = m
-        .plan_loaded(&hf, &Reach::ALL, Precision::F32)
+        .plan_loaded(&hf, &Reach::ALL, Precision::F32, &diffract::report::Stderr)
         .expect("plan");
-    let taller = m.prepare_planned(hf, plan, None).expect("taller material");
+    let taller = m
+        .prepare_planned(hf, plan, None, &diffract::report::Stderr)
+        .expect("taller material");
     let Some(mut r) = renderer() else { return };
     r.set_variant(VariantKind::Default.resolve());
     r.set_leave_out(true);

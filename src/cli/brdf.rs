@@ -56,7 +56,7 @@ pub fn run(args: &BrdfArgs) -> Result<()> {
         }
         Method::Model => {
             let cache = args.cache.dir();
-            let p = material.prepare(cache.as_deref())?;
+            let p = material.prepare(cache.as_deref(), &crate::report::Stderr)?;
             let t = p.terms();
             answer_all(
                 &queries,

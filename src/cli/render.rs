@@ -79,12 +79,16 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     // fails first. The terms are computed only if the variant reads them: a table variant
     // builds from the height field.
     let material = args.material.apply(scene.material.clone());
-    let (heightfield, plan) = material.load_planned(&Reach::ALL, Precision::F32)?;
+    let (heightfield, plan) =
+        material.load_planned(&Reach::ALL, Precision::F32, &crate::report::Stderr)?;
     let inputs = if args.brdf_map {
         None
     } else {
         Some(SceneInputs::load(&scene, true)?)
     };
+    for line in inputs.iter().flat_map(|i| &i.mesh.repairs) {
+        crate::report::Report::warn(&crate::report::Stderr, line);
+    }
     if spectral_default {
         eprintln!(
             "note: one wavelength (--lambda-nm) is drawn by flss; the default {} integrates the spectrum offline",

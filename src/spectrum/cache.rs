@@ -632,10 +632,15 @@ fn round_to_f32(stack: &mut TermStack) {
 /// The terms of `hf` for `req`, through the cache in `dir` when one is given: a valid file
 /// `terms-{key:016x}.bin` is loaded (and marked as used); a missing one is computed,
 /// rounded to float32 and written, after which the least recently used files are evicted
-/// to keep the directory under [`cache_max_bytes`]; a corrupt or stale one is reported on
-/// stderr in one line, recomputed and overwritten. Failing to write the cache only warns:
+/// to keep the directory under [`cache_max_bytes`]; a corrupt or stale one is a one-line
+/// warning to `report`, recomputed and overwritten. Failing to write the cache only warns:
 /// the terms are still correct.
-pub fn terms_cached(hf: &HeightField, req: &TermRequest, dir: Option<&Path>) -> Result<TermStack> {
+pub fn terms_cached(
+    hf: &HeightField,
+    req: &TermRequest,
+    dir: Option<&Path>,
+    report: &dyn crate::report::Report,
+) -> Result<TermStack> {
     req.validate()?;
     check_memory(hf, req)?;
     let Some(dir) = dir else {
@@ -654,12 +659,12 @@ pub fn terms_cached(hf: &HeightField, req: &TermRequest, dir: Option<&Path>) -> 
                 .and_then(|f| f.set_modified(SystemTime::now()));
             return Ok(stack);
         }
-        Ok(_) => eprintln!(
-            "warning: term cache {}: contents do not match the request; recomputing",
+        Ok(_) => report.warn(&format!(
+            "term cache {}: contents do not match the request; recomputing",
             path.display()
-        ),
+        )),
         Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => eprintln!("warning: {e}; recomputing"),
+        Err(e) => report.warn(&format!("{e}; recomputing")),
     }
     let mut stack = super::compute_terms(hf, req)?;
     round_to_f32(&mut stack);
@@ -667,12 +672,12 @@ pub fn terms_cached(hf: &HeightField, req: &TermRequest, dir: Option<&Path>) -> 
     let bytes = file_len(stack.term_count(), band.width * band.height, Precision::F32)
         .unwrap_or(usize::MAX) as u64;
     if bytes > max {
-        eprintln!(
-            "warning: the terms take {} MiB, more than the cache cap of {} MiB \
+        report.warn(&format!(
+            "the terms take {} MiB, more than the cache cap of {} MiB \
              (DIFFRACT_CACHE_MAX); not cached",
             bytes >> 20,
             max >> 20
-        );
+        ));
         return Ok(stack);
     }
     let saved = std::fs::create_dir_all(dir)
@@ -680,7 +685,7 @@ pub fn terms_cached(hf: &HeightField, req: &TermRequest, dir: Option<&Path>) -> 
         .and_then(|()| save(&path, &stack, key, Precision::F32))
         .and_then(|()| evict(dir, max, Some(&path)));
     if let Err(e) = saved {
-        eprintln!("warning: could not write the term cache: {e}");
+        report.warn(&format!("could not write the term cache: {e}"));
     }
     Ok(stack)
 }
@@ -1007,7 +1012,7 @@ mod tests {
         let exact = super::super::compute_terms(&hf, &req).unwrap();
         let mut direct = exact.clone();
         round_to_f32(&mut direct);
-        let first = terms_cached(&hf, &req, Some(&dir)).unwrap();
+        let first = terms_cached(&hf, &req, Some(&dir), &crate::report::Stderr).unwrap();
         assert_eq!(first, direct);
         let file = dir.join(format!("terms-{:016x}.bin", cache_key(&hf, &req)));
         assert_eq!(load(&file, cache_key(&hf, &req)).unwrap(), direct);
@@ -1015,15 +1020,24 @@ mod tests {
         let mut b = std::fs::read(&file).unwrap();
         b[HEADER_LEN + 3] ^= 0xff;
         std::fs::write(&file, &b).unwrap();
-        assert_eq!(terms_cached(&hf, &req, Some(&dir)).unwrap(), direct);
+        let said = crate::report::Collect::default();
+        assert_eq!(terms_cached(&hf, &req, Some(&dir), &said).unwrap(), direct);
+        let warned = said.warnings();
+        assert!(
+            warned.len() == 1 && warned[0].ends_with("recomputing"),
+            "one warning for the corrupt file: {warned:?}"
+        );
         assert_eq!(load(&file, cache_key(&hf, &req)).unwrap(), direct);
         // A different request gets its own file.
         let other = request(1);
-        let second = terms_cached(&hf, &other, Some(&dir)).unwrap();
+        let second = terms_cached(&hf, &other, Some(&dir), &crate::report::Stderr).unwrap();
         assert_eq!(second.term_count(), 2);
         assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 2);
         // Without a directory nothing is written, and the terms keep f64.
-        assert_eq!(terms_cached(&hf, &req, None).unwrap(), exact);
+        assert_eq!(
+            terms_cached(&hf, &req, None, &crate::report::Stderr).unwrap(),
+            exact
+        );
         let _ = std::fs::remove_dir_all(&dir);
     }
 

@@ -77,7 +77,10 @@ pub(super) fn run(scene: Scene, settings: Settings) -> Result<()> {
     event_loop.set_control_flow(ControlFlow::Poll);
     // The DFT terms wait for a variant that reads them (`V` to flss, nmm or pq): the
     // table variants build from the height field.
-    let (heightfield, plan) = scene.material.load_planned(&Reach::ALL, Precision::F32)?;
+    let (heightfield, plan) =
+        scene
+            .material
+            .load_planned(&Reach::ALL, Precision::F32, &crate::report::Stderr)?;
     let loader = MaterialLoader::new(
         scene.material.clone(),
         settings.cache_dir.clone(),
@@ -286,6 +289,9 @@ impl Viewer {
         loader: MaterialLoader,
     ) -> Result<Self> {
         let mesh = scene.mesh.load()?;
+        for line in &mesh.repairs {
+            crate::report::Report::warn(&crate::report::Stderr, line);
+        }
         let out = &scene.output;
         let attrs = Window::default_attributes()
             .with_title("diffract")

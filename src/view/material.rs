@@ -160,6 +160,6 @@ fn load(
         0 => (*field).clone(),
         _ => field.scaled(edit.height_scale())?,
     };
-    let plan = material.plan_loaded(&hf, &Reach::ALL, Precision::F32)?;
+    let plan = material.plan_loaded(&hf, &Reach::ALL, Precision::F32, &crate::report::Stderr)?;
     material.prepare_planned_deferred(hf, plan, cache_dir.as_deref())
 }

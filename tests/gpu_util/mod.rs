@@ -91,7 +91,7 @@ pub fn small_material(
 }
 
 pub fn prepare(m: &Material) -> PreparedMaterial {
-    m.prepare(None)
+    m.prepare(None, &diffract::report::Stderr)
         .unwrap_or_else(|e| panic!("preparing {}: {e}", m.heightfield))
 }
 
@@ -248,6 +248,7 @@ pub fn as_render_defaults(r: &mut Renderer, material: &Material, cache: &str) ->
         .load_planned(
             &diffract::brdf::truncation::Reach::ALL,
             diffract::brdf::truncation::Precision::F32,
+            &diffract::report::Stderr,
         )
         .expect("default material");
     r.set_storage_format(args.gpu.storage);
@@ -260,7 +261,7 @@ pub fn as_render_defaults(r: &mut Renderer, material: &Material, cache: &str) ->
     std::fs::create_dir_all(&dir).unwrap();
     r.set_cache_dir(Some(dir.clone()));
     material
-        .prepare_planned(heightfield, plan, Some(&dir))
+        .prepare_planned(heightfield, plan, Some(&dir), &diffract::report::Stderr)
         .expect("prepare")
 }
 

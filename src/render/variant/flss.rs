@@ -118,7 +118,7 @@ impl Variant for Flss {
 pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<FlssGpu> {
     let start = Instant::now();
     let prepared = setup.prepared;
-    let stack = prepared.load_terms()?;
+    let stack = prepared.load_terms(setup.report)?;
     let (selection, wavelengths) =
         WavelengthsLeft::of(&prepared.colour, setup.lambda_tolerance(), "per pixel");
     // A single-wavelength map may ask for any λ; the scene's colour only for the kept ones.
