@@ -17,7 +17,7 @@ use crate::brdf::{direction, model, reference};
 use crate::cli::cache::CacheArgs;
 use crate::cli::gpu::TableArgs;
 use crate::cli::material::MaterialArgs;
-use crate::colour::{delta_e2000, xyz_to_lab, ColourTable};
+use crate::colour::{delta_e2000, linear_srgb_to_xyz, xyz_to_lab, ColourTable};
 use crate::gpu::StorageFormat;
 use crate::material::Material;
 use crate::render::variant::{Family, Preset};
@@ -146,15 +146,6 @@ pub struct ErrorStats {
     /// Median and 99th percentile of the same CIEDE2000 values.
     pub p50_de: f64,
     pub p99_de: f64,
-}
-
-/// Linear sRGB → CIE XYZ (the inverse of MODEL §5's matrix, IEC 61966-2-1).
-fn linear_srgb_to_xyz(c: [f64; 3]) -> [f64; 3] {
-    [
-        0.4124 * c[0] + 0.3576 * c[1] + 0.1805 * c[2],
-        0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2],
-        0.0193 * c[0] + 0.1192 * c[1] + 0.9505 * c[2],
-    ]
 }
 
 /// Compares `xyz` with `reference` sample by sample.
