@@ -157,9 +157,12 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
             .map_err(plot_error)?
             .label("Pareto front")
             .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-        for p in points {
+        let at: Vec<(f64, f64)> = points
+            .iter()
+            .map(|p| (clamp(p.time_ms, t0), clamp(p.error, e0)))
+            .collect();
+        for (p, &at) in points.iter().zip(&at) {
             let on_front = front.iter().any(|f| std::ptr::eq(*f, p));
-            let at = (clamp(p.time_ms, t0), clamp(p.error, e0));
             let style = if on_front {
                 RED.filled()
             } else {
@@ -168,15 +171,41 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
             chart
                 .draw_series(std::iter::once(Circle::new(at, 5, style)))
                 .map_err(plot_error)?;
-            chart
-                .draw_series(std::iter::once(
-                    EmptyElement::at(at)
-                        + Text::new(p.label.clone(), (8, -18), ("sans-serif", 14).into_font()),
-                ))
+        }
+        // Labels where they overlap neither another label nor a point; one moved away from
+        // its point is joined to it by a thin grey line.
+        let font = ("sans-serif", 14).into_font();
+        let style = TextStyle::from(font.clone());
+        let marks: Vec<(i32, i32)> = at.iter().map(|a| chart.backend_coord(a)).collect();
+        let sizes = points
+            .iter()
+            .map(|p| {
+                root.estimate_text_size(&p.label, &style)
+                    .map_err(plot_error)
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let (xr, yr) = chart.plotting_area().get_pixel_range();
+        let placed = place_labels(&marks, &sizes, [xr.start, yr.start, xr.end, yr.end]);
+        for ((p, &mark), (&corner, &size)) in
+            points.iter().zip(&marks).zip(placed.iter().zip(&sizes))
+        {
+            if p.label.is_empty() {
+                continue;
+            }
+            let near = nearest_on_box(mark, corner, size);
+            let (dx, dy) = (near.0 - mark.0, near.1 - mark.1);
+            if dx * dx + dy * dy > 12 * 12 {
+                root.draw(&PathElement::new(vec![mark, near], RGBColor(140, 140, 140)))
+                    .map_err(plot_error)?;
+            }
+            root.draw(&Text::new(p.label.clone(), corner, font.clone()))
                 .map_err(plot_error)?;
         }
+        // The legend goes to the lower left, fast and accurate: that corner holds points only
+        // where one variant is about the fastest and the most accurate at once.
         chart
             .configure_series_labels()
+            .position(SeriesLabelPosition::LowerLeft)
             .border_style(BLACK)
             .background_style(WHITE.mix(0.8))
             .label_font(("sans-serif", 15))
@@ -185,6 +214,81 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
         root.present().map_err(plot_error)?;
     }
     write_png(path, &buf, width, height)
+}
+
+/// Top-left corners (pixels) for labels of `sizes` beside the marks at `marks`, inside
+/// `area` (`[x0, y0, x1, y1]`): each label takes the first of its candidate places, nearest
+/// first, that overlaps no label already placed and no mark (a disc of 6 pixels); where
+/// none is free, the candidate with the least overlap. Labels are placed in order of their
+/// marks from left to right, so a crowded cluster fans out from its left.
+pub fn place_labels(marks: &[(i32, i32)], sizes: &[(u32, u32)], area: [i32; 4]) -> Vec<(i32, i32)> {
+    const MARK: i32 = 6;
+    const GAP: i32 = 4;
+    let overlap = |a: [i32; 4], b: [i32; 4]| -> i64 {
+        let w = (a[2].min(b[2]) - a[0].max(b[0])).max(0) as i64;
+        let h = (a[3].min(b[3]) - a[1].max(b[1])).max(0) as i64;
+        w * h
+    };
+    let mut order: Vec<usize> = (0..marks.len()).collect();
+    order.sort_by_key(|&i| (marks[i].0, marks[i].1));
+    let mut boxes: Vec<[i32; 4]> = Vec::with_capacity(marks.len());
+    let mut corners = vec![(0, 0); marks.len()];
+    for i in order {
+        let (mx, my) = marks[i];
+        let (w, h) = (sizes[i].0 as i32, sizes[i].1 as i32);
+        let mut candidates = vec![
+            (mx + 8, my - h - 2),
+            (mx + 8, my + 2),
+            (mx - w - 8, my - h - 2),
+            (mx - w - 8, my + 2),
+            (mx - w / 2, my - h - 8),
+            (mx - w / 2, my + 8),
+        ];
+        // Farther out: stacked above and below, then to the sides.
+        for k in 1..=8 {
+            let step = k * (h + GAP);
+            candidates.push((mx + 8, my - h - 2 - step));
+            candidates.push((mx + 8, my + 2 + step));
+            candidates.push((mx - w - 8, my - h - 2 - step));
+            candidates.push((mx - w - 8, my + 2 + step));
+        }
+        let cost = |&(x, y): &(i32, i32)| -> i64 {
+            let b = [x, y, x + w, y + h];
+            let outside = (area[0] - b[0]).max(0)
+                + (b[2] - area[2]).max(0)
+                + (area[1] - b[1]).max(0)
+                + (b[3] - area[3]).max(0);
+            let padded = [
+                b[0] - GAP / 2,
+                b[1] - GAP / 2,
+                b[2] + GAP / 2,
+                b[3] + GAP / 2,
+            ];
+            let labels: i64 = boxes.iter().map(|&o| overlap(padded, o)).sum();
+            let dots: i64 = marks
+                .iter()
+                .map(|&(x, y)| overlap(b, [x - MARK, y - MARK, x + MARK, y + MARK]))
+                .sum();
+            labels + dots + 1000 * outside as i64
+        };
+        let best = candidates
+            .iter()
+            .find(|c| cost(c) == 0)
+            .or_else(|| candidates.iter().min_by_key(|c| cost(c)))
+            .copied()
+            .unwrap_or((mx + 8, my - h - 2));
+        boxes.push([best.0, best.1, best.0 + w, best.1 + h]);
+        corners[i] = best;
+    }
+    corners
+}
+
+/// The point of the box at `corner` with `size` nearest to `p`.
+fn nearest_on_box(p: (i32, i32), corner: (i32, i32), size: (u32, u32)) -> (i32, i32) {
+    (
+        p.0.clamp(corner.0, corner.0 + size.0 as i32),
+        p.1.clamp(corner.1, corner.1 + size.1 as i32),
+    )
 }
 
 /// Labels along one axis of a heat map, in data coordinates.
@@ -724,6 +828,52 @@ mod tests {
         f.sort_unstable();
         // (3, 0.7) is beaten by (2, 0.5); the duplicate (2, 0.5) points beat neither other.
         assert_eq!(f, vec![0, 1, 3, 4]);
+    }
+
+    #[test]
+    fn labels_of_a_crowded_cluster_do_not_overlap() {
+        // Five marks within a few pixels of each other (as equal timings give), two apart.
+        let marks = [
+            (500, 300),
+            (503, 301),
+            (506, 300),
+            (509, 302),
+            (700, 300),
+            (200, 100),
+            (502, 299),
+        ];
+        let sizes = [
+            (120, 14),
+            (150, 14),
+            (90, 14),
+            (130, 14),
+            (80, 14),
+            (60, 14),
+            (100, 14),
+        ];
+        let area = [100, 50, 950, 650];
+        let corners = place_labels(&marks, &sizes, area);
+        let boxes: Vec<[i32; 4]> = corners
+            .iter()
+            .zip(&sizes)
+            .map(|(&(x, y), &(w, h))| [x, y, x + w as i32, y + h as i32])
+            .collect();
+        for (i, a) in boxes.iter().enumerate() {
+            assert!(
+                a[0] >= area[0] && a[1] >= area[1] && a[2] <= area[2] && a[3] <= area[3],
+                "{a:?} outside"
+            );
+            for b in &boxes[i + 1..] {
+                let apart = a[2] <= b[0] || b[2] <= a[0] || a[3] <= b[1] || b[3] <= a[1];
+                assert!(apart, "labels {a:?} and {b:?} overlap");
+            }
+            for &(x, y) in &marks {
+                let clear = a[2] <= x - 6 || x + 6 <= a[0] || a[3] <= y - 6 || y + 6 <= a[1];
+                assert!(clear, "label {a:?} covers the mark at ({x}, {y})");
+            }
+        }
+        // A lone mark keeps its label next to it: up and to the right.
+        assert_eq!(corners[5], (208, 100 - 14 - 2));
     }
 }
 
