@@ -33,7 +33,6 @@ const int LAMBDA_MIN_NM = 380;
 const int LAMBDA_MAX_NM = 780;
 // Samples of the trapezoid rule over [380, 780] nm (MODEL §5). Binding 2 may hold fewer:
 // the renderer leaves out wavelengths whose weight cannot matter (loop over its length).
-const int LAMBDA_COUNT = (LAMBDA_MAX_NM - LAMBDA_MIN_NM) / LAMBDA_STEP_NM + 1;
 // Capacity of the per-term decode table; Material::validate caps T at 64.
 const int MAX_TERMS = 65;
 // Capacity of the light's disc directions; light::MAX_DISK_SAMPLES on the CPU.

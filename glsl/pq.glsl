@@ -127,7 +127,9 @@ vec3 diffractionXyz(vec3 wi, vec3 wr) {
     }
     vec3 uvw = -wi - wr;
     vec3 xyz = vec3(0.0);
-    for (int j = 0; j < LAMBDA_COUNT; ++j) {
+    // The colour table holds the wavelengths the variant keeps (leaving out drops the rest).
+    int lambdaCount = colourWeights.length();
+    for (int j = 0; j < lambdaCount; ++j) {
         vec4 xyzWeights = getColorWeights(j);
         xyz += pqPower(uvw, xyzWeights.w * 1e-3) * xyzWeights.xyz;
     }

@@ -161,6 +161,13 @@ fn nmm_map_left_out_equals_keep_all_within_the_bound() {
     map_both_ways(VariantKind::Nmm, "builtin:blazed", 30.0, None);
 }
 
+/// pq loops over the colour table the variant keeps: it once looped over every wavelength of
+/// the step, read past the kept ones and drew a black map whenever leaving out was on.
+#[test]
+fn pq_map_left_out_equals_keep_all_within_the_bound() {
+    map_both_ways(VariantKind::Pq, "builtin:blazed", 30.0, None);
+}
+
 #[test]
 fn table_built_from_fewer_wavelengths_equals_keep_all_within_the_bound() {
     let table = TableOptions {

@@ -185,4 +185,13 @@ impl PreparedVariant for PqGpu {
     fn periodicity(&self) -> Option<Periodicity> {
         Some(self.pq)
     }
+
+    /// FLSS's record, with the memory of pq's own uniform block (as its stats count it).
+    fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
+        let mut left = self.flss.left_out()?;
+        let ubo = std::mem::size_of::<PqInfoUbo>();
+        left.gpu_bytes += ubo;
+        left.gpu_bytes_keep_all += ubo;
+        Some(left)
+    }
 }
