@@ -860,8 +860,20 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         crate::fsutil::write_atomic(path, format_csv(&reports).as_bytes())?;
     }
     if let Some(path) = &args.plot {
+        // A dark reference's relative errors are noise: such rows are not plotted, and a
+        // map that is dark for every row gives no plot at all.
+        if reports.iter().all(|r| r.reference_dark) {
+            return Err(Error::invalid(
+                "plot",
+                format!(
+                    "the reference map is dark (every sample below the tolerance), so its relative errors are noise and {} is not written; lobes narrower than a pixel are missed by a small map: try a larger or odd --size (an odd map's middle row lies in the plane of incidence)",
+                    path.display()
+                ),
+            ));
+        }
         let mut points: Vec<crate::plot::Point> = reports
             .iter()
+            .filter(|r| !r.reference_dark)
             .filter_map(|r| {
                 r.gpu_ms.map(|t| crate::plot::Point {
                     label: r.variant.name.clone(),

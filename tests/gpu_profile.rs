@@ -128,3 +128,49 @@ fn by_name<'a>(
         .find(|r| r.variant.name == name)
         .unwrap_or_else(|| panic!("no variant {name}"))
 }
+
+/// A map too small to meet the blazed grating's lobes is dark: `profile` says so in its
+/// table and CSV, and refuses to plot ratios of noise (one error line, non-zero exit, no
+/// plot file); the CSV it wrote before stays.
+#[test]
+fn a_dark_map_is_not_plotted() {
+    let dir = std::env::temp_dir().join(format!("diffract-profile-dark-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let (csv, png) = (dir.join("p.csv"), dir.join("p.png"));
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+        .args(["profile", "--heightfield", "builtin:blazed", "--size", "8"])
+        .args(["--only", "taylor R=2", "--pixels", "4", "--brightest", "4"])
+        .args(["--frames", "1", "--mesh-size", "0", "--no-cache"])
+        .arg("--csv")
+        .arg(&csv)
+        .arg("--plot")
+        .arg(&png)
+        .env("DIFFRACT_VALIDATION", "1")
+        .output()
+        .expect("run diffract");
+    if gpu_util::binary_found_no_vulkan(&o) {
+        return;
+    }
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(
+        !o.status.success(),
+        "a dark map's plot must be refused: {err}"
+    );
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "{err}");
+    assert!(
+        errors[0].contains("the reference map is dark") && errors[0].contains("odd --size"),
+        "{err}"
+    );
+    assert!(!png.exists(), "no plot of noise");
+    let table = std::fs::read_to_string(&csv).expect("the CSV is written before the plot");
+    let mut lines = table.lines();
+    let header: Vec<&str> = lines.next().expect("a header").split(',').collect();
+    let row: Vec<&str> = lines.next().expect("one row").split(',').collect();
+    let dark = header.iter().position(|h| *h == "reference_dark").unwrap();
+    assert_eq!(
+        row[dark], "true",
+        "the row says the reference is dark: {row:?}"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
