@@ -37,8 +37,8 @@ registry=(
     "closeup_scales|slow|default scene through a 10° lens, 384² (~3-8 min)"
     "default_snake|slow|flat-scales example scene, 512² (table build, ~2-5 min)"
     "profile_elaphe|slow|profiler: error against GPU time, Elaphe-like, 128² (~30-60 min)"
-    "profile_blazed_pq|slow|profiler: PQ and NMM against FLSS, blazed, 64² (~5-10 min)"
-    "profile_blazed|slow|profiler CSV: FLSS and chebyshev-w, blazed, 64² (~5 min)"
+    "profile_blazed_pq|slow|profiler: PQ and NMM against FLSS, blazed, 65² (~5-10 min)"
+    "profile_blazed|slow|profiler CSV: FLSS and chebyshev-w, blazed, 65² (~5 min)"
     "profile_per_vertex_q1|slow|profiler CSV: per vertex, default scene mesh, 1 quad a scale (~10 min)"
     "profile_per_vertex_q6|slow|profiler CSV: per vertex, default scene mesh, 6 quads a scale (~10 min)"
 )
@@ -184,12 +184,12 @@ make_figure() {
             profile "$name" plot --heightfield assets/elaphe.png --size 128 --pixels 1024 \
                 --brightest 64 --frames 5 --mesh-size 128 ;;
         profile_blazed_pq)
-            profile "$name" plot --heightfield builtin:blazed --size 64 --pixels 256 \
+            profile "$name" plot --heightfield builtin:blazed --size 65 --pixels 256 \
                 --brightest 32 --frames 3 --mesh-size 0 \
                 --only "taylor R=2,taylor R=2 1nm,nmm taylor R=2,pq taylor,pq taylor 1nm" ;;
         profile_blazed)
             profile "$name" csv --heightfield assets/blazed.png --only "taylor R=2,chebyshev-w" \
-                --size 64 --pixels 256 --brightest 32 --frames 3 --mesh-size 0 ;;
+                --size 65 --pixels 256 --brightest 32 --frames 3 --mesh-size 0 ;;
         profile_per_vertex_q1 | profile_per_vertex_q6)
             profile "$name" csv --heightfield builtin:elaphe-grown --only "taylor R=2" \
                 --size 16 --pixels 8 --brightest 8 --frames 1 --mesh-size 128 --per-vertex \
