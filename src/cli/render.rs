@@ -53,7 +53,15 @@ pub struct RenderArgs {
     /// Say what was left out in detail (which wavelengths, the texel band, the terms).
     #[arg(long)]
     pub verbose: bool,
+    /// Draw the picture N more times after the first and report the median GPU time of
+    /// those N draws: the first draw of a pipeline also pays for the driver's shader
+    /// compilation (lavapipe compiles fragment shaders at their first draw). 0: one draw.
+    #[arg(long, default_value_t = 0, value_name = "N")]
+    pub repeat: u32,
 }
+
+/// Most draws `--repeat` asks for.
+pub const MAX_REPEAT: u32 = 1000;
 
 /// Runs `diffract render`: renders, writes the image(s), prints one line with the device,
 /// GPU and wall time.
@@ -109,23 +117,39 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .is_spectral()
         .then(|| crate::progress::spinner("rendering"));
 
-    let (frame, what) = if let Some(inputs) = &inputs {
-        let frame = render_resolved(&mut renderer, &scene, inputs, &prepared, &args.out)?;
-        (frame, "scene".to_string())
-    } else {
-        let frame = renderer.render_brdf_map(
+    // A scene is written as its output file holds it: an EXR stays linear, a PNG is
+    // tone-mapped (Renderer::render_output).
+    let tone = !matches!(
+        crate::image_io::output_format(&args.out)?,
+        crate::image_io::OutputFormat::Exr
+    );
+    let draw = |renderer: &mut Renderer| match &inputs {
+        Some(inputs) => renderer.render_output(&scene, Some(inputs), &prepared, tone),
+        None => renderer.render_brdf_map(
             &prepared,
             args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I),
             args.phi_i.unwrap_or(0.0),
             args.size.unwrap_or(crate::render::DEFAULT_MAP_SIZE),
             args.lambda_nm,
-        )?;
+        ),
+    };
+    let mut frame = draw(&mut renderer)?;
+    let mut repeated = Vec::new();
+    for _ in 0..args.repeat {
+        repeated.extend(draw(&mut renderer)?.gpu_ms);
+    }
+    let timing = Timing::of(frame.gpu_ms, repeated);
+    frame.gpu_ms = timing.gpu_ms;
+    all_finite(&frame, &args.out)?;
+    let what = if inputs.is_some() {
+        crate::image_io::write_image(&args.out, frame.width, frame.height, &frame.rgb, 1.0)?;
+        "scene".to_string()
+    } else {
         write_map(args, &frame)?;
-        let what = match args.lambda_nm {
+        match args.lambda_nm {
             Some(l) => format!("BRDF map ρ at {l} nm"),
             None => "BRDF map (XYZ)".to_string(),
-        };
-        (frame, what)
+        }
     };
     drop(spin);
     let left = renderer.left_out();
@@ -144,7 +168,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         gpu_bytes: frame.variant.gpu_bytes,
         keep_all: args.keep_all,
     };
-    print_result(args, &scene, renderer.device_name(), &frame, &what);
+    print_result(args, &scene, renderer.device_name(), &frame, &what, &timing);
     let n = renderer.validation_messages();
     if n > 0 {
         return Err(Error::Validation(n));
@@ -162,10 +186,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
 /// The render's lines on stdout: where the table was built (table variants), then the
 /// device, what was drawn, the output, the variant, GPU and wall time, and the fetches a
 /// pixel costs.
-fn print_result(args: &RenderArgs, scene: &Scene, device: &str, frame: &Picture, what: &str) {
+fn print_result(
+    args: &RenderArgs,
+    scene: &Scene,
+    device: &str,
+    frame: &Picture,
+    what: &str,
+    timing: &Timing,
+) {
     let gpu = frame
         .gpu_ms
         .map_or("n/a".to_string(), |ms| format!("{ms:.2}"));
+    let gpu = match (timing.repeats, timing.first_ms) {
+        (0, _) => gpu,
+        (n, Some(first)) => format!("{gpu} (median of {n} draws after the first, {first:.2})"),
+        (n, None) => format!("{gpu} ({n} more draws)"),
+    };
     let written = match (args.brdf_map && args.png).then(|| args.out.with_extension("png")) {
         Some(png) => format!("{} + {}", args.out.display(), png.display()),
         None => args.out.display().to_string(),
@@ -249,23 +285,63 @@ fn write_map(args: &RenderArgs, frame: &Picture) -> Result<()> {
     }
 }
 
-/// Renders `scene` as the output file holds it ([`Renderer::render_output`]: an EXR stays
-/// linear, a PNG is tone-mapped) and writes `out`. The returned frame holds the written
-/// pixels.
-fn render_resolved(
-    renderer: &mut Renderer,
-    scene: &Scene,
-    inputs: &SceneInputs,
-    prepared: &crate::material::PreparedMaterial,
-    out_path: &std::path::Path,
-) -> Result<Picture> {
-    let tone = !matches!(
-        crate::image_io::output_format(out_path)?,
-        crate::image_io::OutputFormat::Exr
-    );
-    let frame = renderer.render_output(scene, Some(inputs), prepared, tone)?;
-    crate::image_io::write_image(out_path, frame.width, frame.height, &frame.rgb, 1.0)?;
-    Ok(frame)
+/// No variant's numbers are written unchecked: a pixel that is not a finite number is a
+/// fault of the draw, and then nothing is written to `out`.
+fn all_finite(frame: &Picture, out: &std::path::Path) -> Result<()> {
+    let bad = frame
+        .rgb
+        .iter()
+        .filter(|p| !p.iter().all(|c| c.is_finite()))
+        .count();
+    if bad == 0 {
+        return Ok(());
+    }
+    Err(Error::invalid(
+        "render",
+        format!(
+            "{bad} of {} pixels drawn by {} are not finite numbers; {} was not written",
+            frame.rgb.len(),
+            frame.variant.name,
+            out.display()
+        ),
+    ))
+}
+
+/// The GPU time `render` reports: the first draw's, or with `--repeat N` the median of the
+/// N draws after it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Timing {
+    /// The time reported (ms).
+    pub gpu_ms: Option<f64>,
+    /// The first draw's time (ms), when it is not the one reported.
+    pub first_ms: Option<f64>,
+    /// Draws after the first.
+    pub repeats: usize,
+}
+
+impl Timing {
+    /// From the first draw's GPU time and those of the draws after it (no timestamps: none).
+    pub fn of(first: Option<f64>, mut repeated: Vec<f64>) -> Self {
+        if repeated.is_empty() {
+            return Self {
+                gpu_ms: first,
+                first_ms: None,
+                repeats: 0,
+            };
+        }
+        repeated.sort_by(f64::total_cmp);
+        let n = repeated.len();
+        let median = if n % 2 == 1 {
+            repeated[n / 2]
+        } else {
+            0.5 * (repeated[n / 2 - 1] + repeated[n / 2])
+        };
+        Self {
+            gpu_ms: Some(median),
+            first_ms: first,
+            repeats: n,
+        }
+    }
 }
 
 /// Everything `diffract render` can check before the device and the precompute: flags that
@@ -336,6 +412,12 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
             }
         }
     }
+    if args.repeat > MAX_REPEAT {
+        return Err(Error::invalid(
+            "repeat",
+            format!("{}; expected 0..={MAX_REPEAT} draws", args.repeat),
+        ));
+    }
     args.gpu.table.check()?;
     let material = args.material.apply(scene.material.clone());
     material.validate()?;
@@ -357,4 +439,54 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{all_finite, Timing};
+    use crate::render::Picture;
+
+    #[test]
+    fn a_picture_with_a_non_finite_pixel_is_refused_before_writing() {
+        let mut frame = Picture {
+            width: 2,
+            height: 1,
+            rgb: vec![[0.5, 0.25, 0.0]; 2],
+            gpu_ms: None,
+            wall_ms: 0.0,
+            variant: Default::default(),
+        };
+        let out = std::path::Path::new("x.png");
+        assert!(all_finite(&frame, out).is_ok());
+        frame.rgb[1][2] = f32::NAN;
+        let e = all_finite(&frame, out).unwrap_err().to_string();
+        assert!(
+            e.contains("1 of 2 pixels") && e.contains("x.png was not written"),
+            "{e}"
+        );
+        frame.rgb[0][0] = f32::INFINITY;
+        assert!(all_finite(&frame, out)
+            .unwrap_err()
+            .to_string()
+            .contains("2 of 2"));
+    }
+
+    #[test]
+    fn repeated_draws_report_their_median_and_the_first_beside_it() {
+        let one = Timing::of(Some(9.0), vec![]);
+        assert_eq!(
+            (one.gpu_ms, one.first_ms, one.repeats),
+            (Some(9.0), None, 0)
+        );
+        let odd = Timing::of(Some(30.0), vec![5.0, 3.0, 4.0]);
+        assert_eq!(
+            (odd.gpu_ms, odd.first_ms, odd.repeats),
+            (Some(4.0), Some(30.0), 3)
+        );
+        let even = Timing::of(Some(30.0), vec![5.0, 3.0, 4.0, 8.0]);
+        assert_eq!(even.gpu_ms, Some(4.5));
+        // No timestamps on the queue: nothing to report, whatever was drawn.
+        let none = Timing::of(None, vec![]);
+        assert_eq!(none.gpu_ms, None);
+    }
 }

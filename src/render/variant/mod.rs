@@ -433,7 +433,7 @@ pub const CHEBYSHEV_W_TOLERANCE: f64 = 1e-4;
 pub const MIN_CHEBYSHEV_W_NODES: usize = 4;
 
 /// What a frame reports about the variant that drew it.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct VariantStats {
     /// Variant name and its main settings.
     pub name: String,
