@@ -61,3 +61,42 @@ fn a_table_that_fits_says_nothing() {
     assert_eq!(report.warnings(), Vec::<String>::new());
     assert_no_validation(&r);
 }
+
+/// `render --repeat N` draws N more times and reports their median GPU time beside the
+/// first draw's, on its one result line; the map it writes is the same picture.
+#[test]
+fn render_repeat_reports_the_median_of_the_draws_after_the_first() {
+    let dir = std::env::temp_dir().join(format!("diffract-repeat-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |out: &str, extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+            .args(["render", "--brdf-map", "--size", "8", "--variant", "flss"])
+            .args(["--heightfield", "builtin:sinusoidal", "--lambda-step-nm", "40"])
+            .arg("-o")
+            .arg(dir.join(out))
+            .args(extra)
+            .env("DIFFRACT_VALIDATION", "1")
+            .output()
+            .expect("run diffract")
+    };
+    let o = run("once.exr", &[]);
+    if binary_found_no_vulkan(&o) {
+        return;
+    }
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let once = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(!once.contains("median"), "{once}");
+    let o = run("again.exr", &["--repeat", "3"]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let again = String::from_utf8_lossy(&o.stdout).to_string();
+    assert!(
+        again.contains("(median of 3 draws after the first, "),
+        "the result line says what it timed: {again}"
+    );
+    assert_eq!(
+        std::fs::read(dir.join("once.exr")).unwrap(),
+        std::fs::read(dir.join("again.exr")).unwrap(),
+        "the same picture"
+    );
+    let _ = std::fs::remove_dir_all(dir);
+}
