@@ -29,12 +29,22 @@ void splineTaps(vec2 f, vec2 n, out vec2 p0, out vec2 p1, out vec2 g0, out vec2 
     p1 = (i + 2.5 + w3 / g1) / (n + 2.0);
 }
 
-vec3 coefficientAt(vec2 p0, vec2 p1, vec2 g0, vec2 g1, int j) {
-    float l = float(j);
-    return g0.y * (g0.x * texture(gCoefficients, vec3(p0.x, p0.y, l)).rgb
-                 + g1.x * texture(gCoefficients, vec3(p1.x, p0.y, l)).rgb)
-         + g1.y * (g0.x * texture(gCoefficients, vec3(p0.x, p1.y, l)).rgb
-                 + g1.x * texture(gCoefficients, vec3(p1.x, p1.y, l)).rgb);
+// The coefficient planes' XYZ are packed four values a texel over the layers: plane j's
+// X, Y, Z are values 3j, 3j + 1, 3j + 2 of the flat sequence (no unused alpha to fetch).
+const int PACKED_LAYERS = (3 * TABLE_TERMS + 3) / 4;
+
+vec4 layerAt(vec2 p0, vec2 p1, vec2 g0, vec2 g1, int layer) {
+    float l = float(layer);
+    return g0.y * (g0.x * texture(gCoefficients, vec3(p0.x, p0.y, l))
+                 + g1.x * texture(gCoefficients, vec3(p1.x, p0.y, l)))
+         + g1.y * (g0.x * texture(gCoefficients, vec3(p0.x, p1.y, l))
+                 + g1.x * texture(gCoefficients, vec3(p1.x, p1.y, l)));
+}
+
+vec3 coefficient(vec4 packed[PACKED_LAYERS], int j) {
+    int q = 3 * j;
+    return vec3(packed[q / 4][q % 4], packed[(q + 1) / 4][(q + 1) % 4],
+                packed[(q + 2) / 4][(q + 2) % 4]);
 }
 
 vec3 diffractionXyz(vec3 wi, vec3 wr) {
@@ -45,16 +55,20 @@ vec3 diffractionXyz(vec3 wi, vec3 wr) {
     }
     vec2 p0, p1, g0, g1;
     splineTaps(f.xy, tableInfo.nodes.xy, p0, p1, g0, g1);
+    vec4 packed[PACKED_LAYERS];
+    for (int l = 0; l < PACKED_LAYERS; ++l) {
+        packed[l] = layerAt(p0, p1, g0, g1, l);
+    }
     float x = 2.0 * f.z - 1.0;
     vec3 b1 = vec3(0.0);
     vec3 b2 = vec3(0.0);
     for (int j = TABLE_TERMS - 1; j >= 1; --j) {
-        vec3 b0 = coefficientAt(p0, p1, g0, g1, j) + 2.0 * x * b1 - b2;
+        vec3 b0 = coefficient(packed, j) + 2.0 * x * b1 - b2;
         b2 = b1;
         b1 = b0;
     }
     // G ≥ 0: the splines and the series in w may overshoot below zero; light cannot.
-    return gainC * max(coefficientAt(p0, p1, g0, g1, 0) + x * b1 - b2, vec3(0.0));
+    return gainC * max(coefficient(packed, 0) + x * b1 - b2, vec3(0.0));
 }
 
 #include "shade.glsl"

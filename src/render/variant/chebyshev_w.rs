@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use super::table::{prepare, Layout};
+use super::table::{packed_layers, prepare, Layout};
 use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant};
 use crate::brdf::table;
 use crate::gpu::Device;
@@ -18,7 +18,7 @@ impl Variant for ChebyshevW {
     }
 
     fn summary(&self) -> &'static str {
-        "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw in w, cubic B-spline in (u,v): 4K bilinear fetches"
+        "G = Σ_j c_j(u,v)·T_j(ŵ) from f64 tables, Clenshaw in w, cubic B-spline in (u,v): 4⌈3K/4⌉ bilinear fetches"
     }
 
     fn family(&self) -> Family {
@@ -38,7 +38,7 @@ impl Variant for ChebyshevW {
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
-        4 * f.table.w_nodes_for(Self::KIND)
+        4 * packed_layers(f.table.w_nodes_for(Self::KIND))
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
@@ -61,7 +61,7 @@ impl Variant for ChebyshevW {
             Self::KIND,
             dev,
             setup,
-            Layout::Planes,
+            Layout::PackedPlanes,
             table::ChebyshevW::nodes,
             |r, s| Ok(table::ChebyshevW::from_nodes(r, &s)),
         )

@@ -28,6 +28,15 @@ pub(crate) enum Layout {
     Volume,
     /// Planes are the layers of an image array: bilinear in (u, v) per plane.
     Planes,
+    /// The planes' XYZ packed four values a texel: plane `j`'s X, Y, Z are values `3j`,
+    /// `3j + 1`, `3j + 2` of each texel's flat sequence over the layers, so `K` planes take
+    /// `⌈3K/4⌉` layers (no unused alpha channel to store and fetch).
+    PackedPlanes,
+}
+
+/// Image layers that `planes` planes of XYZ take when packed four values a texel.
+pub(crate) fn packed_layers(planes: usize) -> usize {
+    (3 * planes).div_ceil(4)
 }
 
 /// Wavelength step (nm) of a table that holds the sun's disc, when the default 1 nm was
@@ -195,28 +204,28 @@ impl TableGpu {
         let info = &dev.info;
         let (limit, view_type) = match layout {
             Layout::Volume => (info.max_image_dimension_3d, vk::ImageViewType::TYPE_3D),
-            Layout::Planes => (
+            Layout::Planes | Layout::PackedPlanes => (
                 info.max_image_dimension_2d,
                 vk::ImageViewType::TYPE_2D_ARRAY,
             ),
         };
         let depth_limit = match layout {
             Layout::Volume => info.max_image_dimension_3d,
-            Layout::Planes => info.max_image_array_layers,
+            Layout::Planes | Layout::PackedPlanes => info.max_image_array_layers,
         };
-        if pu as u32 > limit || pv as u32 > limit || planes.len() as u32 > depth_limit {
+        let layers = texel_layers(planes, layout);
+        if pu as u32 > limit || pv as u32 > limit || layers.len() as u32 > depth_limit {
             return Err(Error::invalid(
                 "table size",
                 format!(
                     "{pu}×{pv}×{} texels exceed the device limits ({limit} a side, {depth_limit} deep): use a coarser texel",
-                    planes.len()
+                    layers.len()
                 ),
             ));
         }
-        let mut bytes = Vec::with_capacity(pu * pv * planes.len() * texel_bytes);
-        for plane in planes {
-            for t in plane {
-                let rgba = [t[0] as f32, t[1] as f32, t[2] as f32, 0.0];
+        let mut bytes = Vec::with_capacity(pu * pv * layers.len() * texel_bytes);
+        for layer in &layers {
+            for rgba in layer {
                 match format {
                     TableFormat::Rgba32f => rgba
                         .iter()
@@ -234,7 +243,7 @@ impl TableGpu {
                 format: vk_format,
                 width: pu as u32,
                 height: pv as u32,
-                layers: planes.len() as u32,
+                layers: layers.len() as u32,
                 usage: vk::ImageUsageFlags::SAMPLED,
                 aspect: vk::ImageAspectFlags::COLOR,
                 view_type,
@@ -260,11 +269,11 @@ impl TableGpu {
             vk::BufferUsageFlags::UNIFORM_BUFFER,
             std::slice::from_ref(&ubo),
         )?;
+        // Per layer: bilinear planes one fetch, spline planes (with ghosts) four.
+        let per_layer = if (pu, pv) == (nu, nv) { 1 } else { 4 };
         let fetches = match layout {
             Layout::Volume => 1,
-            // Bilinear planes: one fetch each; spline planes (with ghosts): four.
-            Layout::Planes if (pu, pv) == (nu, nv) => planes.len(),
-            Layout::Planes => 4 * planes.len(),
+            Layout::Planes | Layout::PackedPlanes => per_layer * layers.len(),
         };
         Ok(Self {
             model: None,
@@ -292,6 +301,35 @@ impl TableGpu {
             )?,
             image,
         })
+    }
+}
+
+/// The texels of each image layer (RGBA, float32) for `planes` of XYZ in `layout`.
+fn texel_layers(planes: &[Vec<[f64; 3]>], layout: Layout) -> Vec<Vec<[f32; 4]>> {
+    match layout {
+        Layout::Volume | Layout::Planes => planes
+            .iter()
+            .map(|p| {
+                p.iter()
+                    .map(|t| [t[0] as f32, t[1] as f32, t[2] as f32, 0.0])
+                    .collect()
+            })
+            .collect(),
+        Layout::PackedPlanes => {
+            let texels = planes.first().map_or(0, Vec::len);
+            (0..packed_layers(planes.len()))
+                .map(|l| {
+                    (0..texels)
+                        .map(|t| {
+                            std::array::from_fn(|c| {
+                                let q = 4 * l + c;
+                                planes.get(q / 3).map_or(0.0, |p| p[t][q % 3] as f32)
+                            })
+                        })
+                        .collect()
+                })
+                .collect()
+        }
     }
 }
 
@@ -333,5 +371,33 @@ impl PreparedVariant for TableGpu {
 
     fn left_out(&self) -> Option<LeftOut> {
         self.left_out.clone()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn packed_planes_hold_every_value_once_in_order() {
+        // Five planes of two texels: 15 values a texel in four layers, the last one padded.
+        let planes: Vec<Vec<[f64; 3]>> = (0..5)
+            .map(|j| {
+                (0..2)
+                    .map(|t| std::array::from_fn(|c| (100 * t + 3 * j + c) as f64))
+                    .collect()
+            })
+            .collect();
+        assert_eq!(packed_layers(5), 4);
+        let layers = texel_layers(&planes, Layout::PackedPlanes);
+        assert_eq!(layers.len(), 4);
+        for t in 0..2 {
+            let flat: Vec<f32> = layers.iter().flat_map(|l| l[t]).collect();
+            let want: Vec<f32> = (0..15).map(|q| (100 * t + q) as f32).collect();
+            assert_eq!(&flat[..15], &want[..]);
+            assert_eq!(flat[15], 0.0);
+        }
+        assert_eq!(texel_layers(&planes, Layout::Planes).len(), 5);
+        assert_eq!(packed_layers(12), 9);
     }
 }
