@@ -54,8 +54,8 @@ pub struct RenderArgs {
     #[arg(long)]
     pub verbose: bool,
     /// Draw the picture N more times after the first and report the median GPU time of
-    /// those N draws: the first draw of a pipeline also pays for the driver's shader
-    /// compilation (lavapipe compiles fragment shaders at their first draw). 0: one draw.
+    /// those N draws: the first draw of a pipeline also pays for one-time work in the
+    /// driver (on lavapipe, about twice the time of a later draw of a small map). 0: one draw.
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub repeat: u32,
 }
