@@ -71,7 +71,12 @@ fn render_repeat_reports_the_median_of_the_draws_after_the_first() {
     let run = |out: &str, extra: &[&str]| {
         std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
             .args(["render", "--brdf-map", "--size", "8", "--variant", "flss"])
-            .args(["--heightfield", "builtin:sinusoidal", "--lambda-step-nm", "40"])
+            .args([
+                "--heightfield",
+                "builtin:sinusoidal",
+                "--lambda-step-nm",
+                "40",
+            ])
             .arg("-o")
             .arg(dir.join(out))
             .args(extra)
