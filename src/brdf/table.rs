@@ -174,20 +174,6 @@ impl TableSpec {
         0.5 * 0.55 / (2.0 * std::f64::consts::PI * sigma_s)
     }
 
-    /// The `(u, v)` spacing of a table that holds the sun's disc ([`prefilter_disc`]): the
-    /// narrowest lobe of `G`, the intensity `|P̂|²` of the coherence window at λ = 380 nm
-    /// (std `λ/(2√2·πσs)`), widened in quadrature by the disc's footprint along its
-    /// narrowest axis, at the ratio [`TableSpec::default_texel`] has to the unblurred lobe.
-    pub fn blurred_texel(coherence_um: f64, disc: &DiscKernel) -> f64 {
-        let sigma_s = coherence_um / 4.0;
-        let lobe = crate::colour::LAMBDA_MIN_NM as f64 * 1e-3
-            / (2.0 * std::f64::consts::SQRT_2 * std::f64::consts::PI * sigma_s);
-        let c = disc.covariance();
-        let (a, b, d) = (c[0][0], c[0][1], c[1][1]);
-        let narrow = (0.5 * (a + d) - (0.25 * (a - d) * (a - d) + b * b).sqrt()).max(0.0);
-        Self::default_texel(coherence_um) * (lobe * lobe + narrow).sqrt() / lobe
-    }
-
     /// Nodes along `u` and `v` (both ends included).
     pub fn uv_nodes(&self) -> Result<(usize, usize)> {
         if !(self.texel_uv.is_finite() && self.texel_uv > 0.0) {
