@@ -5,25 +5,24 @@
 //! RGBA16F, the grown measured Elaphe field), against the shader's own statement evaluated
 //! on the CPU with the reference BRDF: every chosen pixel's ray is cast through the mesh in
 //! f64, the vertex stage's frame and `ωr` are interpolated at the hit, the skin texture is
-//! sampled bilinearly, and the sun's disc is summed over its directions with the reference
-//! at 1 nm (MODEL §6.1), then Algorithm 4's blend, the sky's ambient light and the exposure.
+//! sampled bilinearly, and the sun's disc is summed with the reference at 1 nm over 64
+//! directions (the continuous disc the pre-filter integrates; MODEL §6.1), then Algorithm
+//! 4's blend, the sky's ambient light and the exposure. The worst displayable pixel is
+//! summed again over 256 directions: at an order's edge the disc's integral still moves by
+//! about 1 % between 64, 128 and 256 directions.
 //!
 //! The image is 96² at one sample a pixel (the default's 2×2 supersampling averages
 //! samples; it does not change what a sample is). The pixels are the 12 where diffraction
 //! adds the most light to the skin: four near the specular direction, far brighter than
 //! white (Y up to 75 after the exposure, which the tone curve compresses), and eight in the
 //! orders. Needs Vulkan; the table is cached under target/test-output so a rerun skips its
-//! build (the reference takes about 6 minutes on 2 cores).
+//! build (the reference takes about 2.5 minutes on 2 cores).
 //!
-//! Measured on lavapipe (2026-11-23): in the orders, ΔE2000 (white at Y = 1) 0.09–0.42 at
-//! seven pixels and 3.3 at one, where the GPU is 7 % brighter in red and 13 % in green than
-//! the reference; near the specular direction the luminance is 1.3–5.1 % above it. The
-//! goal of ΔE2000 p99 ≤ 1 on mesh pixels is not met at that one pixel. The same table
-//! summing the disc's directions per fragment is within 1.4 % there and 0.3 % at the
-//! specular pixels. Against a reference over 64 directions of the disc (the continuous disc
-//! the pre-filter integrates) the specular pixel that is 5.1 % off here is within 1.3 %,
-//! and the order-edge pixel is at ΔE2000 3.8, with twice the reference's blue
-//! (docs/accuracy.md). The limits below hold what is measured, so a regression fails.
+//! Measured on lavapipe (2026-11-25): in the orders, ΔE2000 (white at Y = 1) 0.04–0.07 at
+//! seven pixels and 0.74 at the order's edge (1.08 against 64 directions); near the
+//! specular direction the luminance is within 3.4 % of the reference. The goal of ΔE2000
+//! p99 ≤ 1 on mesh pixels holds. Before the table's `(u, v)` spacing resolved the unblurred
+//! lobe (docs/tables.md), the order's edge was at ΔE2000 3.8 with a third too much blue.
 
 mod gpu_util;
 
@@ -38,14 +37,19 @@ use gpu_util::*;
 use rayon::prelude::*;
 
 const SIZE: u32 = 96;
+/// Directions over the sun's disc in the reference (the scene draws with eight).
+const REFERENCE_DISC: u32 = 64;
+/// Directions over the disc for the worst displayable pixel's second look.
+const REFINED_DISC: u32 = 256;
 /// Pixels compared: where diffraction adds the most light.
 const CHOSEN: usize = 12;
 /// Pixels whose reference is displayable (Y ≤ 1 after the exposure): the median and the
-/// largest ΔE2000 (white at Y = 1) from the reference (measured 0.2 and 3.3).
-const MAX_MEDIAN_DE: f64 = 0.5;
-const MAX_DE: f64 = 4.0;
-/// Brighter pixels (near the specular direction): relative luminance error (measured 5.1 %).
-const MAX_BRIGHT_REL: f64 = 0.08;
+/// largest ΔE2000 (white at Y = 1) from the reference (measured 0.064 and 0.74); the
+/// largest is the goal itself.
+const MAX_MEDIAN_DE: f64 = 0.25;
+const MAX_DE: f64 = 1.0;
+/// Brighter pixels (near the specular direction): relative luminance error (measured 3.4 %).
+const MAX_BRIGHT_REL: f64 = 0.05;
 
 /// The vertex stage's outputs at one vertex (glsl/diffraction.vert, frame.glsl), in f64.
 struct VertexOut {
@@ -173,12 +177,25 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
             .map(|p| p.map(srgb8_to_linear))
             .collect::<Vec<_>>(),
     );
-    let light = &scene.light;
+    // The reference integrates the disc the table's pre-filter integrates (the continuous
+    // disc) with REFERENCE_DISC directions, not the scene's eight: at an order's edge eight
+    // directions miss the disc's integral by 15 %.
+    let mut light = scene.light.clone();
+    light.disk_samples = REFERENCE_DISC;
     let disk: Vec<(DVec3, f64)> = light
         .disk_samples()
         .iter()
         .map(|s| (DVec3::from(s.towards_light.map(f64::from)), s.weight as f64))
         .collect();
+    let light = &light;
+    let fine: Vec<(DVec3, f64)> = {
+        let mut l = light.clone();
+        l.disk_samples = REFINED_DISC;
+        l.disk_samples()
+            .iter()
+            .map(|s| (DVec3::from(s.towards_light.map(f64::from)), s.weight as f64))
+            .collect()
+    };
     let ior = prepared.material.ior;
     let r0 = ((ior - 1.0) / (ior + 1.0)).powi(2);
     let (intensity, exposure) = (light.intensity as f64, scene.output.exposure as f64);
@@ -187,11 +204,23 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
     // Per pixel: the interpolated frame, ωr, the texture and each disc direction's ωi.
     struct Pixel {
         ij: (u32, u32),
+        frame: [DVec3; 3],
         wr: DVec3,
         tex: [f64; 3],
         /// (ωi, weight · irradiance, Schlick F at the half vector).
         lights: Vec<(DVec3, f64, f64)>,
     }
+    let lights_of = |[t, b, n]: [DVec3; 3], wr: DVec3, disk: &[(DVec3, f64)]| {
+        disk.iter()
+            .map(|&(l, weight)| {
+                let wi = DVec3::new(l.dot(t), l.dot(b), l.dot(n)).normalize();
+                let h = (wi + wr).normalize();
+                let m = 1.0 - wr.dot(h).clamp(0.0, 1.0);
+                let f = r0 + (1.0 - r0) * m.powi(5);
+                (wi, weight * wi.z.max(0.0) * intensity, f)
+            })
+            .collect::<Vec<_>>()
+    };
     let pixels: Vec<Pixel> = (0..SIZE * SIZE)
         .into_par_iter()
         .filter_map(|k| {
@@ -212,21 +241,12 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
             let wr = lerp(&|o| o.wr).normalize();
             let uv = lerp(&|o| DVec3::new(o.uv[0], o.uv[1], 0.0));
             let tex = bilinear(&texels, [uv.x, uv.y]).map(|c| gain * c);
-            let lights = disk
-                .iter()
-                .map(|&(l, weight)| {
-                    let wi = DVec3::new(l.dot(t), l.dot(b), l.dot(n)).normalize();
-                    let h = (wi + wr).normalize();
-                    let m = 1.0 - wr.dot(h).clamp(0.0, 1.0);
-                    let f = r0 + (1.0 - r0) * m.powi(5);
-                    (wi, weight * wi.z.max(0.0) * intensity, f)
-                })
-                .collect();
             Some(Pixel {
                 ij: (i, j),
+                frame: [t, b, n],
+                lights: lights_of([t, b, n], wr, &disk),
                 wr,
                 tex,
-                lights,
             })
         })
         .collect();
@@ -264,28 +284,40 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
         .map(|&(k, _)| &pixels[k])
         .collect();
 
+    // The BRDF is reciprocal (C and G depend on ωi and ωr symmetrically), so each pixel's
+    // disc directions are the "view" directions of one xyz_many call lit from its ωr: the
+    // same numbers as reference::xyz per direction (to rounding), several times faster.
     let table = ColourTable::new(1).unwrap();
-    let jobs: Vec<(usize, usize)> = (0..chosen.len())
-        .flat_map(|p| (0..disk.len()).map(move |k| (p, k)))
+    let diffraction = |wr: DVec3, lights: &[(DVec3, f64, f64)]| -> Vec<[f64; 3]> {
+        let dirs: Vec<[f64; 3]> = lights.iter().map(|l| l.0.to_array()).collect();
+        reference::xyz_many(
+            &prepared.heightfield,
+            prepared.material.coherence_um,
+            &prepared.shading,
+            &table,
+            wr.to_array(),
+            &dirs,
+            &|| {},
+        )
+        .into_iter()
+        .map(xyz_to_linear_srgb)
+        .collect()
+    };
+    let refs: Vec<[f64; 3]> = chosen
+        .iter()
+        .flat_map(|px| diffraction(px.wr, &px.lights))
         .collect();
-    let refs: Vec<[f64; 3]> = jobs
-        .par_iter()
-        .map(|&(p, k)| {
-            let px = chosen[p];
-            let xyz = reference::xyz(
-                &prepared.heightfield,
-                prepared.material.coherence_um,
-                &prepared.shading,
-                &table,
-                px.lights[k].0.to_array(),
-                px.wr.to_array(),
-            );
-            xyz_to_linear_srgb(xyz)
-        })
-        .collect();
+    let de_of = |gpu: [f64; 3], expected: [f64; 3]| {
+        // Against white at Y = 1 after the exposure (where the tone curve starts).
+        delta_e2000(
+            xyz_to_lab(linear_srgb_to_xyz(gpu)),
+            xyz_to_lab(linear_srgb_to_xyz(expected)),
+        )
+    };
     let mut des = Vec::new();
     let mut worst_bright: f64 = 0.0;
     let mut coloured = 0;
+    let mut worst_pixel: Option<(f64, usize)> = None;
     for (p, px) in chosen.iter().enumerate() {
         let diff = &refs[p * disk.len()..(p + 1) * disk.len()];
         let expected = shade(px, diff);
@@ -293,12 +325,11 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
         let skin = shade(px, &no_diffraction);
         let (yg, yr) = (linear_srgb_to_xyz(gpu)[1], linear_srgb_to_xyz(expected)[1]);
         let what = if yr <= 1.0 {
-            // Against white at Y = 1 after the exposure (where the tone curve starts).
-            let de = delta_e2000(
-                xyz_to_lab(linear_srgb_to_xyz(gpu)),
-                xyz_to_lab(linear_srgb_to_xyz(expected)),
-            );
+            let de = de_of(gpu, expected);
             des.push(de);
+            if worst_pixel.is_none_or(|(w, _)| de > w) {
+                worst_pixel = Some((de, p));
+            }
             format!("ΔE2000 {de:.3}")
         } else {
             let rel = (yg - yr).abs() / yr;
@@ -313,6 +344,26 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
         if yr >= 1.2 * linear_srgb_to_xyz(skin)[1] {
             coloured += 1;
         }
+    }
+    // The worst displayable pixel again, its disc summed over REFINED_DISC directions: at
+    // an order's edge the disc's integral still moves by about 1 % between 64, 128 and
+    // 256 directions (measured: ΔE2000 1.08, 0.47 and 0.74 for the same GPU pixel).
+    if let Some((de, p)) = worst_pixel {
+        let px = chosen[p];
+        let lights = lights_of(px.frame, px.wr, &fine);
+        let refined = Pixel {
+            lights: lights.clone(),
+            ..*px
+        };
+        let expected = shade(&refined, &diffraction(px.wr, &lights));
+        let gpu = frame.at(px.ij.0, px.ij.1).map(f64::from);
+        let fine_de = de_of(gpu, expected);
+        eprintln!(
+            "pixel {:?} against {REFINED_DISC} directions: reference {expected:.4?}: ΔE2000 {fine_de:.3} ({de:.3} against {REFERENCE_DISC})",
+            px.ij
+        );
+        let at = des.iter().position(|&d| d == de).unwrap();
+        des[at] = fine_de;
     }
     des.sort_by(f64::total_cmp);
     let (median, worst) = (des[des.len() / 2], des[des.len() - 1]);
