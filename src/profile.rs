@@ -62,7 +62,7 @@ impl Variant {
     /// The row of `kind` for `preset`, with the profile's Taylor `terms` and `table` options.
     fn from_preset(kind: VariantKind, preset: &Preset, terms: usize, table: &TableOptions) -> Self {
         let table = TableOptions {
-            step_nm: preset.table_step_nm.unwrap_or(table.step_nm),
+            step_nm: preset.table_step_nm.or(table.step_nm),
             format: preset.table_format.unwrap_or(table.format),
             ..*table
         };
@@ -89,7 +89,7 @@ impl Variant {
                 expansion: Expansion::Taylor,
                 terms: 0,
                 window_radius: 0,
-                lambda_step_nm: table.step_nm,
+                lambda_step_nm: table.step_nm.unwrap_or(TableOptions::DEFAULT_STEP_NM),
                 storage: StorageFormat::Rg32f,
                 table,
                 leave_out: preset.leave_out,

@@ -17,7 +17,7 @@ fn one_evaluation_of_the_prefiltered_table_matches_its_f64_model() {
     r.set_variant(VariantKind::ChebyshevW);
     r.set_keep_models(true);
     r.set_table_options(TableOptions {
-        step_nm: 10,
+        step_nm: Some(10),
         texel_uv: Some(0.004),
         w_nodes: Some(6),
         ..TableOptions::default()
@@ -66,4 +66,29 @@ fn one_evaluation_of_the_prefiltered_table_matches_its_f64_model() {
         worst <= 3e-3 * max,
         "GPU vs f64 model {worst:e} (max {max})"
     );
+}
+
+/// A table that holds the disc integrates at 2 nm unless a step is asked for; an explicit
+/// step is kept, 1 nm included (1 nm once read as "nothing asked" and became 2).
+#[test]
+fn an_explicit_wavelength_step_is_kept_for_a_disc_table() {
+    let Some(mut r) = renderer() else { return };
+    let scene = plane_scene(3.0);
+    let p = prepare(&scene.material);
+    r.set_variant(VariantKind::ChebyshevW);
+    for (asked, built) in [(None, "dλ=2 "), (Some(1), "dλ=1 "), (Some(5), "dλ=5 ")] {
+        r.set_table_options(TableOptions {
+            step_nm: asked,
+            texel_uv: Some(0.02),
+            w_nodes: Some(4),
+            ..TableOptions::default()
+        });
+        let frame = r.render_scene(&scene, &p).expect("render plane");
+        let name = &frame.variant.name;
+        assert!(
+            name.contains("pre-filtered") && name.contains(built),
+            "{asked:?}: {name}"
+        );
+    }
+    assert_no_validation(&r);
 }

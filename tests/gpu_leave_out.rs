@@ -70,7 +70,9 @@ fn map_both_ways(kind: VariantKind, heightfield: &str, theta: f64, table: Option
     // The wavelengths are leave_out::wavelengths_needed's, for the colour table it loops
     // over (the material's per pixel, the table step's in a build).
     let w = rec.wavelengths.as_ref().unwrap();
-    let step = table.map_or(m.lambda_step_nm, |t| t.step_nm);
+    let step = table.map_or(m.lambda_step_nm, |t| {
+        t.step_nm.unwrap_or(TableOptions::DEFAULT_STEP_NM)
+    });
     let colour = diffract::colour::ColourTable::new(step).unwrap();
     let sel = wavelengths_needed(&colour, m.tolerance);
     assert_eq!(w.kept_nm.len(), sel.keep.len());
@@ -172,7 +174,7 @@ fn pq_map_left_out_equals_keep_all_within_the_bound() {
 fn table_built_from_fewer_wavelengths_equals_keep_all_within_the_bound() {
     let table = TableOptions {
         texel_uv: Some(0.02),
-        step_nm: 10,
+        step_nm: Some(10),
         ..TableOptions::default()
     };
     // The light's mirror direction on a pixel, so the map holds the specular peak.

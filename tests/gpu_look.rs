@@ -34,7 +34,7 @@ fn render_at(scene: &Scene, size: u32, ss: u32, cache: &Path) -> Option<Picture>
     // The table at 5 nm instead of 1 nm keeps its build under a minute on two cores; the
     // test is about sampling in space, which the table's spectral step does not change.
     r.set_table_options(TableOptions {
-        step_nm: 5,
+        step_nm: Some(5),
         ..TableOptions::default()
     });
     r.set_cache_dir(Some(cache.to_path_buf()));

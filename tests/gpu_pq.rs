@@ -209,7 +209,7 @@ fn per_vertex_runs_for_nmm_and_pq_and_is_refused_elsewhere() {
     r.set_variant(VariantKind::Volume);
     r.set_table_options(diffract::render::TableOptions {
         texel_uv: Some(0.02),
-        step_nm: 20,
+        step_nm: Some(20),
         ..Default::default()
     });
     let err = r.render_scene(&scene, &p).unwrap_err().to_string();

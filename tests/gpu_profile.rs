@@ -40,7 +40,7 @@ fn variants_report_error_and_time() {
             .filter(|v| v.kind != diffract::render::VariantKind::Pq)
             .chain(table_variants(&TableOptions {
                 texel_uv: Some(0.02),
-                step_nm: 20,
+                step_nm: Some(20),
                 ..TableOptions::default()
             }))
             .collect(),

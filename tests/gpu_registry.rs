@@ -28,7 +28,7 @@ fn every_registered_variant_renders_a_map() {
     let prepared = prepare(&periodic_material(&dir, 8, 20));
     r.set_table_options(TableOptions {
         texel_uv: Some(0.02),
-        step_nm: 20,
+        step_nm: Some(20),
         ..TableOptions::default()
     });
     for kind in VariantKind::ALL {

@@ -23,7 +23,7 @@ fn a_coarsened_table_warns_through_the_report() {
     r.set_table_options(TableOptions {
         texel_uv: Some(1e-4),
         w_nodes: Some(2),
-        step_nm: 20,
+        step_nm: Some(20),
         budget_bytes: 1 << 20,
         ..TableOptions::default()
     });
@@ -54,7 +54,7 @@ fn a_table_that_fits_says_nothing() {
     r.set_variant(VariantKind::Volume);
     r.set_table_options(TableOptions {
         w_nodes: Some(2),
-        step_nm: 20,
+        step_nm: Some(20),
         ..TableOptions::default()
     });
     r.render_brdf_map(&prepared, 30.0, 0.0, 8, None).unwrap();

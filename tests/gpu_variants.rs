@@ -48,7 +48,7 @@ const THETA: f64 = 30.0;
 fn options() -> TableOptions {
     TableOptions {
         texel_uv: Some(0.01),
-        step_nm: 10,
+        step_nm: Some(10),
         ..TableOptions::default()
     }
 }
@@ -151,7 +151,7 @@ fn table_variants_agree_with_the_reference_where_the_table_resolves_g() {
     let wi = direction(THETA, 0.0);
     r.set_table_options(TableOptions {
         texel_uv: Some(0.004),
-        step_nm: 10,
+        step_nm: Some(10),
         w_nodes: Some(24),
         ..TableOptions::default()
     });

@@ -15,9 +15,10 @@ pub struct TableArgs {
     /// Table variants: nodes along w (default: volume 32, chebyshev-w 16, dhillon 12).
     #[arg(long)]
     pub table_w_nodes: Option<usize>,
-    /// Table variants: wavelength step of the offline spectral integral (nm).
-    #[arg(long, default_value_t = TableOptions::default().step_nm)]
-    pub table_step_nm: u32,
+    /// Table variants: wavelength step of the offline spectral integral (nm) [default: 1,
+    /// or 2 for a table that holds the sun's disc, whose blur hides the coarser step].
+    #[arg(long)]
+    pub table_step_nm: Option<u32>,
     /// Table variants: GPU memory budget (MB); the u/v spacing is coarsened to fit.
     #[arg(long, default_value_t = 512)]
     pub table_budget_mb: usize,
@@ -61,7 +62,9 @@ impl TableArgs {
                 ));
             }
         }
-        crate::colour::ColourTable::new(self.table_step_nm)?;
+        if let Some(step) = self.table_step_nm {
+            crate::colour::ColourTable::new(step)?;
+        }
         if self.table_budget_mb == 0 {
             return Err(Error::invalid(
                 "table budget",

@@ -76,7 +76,11 @@ impl BuildOptions {
             table: TableOptions {
                 texel_uv: Some(texel * COARSE_TEXEL_FACTOR),
                 w_nodes: Some(COARSE_W_NODES),
-                step_nm: self.table.step_nm.max(COARSE_STEP_NM),
+                step_nm: Some(
+                    self.table
+                        .step_nm
+                        .map_or(COARSE_STEP_NM, |s| s.max(COARSE_STEP_NM)),
+                ),
                 ..self.table
             },
             cache_dir: None,

@@ -318,10 +318,10 @@ pub struct TableOptions {
     pub texel_uv: Option<f64>,
     /// Nodes along `w`; `None`: the variant's default (volume 32, chebyshev-w 16, dhillon 12).
     pub w_nodes: Option<usize>,
-    /// Wavelength step of the offline spectral integral (nm). 1 by default: a line of
-    /// the 65 µm coherence window is about 1 nm wide at |u| ≈ 2, and the table pays the
-    /// step only once, offline.
-    pub step_nm: u32,
+    /// Wavelength step of the offline spectral integral (nm); `None`: the variant's choice,
+    /// [`TableOptions::DEFAULT_STEP_NM`], or a coarser step for a table that holds the
+    /// sun's disc. An explicit step is kept as given.
+    pub step_nm: Option<u32>,
     /// GPU memory a table may take; the `(u, v)` spacing is coarsened to fit (and said so).
     pub budget_bytes: usize,
     pub format: TableFormat,
@@ -334,7 +334,7 @@ impl Default for TableOptions {
         Self {
             texel_uv: None,
             w_nodes: None,
-            step_nm: 1,
+            step_nm: None,
             budget_bytes: 512 << 20,
             format: TableFormat::Rgba32f,
             build: Default::default(),
@@ -343,6 +343,11 @@ impl Default for TableOptions {
 }
 
 impl TableOptions {
+    /// The step of a table that holds no disc, unless another is asked for: a line of the
+    /// 65 µm coherence window is about 1 nm wide at |u| ≈ 2, and the table pays the step
+    /// only once, offline.
+    pub const DEFAULT_STEP_NM: u32 = 1;
+
     /// `w` nodes of variant `kind` unless the height field asks for more
     /// ([`TableOptions::w_nodes_for_field`]).
     pub fn w_nodes_for(&self, kind: VariantKind) -> usize {
@@ -419,7 +424,7 @@ impl TableOptions {
             region,
             texel_uv: texel,
             w_nodes,
-            step_nm: self.step_nm,
+            step_nm: self.step_nm.unwrap_or(Self::DEFAULT_STEP_NM),
         };
         spec.validate()?;
         Ok((spec, (texel > asked).then_some(asked)))

@@ -39,8 +39,7 @@ pub(crate) fn packed_layers(planes: usize) -> usize {
     (3 * planes).div_ceil(4)
 }
 
-/// Wavelength step (nm) of a table that holds the sun's disc, when the default 1 nm was
-/// asked for. A step moves a line's lookup by `Δu = |u|·Δλ/λ`: 2 nm at |u| = 1 and 380 nm is
+/// Wavelength step (nm) of a table that holds the sun's disc, when no step was asked for. A step moves a line's lookup by `Δu = |u|·Δλ/λ`: 2 nm at |u| = 1 and 380 nm is
 /// 0.0053, 1.7 standard deviations of the disc-blurred lobe (0.0031), where a pure line
 /// spectrum ripples by 2·exp(−2π²/1.7²) ≈ 2e-3. On the default scene 1, 2 and 4 nm give the
 /// same picture (ΔE2000 mean 0.04 against the 8-direction render, docs/tables.md).
@@ -79,11 +78,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     // aliases to the blur: ΔE2000 3.8 at an order's edge on the default scene, 0.9 with it).
     let options = match &setup.disc {
         Some(_) => TableOptions {
-            step_nm: if setup.table.step_nm == TableOptions::default().step_nm {
-                DISC_STEP_NM
-            } else {
-                setup.table.step_nm
-            },
+            step_nm: Some(setup.table.step_nm.unwrap_or(DISC_STEP_NM)),
             ..*setup.table
         },
         None => *setup.table,
