@@ -5,12 +5,10 @@
 
 use crate::{Error, Result};
 
-mod cli;
 mod generate;
 mod grow;
 mod io;
 
-pub use cli::{run_heightfield, HeightfieldArgs};
 pub use generate::{
     generate, GratingKind, GratingSpec, LatticeWave, DEFAULT_DH_UM, DEFAULT_SIZE_UM,
     MAX_GENERATED_DH_UM,

@@ -20,7 +20,7 @@ enum Command {
     /// Evaluate the BRDF for a CSV of directions and wavelengths (reference or model).
     Brdf(diffract::cli::brdf::BrdfArgs),
     /// Generate a test grating height field (PNG or .f32 with a .toml sidecar).
-    Heightfield(diffract::heightfield::HeightfieldArgs),
+    Heightfield(diffract::cli::heightfield::HeightfieldArgs),
     /// Grating-equation experiment (MODEL §8): period estimated from first-order peaks.
     EvalGrating(diffract::eval::EvalArgs),
     /// Shader variants on the GPU: error against the f64 reference together with GPU time.
@@ -162,7 +162,7 @@ fn main() -> ExitCode {
     let result = match &cli.command {
         Command::Render(a) => diffract::cli::render::run(a),
         Command::Brdf(a) => diffract::cli::brdf::run(a),
-        Command::Heightfield(a) => diffract::heightfield::run_heightfield(a),
+        Command::Heightfield(a) => diffract::cli::heightfield::run_heightfield(a),
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),
         Command::View(a) => diffract::view::run(a),

@@ -3,9 +3,8 @@
 
 use std::path::{Path, PathBuf};
 
-use diffract::heightfield::{
-    generate, run_heightfield, GratingKind, GratingSpec, HeightField, HeightfieldArgs,
-};
+use diffract::cli::heightfield::{run_heightfield, HeightfieldArgs};
+use diffract::heightfield::{generate, GratingKind, GratingSpec, HeightField};
 use diffract::Error;
 use rustfft::num_complex::Complex64;
 use rustfft::FftPlanner;

@@ -5,9 +5,9 @@
 
 use std::path::{Path, PathBuf};
 
+use diffract::cli::heightfield::{run_heightfield, HeightfieldArgs};
 use diffract::heightfield::{
-    grow, run_heightfield, HeightField, HeightfieldArgs, GROWN_SAMPLES, MEASURED_ELAPHE_DH_UM,
-    MEASURED_ELAPHE_H_MAX_UM,
+    grow, HeightField, GROWN_SAMPLES, MEASURED_ELAPHE_DH_UM, MEASURED_ELAPHE_H_MAX_UM,
 };
 use diffract::Error;
 use rustfft::num_complex::Complex64;

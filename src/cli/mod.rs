@@ -9,7 +9,7 @@
 //! - [`scene::SceneArgs`]: the scene file and the overrides of its output (size, exposure).
 //!
 //! It also holds the commands whose library module sits below these groups: `render`
-//! ([`render`]) and `brdf` ([`brdf`]). The other commands (`view`, `profile`,
+//! ([`render`]), `brdf` ([`brdf`]) and `heightfield` ([`heightfield`]). The other commands (`view`, `profile`,
 //! `stability`, `eval-grating`) live in their own modules, above this one.
 //!
 //! This is the edge between the commands and the library: the groups import the library's
@@ -20,6 +20,7 @@
 pub mod brdf;
 pub mod cache;
 pub mod gpu;
+pub mod heightfield;
 pub mod material;
 pub mod render;
 pub mod scene;

@@ -4,9 +4,7 @@
 
 use std::path::PathBuf;
 
-use super::generate::{generate, GratingKind, GratingSpec, DEFAULT_SIZE_UM};
-use super::grow::grow;
-use super::HeightField;
+use crate::heightfield::{generate, grow, GratingKind, GratingSpec, HeightField, DEFAULT_SIZE_UM};
 use crate::{Error, Result};
 
 /// Generate a test grating height field (MODEL §9), or grow a measured sample (`--from-sample`)
@@ -82,13 +80,13 @@ impl HeightfieldArgs {
             ));
         }
         let n = (size / dh_um).round();
-        if n > super::MAX_SIDE as f64 {
+        if n > crate::heightfield::MAX_SIDE as f64 {
             return Err(Error::invalid(
                 "size",
                 format!(
                     "{size} µm at dH = {:.2} nm is {n} samples, over the limit of {}",
                     dh_um * 1e3,
-                    super::MAX_SIDE
+                    crate::heightfield::MAX_SIDE
                 ),
             ));
         }
