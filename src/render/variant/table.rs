@@ -39,10 +39,11 @@ pub(crate) fn packed_layers(planes: usize) -> usize {
     (3 * planes).div_ceil(4)
 }
 
-/// Wavelength step (nm) of a table that holds the sun's disc, when no step was asked for. A step moves a line's lookup by `Δu = |u|·Δλ/λ`: 2 nm at |u| = 1 and 380 nm is
-/// 0.0053, 1.7 standard deviations of the disc-blurred lobe (0.0031), where a pure line
-/// spectrum ripples by 2·exp(−2π²/1.7²) ≈ 2e-3. On the default scene 1, 2 and 4 nm give the
-/// same picture (ΔE2000 mean 0.04 against the 8-direction render, docs/tables.md).
+/// Wavelength step (nm) of a table that holds the sun's disc, when no step was asked for.
+/// A step moves a line's lookup by `Δu = |u|·Δλ/λ`: 2 nm at |u| = 1 and 380 nm is 0.0053,
+/// 1.7 standard deviations of the disc-blurred lobe (0.0031), where a pure line spectrum
+/// ripples by 2·exp(−2π²/1.7²) ≈ 2e-3. On the default scene 1, 2 and 4 nm give the same
+/// picture (ΔE2000 mean 0.04 against the 8-direction render, docs/tables.md).
 const DISC_STEP_NM: u32 = 2;
 
 /// Mirror of `TableInfo` in glsl/table.glsl (std140: vec4 members only).
@@ -207,19 +208,20 @@ impl TableGpu {
             Layout::Volume => info.max_image_dimension_3d,
             Layout::Planes | Layout::PackedPlanes => info.max_image_array_layers,
         };
-        let layers = texel_layers(planes, layout);
-        if pu as u32 > limit || pv as u32 > limit || layers.len() as u32 > depth_limit {
+        let layers = layer_count(planes.len(), layout);
+        if pu as u32 > limit || pv as u32 > limit || layers as u32 > depth_limit {
             return Err(Error::invalid(
                 "table size",
                 format!(
-                    "{pu}×{pv}×{} texels exceed the device limits ({limit} a side, {depth_limit} deep): use a coarser texel",
-                    layers.len()
+                    "{pu}×{pv}×{layers} texels exceed the device limits ({limit} a side, {depth_limit} deep): use a coarser texel"
                 ),
             ));
         }
-        let mut bytes = Vec::with_capacity(pu * pv * layers.len() * texel_bytes);
-        for layer in &layers {
-            for rgba in layer {
+        let texels = planes.first().map_or(0, Vec::len);
+        let mut bytes = Vec::with_capacity(texels * layers * texel_bytes);
+        for layer in 0..layers {
+            for t in 0..texels {
+                let rgba = layer_texel(planes, layout, layer, t);
                 match format {
                     TableFormat::Rgba32f => rgba
                         .iter()
@@ -237,7 +239,7 @@ impl TableGpu {
                 format: vk_format,
                 width: pu as u32,
                 height: pv as u32,
-                layers: layers.len() as u32,
+                layers: layers as u32,
                 usage: vk::ImageUsageFlags::SAMPLED,
                 aspect: vk::ImageAspectFlags::COLOR,
                 view_type,
@@ -267,7 +269,7 @@ impl TableGpu {
         let per_layer = if (pu, pv) == (nu, nv) { 1 } else { 4 };
         let fetches = match layout {
             Layout::Volume => 1,
-            Layout::Planes | Layout::PackedPlanes => per_layer * layers.len(),
+            Layout::Planes | Layout::PackedPlanes => per_layer * layers,
         };
         Ok(Self {
             model: None,
@@ -298,32 +300,25 @@ impl TableGpu {
     }
 }
 
-/// The texels of each image layer (RGBA, float32) for `planes` of XYZ in `layout`.
-fn texel_layers(planes: &[Vec<[f64; 3]>], layout: Layout) -> Vec<Vec<[f32; 4]>> {
+/// Image layers that `planes` planes of XYZ take in `layout`.
+fn layer_count(planes: usize, layout: Layout) -> usize {
     match layout {
-        Layout::Volume | Layout::Planes => planes
-            .iter()
-            .map(|p| {
-                p.iter()
-                    .map(|t| [t[0] as f32, t[1] as f32, t[2] as f32, 0.0])
-                    .collect()
-            })
-            .collect(),
-        Layout::PackedPlanes => {
-            let texels = planes.first().map_or(0, Vec::len);
-            (0..packed_layers(planes.len()))
-                .map(|l| {
-                    (0..texels)
-                        .map(|t| {
-                            std::array::from_fn(|c| {
-                                let q = 4 * l + c;
-                                planes.get(q / 3).map_or(0.0, |p| p[t][q % 3] as f32)
-                            })
-                        })
-                        .collect()
-                })
-                .collect()
+        Layout::Volume | Layout::Planes => planes,
+        Layout::PackedPlanes => packed_layers(planes),
+    }
+}
+
+/// Texel `t` of image layer `layer` (RGBA, float32) for `planes` of XYZ in `layout`.
+fn layer_texel(planes: &[Vec<[f64; 3]>], layout: Layout, layer: usize, t: usize) -> [f32; 4] {
+    match layout {
+        Layout::Volume | Layout::Planes => {
+            let x = planes[layer][t];
+            [x[0] as f32, x[1] as f32, x[2] as f32, 0.0]
         }
+        Layout::PackedPlanes => std::array::from_fn(|c| {
+            let q = 4 * layer + c;
+            planes.get(q / 3).map_or(0.0, |p| p[t][q % 3] as f32)
+        }),
     }
 }
 
@@ -383,15 +378,21 @@ mod tests {
             })
             .collect();
         assert_eq!(packed_layers(5), 4);
-        let layers = texel_layers(&planes, Layout::PackedPlanes);
-        assert_eq!(layers.len(), 4);
+        let layers = layer_count(planes.len(), Layout::PackedPlanes);
+        assert_eq!(layers, 4);
         for t in 0..2 {
-            let flat: Vec<f32> = layers.iter().flat_map(|l| l[t]).collect();
+            let flat: Vec<f32> = (0..layers)
+                .flat_map(|l| layer_texel(&planes, Layout::PackedPlanes, l, t))
+                .collect();
             let want: Vec<f32> = (0..15).map(|q| (100 * t + q) as f32).collect();
             assert_eq!(&flat[..15], &want[..]);
             assert_eq!(flat[15], 0.0);
         }
-        assert_eq!(texel_layers(&planes, Layout::Planes).len(), 5);
+        assert_eq!(layer_count(planes.len(), Layout::Planes), 5);
+        assert_eq!(
+            layer_texel(&planes, Layout::Planes, 2, 1),
+            [106.0, 107.0, 108.0, 0.0]
+        );
         assert_eq!(packed_layers(12), 9);
     }
 }
