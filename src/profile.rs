@@ -275,19 +275,6 @@ fn pick_pixels(map: &[[f32; 3]], size: u32, bright: usize, spread: usize) -> Vec
     picked
 }
 
-fn median(mut v: Vec<f64>) -> Option<f64> {
-    if v.is_empty() {
-        return None;
-    }
-    v.sort_by(f64::total_cmp);
-    let n = v.len();
-    Some(if n % 2 == 1 {
-        v[n / 2]
-    } else {
-        0.5 * (v[n / 2 - 1] + v[n / 2])
-    })
-}
-
 fn bar(len: usize, msg: &str) -> ProgressBar {
     let b = ProgressBar::new(len as u64).with_message(msg.to_string());
     b.set_style(
@@ -531,7 +518,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
                     t.extend(last.gpu_ms);
                 }
                 r.set_per_vertex(false);
-                Ok(median(t).map(|ms| (ms, last.rgb)))
+                Ok(crate::render::median(t).map(|ms| (ms, last.rgb)))
             };
         let mesh = mesh_view(renderer, false)?;
         let mesh_gpu_ms = mesh.as_ref().map(|m| m.0);
@@ -565,8 +552,8 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<Vec<Vari
         }
         reports.push(VariantReport {
             variant: variant.clone(),
-            gpu_ms: median(gpu),
-            wall_ms: median(wall).unwrap_or(frame.wall_ms),
+            gpu_ms: crate::render::median(gpu),
+            wall_ms: crate::render::median(wall).unwrap_or(frame.wall_ms),
             build_ms: v.build_ms,
             gpu_bytes: v.gpu_bytes,
             fetches: v.fetches,

@@ -9,8 +9,9 @@
 //! - [`scene::SceneArgs`]: the scene file and the overrides of its output (size, exposure).
 //!
 //! It also holds the commands whose library module sits below these groups: `render`
-//! ([`render`]), `brdf` ([`brdf`]) and `heightfield` ([`heightfield`]). The other commands (`view`, `profile`,
-//! `stability`, `eval-grating`) live in their own modules, above this one.
+//! ([`render`]), `brdf` ([`brdf`]) and `heightfield` ([`heightfield`]). The other commands
+//! (`view`, `profile`, `stability`, `eval-grating`) live in their own modules, above this
+//! one.
 //!
 //! This is the edge between the commands and the library: the groups import the library's
 //! types, the commands import the groups, and nothing below the commands imports this

@@ -321,25 +321,19 @@ pub struct Timing {
 
 impl Timing {
     /// From the first draw's GPU time and those of the draws after it (no timestamps: none).
-    pub fn of(first: Option<f64>, mut repeated: Vec<f64>) -> Self {
-        if repeated.is_empty() {
-            return Self {
+    pub fn of(first: Option<f64>, repeated: Vec<f64>) -> Self {
+        let repeats = repeated.len();
+        match crate::render::median(repeated) {
+            None => Self {
                 gpu_ms: first,
                 first_ms: None,
                 repeats: 0,
-            };
-        }
-        repeated.sort_by(f64::total_cmp);
-        let n = repeated.len();
-        let median = if n % 2 == 1 {
-            repeated[n / 2]
-        } else {
-            0.5 * (repeated[n / 2 - 1] + repeated[n / 2])
-        };
-        Self {
-            gpu_ms: Some(median),
-            first_ms: first,
-            repeats: n,
+            },
+            Some(median) => Self {
+                gpu_ms: Some(median),
+                first_ms: first,
+                repeats,
+            },
         }
     }
 }

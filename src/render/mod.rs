@@ -27,7 +27,7 @@ use std::sync::Arc;
 use ash::vk;
 
 pub use background::{Arrived, BuildProgress, Readiness};
-pub use offscreen::Picture;
+pub use offscreen::{median, Picture};
 pub(crate) use params::{OutputMode, ParamsUbo, MAX_TERMS};
 pub use pass::{MapView, PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};

@@ -39,6 +39,20 @@ pub struct Picture {
     pub variant: VariantStats,
 }
 
+/// The median of the times of repeated draws (ms); `None` for no draws.
+pub fn median(mut times: Vec<f64>) -> Option<f64> {
+    if times.is_empty() {
+        return None;
+    }
+    times.sort_by(f64::total_cmp);
+    let n = times.len();
+    Some(if n % 2 == 1 {
+        times[n / 2]
+    } else {
+        0.5 * (times[n / 2 - 1] + times[n / 2])
+    })
+}
+
 impl Picture {
     /// Pixel `(x, y)`, `y` from the top.
     pub fn at(&self, x: u32, y: u32) -> [f32; 3] {
