@@ -21,7 +21,8 @@ mod volume;
 
 use std::sync::Arc;
 
-use crate::brdf::table::{DiscKernel, Region, TableSpec};
+use crate::brdf::table::{chebyshev_w_nodes, DiscKernel, Region, TableSpec};
+pub use crate::brdf::table::{CHEBYSHEV_W_TOLERANCE, MIN_CHEBYSHEV_W_NODES};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::{Device, StorageFormat};
 use crate::material::{Material, PreparedMaterial};
@@ -357,26 +358,14 @@ impl TableOptions {
     }
 
     /// `w` nodes of `kind` for a height range `h_range_um` over `w ∈ [w0, w1]`: for
-    /// `chebyshev-w`, fitted to that range, as many as the series needs to meet
-    /// [`CHEBYSHEV_W_TOLERANCE`] (at least [`MIN_CHEBYSHEV_W_NODES`]); the default otherwise.
-    /// `G = Σ_λ |P̂|²` varies with `w` through phases `s·(h − h')`, `s = 2πw/λ`, so its
-    /// Chebyshev coefficients in `ŵ` decay like the Bessel functions `J_j(a)` of
-    /// `a = (2π/λ_min)·(h_max − h_min)·(w1 − w0)/2`; K is two more than the first `j` with
-    /// `|J_j(a)| ≤` the tolerance (at most [`MAX_NODES_W`](crate::brdf::table::MAX_NODES_W)).
+    /// `chebyshev-w`, fitted to that range ([`chebyshev_w_nodes`]); the default otherwise.
     /// An explicit `w_nodes` is kept as given.
     pub fn w_nodes_for_field(&self, kind: VariantKind, h_range_um: f64, w: [f64; 2]) -> usize {
         let base = self.w_nodes_for(kind);
         if self.w_nodes.is_some() || !kind.implementation().w_nodes_follow_the_field() {
             return base;
         }
-        let k_max = 2.0 * std::f64::consts::PI / (crate::colour::LAMBDA_MIN_NM as f64 * 1e-3);
-        let a = k_max * h_range_um.max(0.0) * 0.5 * (w[1] - w[0]).abs();
-        let max = crate::brdf::table::MAX_NODES_W;
-        let j = crate::brdf::bessel::jn_all(a, max);
-        let first = (0..=max)
-            .find(|&n| n as f64 > a && j[n..].iter().all(|x| x.abs() <= CHEBYSHEV_W_TOLERANCE))
-            .unwrap_or(max);
-        (first + 2).clamp(MIN_CHEBYSHEV_W_NODES, max)
+        chebyshev_w_nodes(h_range_um, w)
     }
 
     /// The sampling of `G` for `kind` over `region`: the requested spacing, coarsened where
@@ -430,12 +419,6 @@ impl TableOptions {
         Ok((spec, (texel > asked).then_some(asked)))
     }
 }
-
-/// Largest `|c_K|/|c_0|` the default `chebyshev-w` coefficient count allows.
-pub const CHEBYSHEV_W_TOLERANCE: f64 = 1e-4;
-
-/// Fewest `chebyshev-w` coefficients fitted to a narrow `w` range.
-pub const MIN_CHEBYSHEV_W_NODES: usize = 4;
 
 /// What a frame reports about the variant that drew it.
 #[derive(Debug, Clone, PartialEq, Default)]
