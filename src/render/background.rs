@@ -227,12 +227,28 @@ impl Renderer {
             need = need.union(&Region::brdf_map(wi.map(|c| c as f32 as f64)).widened(1e-5));
             output = OutputMode::MapDisplay;
         }
-        let Some((key, region)) = self.plan_variant(material, need, output, disc)? else {
+        let wanted = self.wanted_variant(material, need, output, disc)?;
+        // A build for another material or other settings is superseded: stopped now, not
+        // run to its end before the wanted one starts. One for another region of the same
+        // variant goes on (the view may come back to it).
+        if self
+            .background
+            .as_ref()
+            .is_some_and(|bg| !wanted.served_by(&bg.key) && !wanted.same_but_region(&bg.key))
+        {
+            self.cancel_background();
+        }
+        if self
+            .prepared
+            .as_ref()
+            .is_some_and(|(k, _)| wanted.served_by(k))
+        {
             return Ok(Readiness::Ready);
-        };
+        }
         if self.background.is_some() {
             return Ok(Readiness::Building);
         }
+        let (key, region) = (wanted.key, wanted.region);
         let options = self.build_options(region, output, disc);
         let coarse =
             (coarse_first && self.variant.is_table()).then(|| options.coarse(&material.material));
@@ -288,11 +304,32 @@ impl Renderer {
         Ok(Readiness::Building)
     }
 
+    /// Stops the running background build: its worker stops at its next step and is joined
+    /// once it has (at a later poll, or when the renderer goes), so the caller never waits
+    /// for it.
+    fn cancel_background(&mut self) {
+        if let Some(mut bg) = self.background.take() {
+            bg.progress.cancel.store(true, Ordering::Relaxed);
+            // A worker waiting after its stand-in sees the channel close and stops.
+            bg.go = None;
+            self.cancelled.push(bg);
+            self.builds_cancelled += 1;
+        }
+    }
+
+    /// Background builds stopped because a later request superseded them.
+    pub fn builds_cancelled(&self) -> u64 {
+        self.builds_cancelled
+    }
+
     /// Installs what a background build finished, if anything: the prepared variant it
     /// replaces is dropped here (passes built from it keep their own references). A coarse
     /// stand-in is held under the real build's key, so passes built now use it until the
     /// real one arrives. A failed build is an error (the previous variant stays).
     pub fn poll_background(&mut self) -> Result<Option<Arrived>> {
+        // Cancelled workers that have stopped are joined (at once: they have ended).
+        self.cancelled
+            .retain(|bg| bg.handle.as_ref().is_some_and(|h| !h.is_finished()));
         let Some(bg) = &mut self.background else {
             return Ok(None);
         };

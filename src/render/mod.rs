@@ -100,6 +100,42 @@ struct PreparedKey {
     disc: Option<[u64; 4]>,
 }
 
+/// The variant a draw asks for: its key, the region it would be built for and the region
+/// the draw needs.
+struct WantedVariant {
+    key: PreparedKey,
+    region: Region,
+    needed: Region,
+    /// Built with a covering margin: a variant built for another region that holds
+    /// `needed` serves as well.
+    covering: bool,
+}
+
+impl WantedVariant {
+    /// Whether a variant built under `held` serves this draw: the same key or, covering,
+    /// the same but for a region that holds the needed one and a disc footprint close to
+    /// this one.
+    fn served_by(&self, held: &PreparedKey) -> bool {
+        *held == self.key
+            || (self.covering
+                && self.same_but_region(held)
+                && discs_close(held.disc, self.key.disc)
+                && held
+                    .region
+                    .is_some_and(|r| region_contains(&r.map(f64::from_bits), &self.needed)))
+    }
+
+    /// Whether `held` differs from this key in its region and disc footprint at most (the
+    /// same variant, material and settings).
+    fn same_but_region(&self, held: &PreparedKey) -> bool {
+        PreparedKey {
+            region: held.region,
+            disc: held.disc,
+            ..self.key.clone()
+        } == *held
+    }
+}
+
 /// Largest change of a disc footprint's covariance (relative, Frobenius) for which a table
 /// pre-filtered with one still serves the other while the viewer moves the light: the
 /// footprint's width then moves by about half of it, 10 %.
@@ -161,6 +197,9 @@ pub struct Renderer {
     /// A variant build on a worker thread (the viewer's); declared after `prepared` so it
     /// is stopped and joined before the device goes.
     background: Option<Background>,
+    /// Superseded builds told to stop, until their workers have (joined when dropped).
+    cancelled: Vec<Background>,
+    builds_cancelled: u64,
     /// Table variants: when positive, built for the needed region widened by this much and
     /// reused while later regions fall inside it (the viewer); 0: built for exactly the region.
     region_margin: f64,
@@ -206,6 +245,8 @@ impl Renderer {
             report: Arc::new(crate::report::Stderr),
             prepared: None,
             background: None,
+            cancelled: Vec::new(),
+            builds_cancelled: 0,
             region_margin: 0.0,
             table_region: None,
             shader_overrides: Default::default(),
@@ -546,6 +587,24 @@ impl Renderer {
         output: OutputMode,
         disc: Option<DiscKernel>,
     ) -> Result<Option<(PreparedKey, Region)>> {
+        let wanted = self.wanted_variant(prepared, region, output, disc)?;
+        if let Some((k, _)) = &self.prepared {
+            if wanted.served_by(k) {
+                return Ok(None);
+            }
+        }
+        Ok(Some((wanted.key, wanted.region)))
+    }
+
+    /// The key of the variant `region` needs, and the region it would be built for (widened
+    /// by the covering margin where the variant reads the region).
+    fn wanted_variant(
+        &self,
+        prepared: &PreparedMaterial,
+        region: Region,
+        output: OutputMode,
+        disc: Option<DiscKernel>,
+    ) -> Result<WantedVariant> {
         self.variant.check_output(output)?;
         let region = self.table_region.unwrap_or(region);
         let per_region = self.variant.implementation().reads_region(self.leave_out);
@@ -582,27 +641,12 @@ impl Renderer {
                 [a[0][0], a[0][1], a[1][0], a[1][1]].map(f64::to_bits)
             }),
         };
-        if let Some((k, _)) = &self.prepared {
-            if *k == key {
-                return Ok(None);
-            }
-            // Covering: another region that holds this one, and a disc footprint close to
-            // this one, serve as well.
-            let same_but_region = PreparedKey {
-                region: k.region,
-                disc: k.disc,
-                ..key.clone()
-            } == *k;
-            if covering
-                && same_but_region
-                && discs_close(k.disc, key.disc)
-                && k.region
-                    .is_some_and(|r| region_contains(&r.map(f64::from_bits), &needed))
-            {
-                return Ok(None);
-            }
-        }
-        Ok(Some((key, region)))
+        Ok(WantedVariant {
+            key,
+            region,
+            needed,
+            covering,
+        })
     }
 
     /// The disc footprint the prepared variant holds (a table with the sun's disc

@@ -30,8 +30,15 @@ pub(super) struct MaterialLoader {
     current: MaterialEdit,
 }
 
-/// The material an edit describes (the height scale applies to the loaded field).
-pub(super) fn edited(base: &Material, edit: MaterialEdit) -> Material {
+/// What an edit describes: the material, and the factor on its loaded field's heights.
+/// Every key (`Z`/`X`, `K`/`L`, `N`) edits through it.
+struct Edited {
+    material: Material,
+    height_scale: f64,
+}
+
+/// The material `edit` makes of `base`.
+fn edited(base: &Material, edit: MaterialEdit) -> Edited {
     let mut m = base.clone();
     if edit.field != 0 {
         // A shipped field at its own calibration: the scene's overrides were for its field.
@@ -40,7 +47,10 @@ pub(super) fn edited(base: &Material, edit: MaterialEdit) -> Material {
         m.h_max_um = None;
     }
     m.coherence_um *= edit.coherence_scale();
-    m
+    Edited {
+        material: m,
+        height_scale: edit.height_scale(),
+    }
 }
 
 fn field_key(m: &Material) -> FieldKey {
@@ -81,12 +91,12 @@ impl MaterialLoader {
             return Ok(());
         }
         let edit = self.wanted;
-        let material = edited(&self.base, edit);
+        let target = edited(&self.base, edit);
         let fields = Arc::clone(&self.fields);
         let cache_dir = self.cache_dir.clone();
         let handle = std::thread::Builder::new()
             .name("material load".into())
-            .spawn(move || load(&material, edit, &fields, cache_dir))
+            .spawn(move || load(&target, &fields, cache_dir))
             .map_err(|e| Error::invalid("material load", format!("no worker thread: {e}")))?;
         self.running = Some((edit, handle));
         Ok(())
@@ -134,11 +144,11 @@ impl Drop for MaterialLoader {
 /// Loads (or reuses) the field, scales it and prepares the material; the DFT terms wait
 /// for a variant that reads them.
 fn load(
-    material: &Material,
-    edit: MaterialEdit,
+    target: &Edited,
     fields: &Mutex<HashMap<FieldKey, Arc<HeightField>>>,
     cache_dir: Option<PathBuf>,
 ) -> Result<PreparedMaterial> {
+    let material = &target.material;
     material.validate()?;
     let key = field_key(material);
     let kept = fields.lock().ok().and_then(|f| f.get(&key).cloned());
@@ -156,9 +166,11 @@ fn load(
             f
         }
     };
-    let hf = match edit.height_steps {
-        0 => (*field).clone(),
-        _ => field.scaled(edit.height_scale())?,
+    // Unscaled (the factor 1 exactly): the kept field itself.
+    let hf = if target.height_scale == 1.0 {
+        (*field).clone()
+    } else {
+        field.scaled(target.height_scale)?
     };
     let plan = material.plan_loaded(&hf, &Reach::ALL, Precision::F32, &crate::report::Stderr)?;
     material.prepare_planned_deferred(hf, plan, cache_dir.as_deref())

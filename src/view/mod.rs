@@ -8,6 +8,7 @@
 //! objects.
 
 mod app;
+mod draw;
 pub mod input;
 mod material;
 pub mod reload;
