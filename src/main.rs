@@ -32,7 +32,7 @@ enum Command {
         markdown: bool,
     },
     /// The DFT-term cache: list its files or clear it.
-    Cache(diffract::spectrum::cache::CacheCommandArgs),
+    Cache(diffract::cli::cache::CacheCommandArgs),
     /// Stability matrix: error of each evaluator against the f64 reference over heights,
     /// light angles, wavelengths and expansions, with the terms used and pass/warned/refused.
     Stability(diffract::stability::StabilityArgs),
@@ -174,7 +174,7 @@ fn main() -> ExitCode {
             }
             Ok(())
         }
-        Command::Cache(a) => diffract::spectrum::cache::run(a),
+        Command::Cache(a) => diffract::cli::cache::run(a),
         Command::Stability(a) => diffract::stability::run(a),
     };
     match result {

@@ -12,10 +12,10 @@
 use std::path::Path;
 
 use super::table::{sample_g_kept, Slices, TableSpec};
+use crate::cache::{mark_used, CacheDir, Fnv1a, TABLE_FILES};
 use crate::fsutil::write_replacing;
 use crate::heightfield::HeightField;
 use crate::report::Report;
-use crate::spectrum::cache::{self, Fnv1a};
 use crate::{Error, Result};
 
 const MAGIC: &[u8; 8] = b"DIFFGTAB";
@@ -192,8 +192,7 @@ pub fn sample_g_cached_by(
         return Ok((build()?, false));
     };
     let (nu, nv) = spec.validate()?;
-    let max = cache::cache_max_bytes()?;
-    cache::clean_stale_temps(dir);
+    let cache = CacheDir::open(dir)?;
     let key = match keep {
         None => key(hf, coherence_um, spec, w_nodes),
         Some(k) => {
@@ -216,17 +215,13 @@ pub fn sample_g_cached_by(
             h.finish()
         }
     };
-    let path = dir.join(format!("gtable-{key:016x}.bin"));
+    let path = cache.file(TABLE_FILES, key);
     // A valid file has exactly this many bytes: read no more than that.
     let expected = (44 + w_nodes.len() * 8 + nu * nv * w_nodes.len() * 12 + 8) as u64;
     match crate::fsutil::read_bounded(&path, "table cache", expected) {
         Ok(data) => match decode(&data, key, w_nodes) {
             Ok(s) if s.nu == nu && s.nv == nv => {
-                // Last use is the mtime: the cache's LRU eviction reads it.
-                let _ = std::fs::File::options()
-                    .append(true)
-                    .open(&path)
-                    .and_then(|f| f.set_modified(std::time::SystemTime::now()));
+                mark_used(&path);
                 return Ok((s, true));
             }
             Ok(_) => report.warn(&format!(
@@ -243,24 +238,21 @@ pub fn sample_g_cached_by(
     }
     let s = build()?;
     let bytes = encode(&s, key);
-    if bytes.len() as u64 > max {
+    if bytes.len() as u64 > cache.max_bytes() {
         report.warn(&format!(
             "the table takes {} MiB, more than the cache cap of {} MiB (DIFFRACT_CACHE_MAX); not cached",
             bytes.len() >> 20,
-            max >> 20
+            cache.max_bytes() >> 20
         ));
         return Ok((s, false));
     }
-    let saved = std::fs::create_dir_all(dir)
-        .map_err(|e| Error::io(dir, e))
-        .and_then(|()| {
-            // A cache file is diffract's own: replaced, never written into (a FIFO or a link
-            // left at its path must not receive it).
-            write_replacing(&path, |w| {
-                std::io::Write::write_all(w, &bytes).map_err(|e| Error::io(&path, e))
-            })
+    // A cache file is diffract's own: replaced, never written into (a FIFO or a link left
+    // at its path must not receive it).
+    let saved = cache.store(&path, |p| {
+        write_replacing(p, |w| {
+            std::io::Write::write_all(w, &bytes).map_err(|e| Error::io(p, e))
         })
-        .and_then(|()| cache::evict(dir, max, Some(&path)).map(|_| ()));
+    });
     if let Err(e) = saved {
         report.warn(&format!("could not write the table cache: {e}"));
     }

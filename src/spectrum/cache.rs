@@ -2,8 +2,8 @@
 //! hash of everything the stack depends on (every height sample, grid, `dH`, expansion,
 //! term count, stored band, format version). A file is trusted only if its magic, version,
 //! key, sizes and trailing checksum all match; anything else is reported as
-//! [`Error::Cache`] and [`terms_cached`] recomputes. This module owns the file format, the
-//! directory's size cap and its housekeeping; it never computes terms itself.
+//! [`Error::Cache`] and [`terms_cached`] recomputes. This module owns the file format; it
+//! never computes terms itself.
 //!
 //! Terms are stored as float32: the GPU samples RG32F (or narrower formats derived from
 //! it), so no variant reads more, and the file is half the size. A stack that goes through
@@ -11,10 +11,8 @@
 //! second run (loaded) see identical values; `--no-cache` keeps the f64 terms. Files are
 //! written and read streaming: neither side holds a second copy of the stack in memory.
 //!
-//! The directory is capped at [`cache_max_bytes`] (`DIFFRACT_CACHE_MAX`, default
-//! [`DEFAULT_CACHE_MAX`]): after a write the least recently used files (mtime, refreshed
-//! on every hit) are removed until the total fits. Temporary files of writers that died
-//! (`.terms-*.tmp-PID-N`) are removed when a later run opens the cache.
+//! The directory, its key hashing, size cap, eviction and the cleanup of temporary files
+//! are [`crate::cache`]'s, shared with the table cache.
 //!
 //! Layout (all little-endian):
 //! ```text
@@ -29,11 +27,11 @@
 //! ```
 
 use std::io::{BufReader, Read, Write};
-use std::path::{Path, PathBuf};
-use std::time::SystemTime;
+use std::path::Path;
 
 use super::num_complex::Complex64;
 use super::{reachable_band, Band, Expansion, Extrema, TermRequest, TermStack};
+use crate::cache::{mark_used, CacheDir, Fnv1a, TERM_FILES};
 use crate::fsutil::write_replacing;
 use crate::heightfield::HeightField;
 use crate::{Error, Result};
@@ -47,8 +45,6 @@ pub const FORMAT_VERSION: u32 = 2;
 const HEADER_LEN: usize = 8 + 4 + 8 + 1 + 1 + 8 + 8 + 8 + 4 * 8 + 8 + 8 + 8;
 /// Stacks never hold more terms than [`TermRequest::validate`] allows (T ≤ 64).
 const MAX_TERMS: usize = 65;
-/// Default cap of the cache directory (bytes) when `DIFFRACT_CACHE_MAX` is not set.
-pub const DEFAULT_CACHE_MAX: u64 = 2 << 30;
 
 /// How the terms are stored in a file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -63,32 +59,6 @@ impl Precision {
             Precision::F32 => 4,
             Precision::F64 => 8,
         }
-    }
-}
-
-/// 64-bit FNV-1a, fed incrementally. Not cryptographic: it guards against corruption and
-/// accidental reuse, not against an adversary who edits cache files.
-#[derive(Clone, Copy)]
-pub(crate) struct Fnv1a(u64);
-
-impl Fnv1a {
-    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
-    const PRIME: u64 = 0x0000_0100_0000_01b3;
-
-    pub(crate) fn new() -> Self {
-        Self(Self::OFFSET)
-    }
-    pub(crate) fn bytes(&mut self, data: &[u8]) {
-        for &b in data {
-            self.0 ^= u64::from(b);
-            self.0 = self.0.wrapping_mul(Self::PRIME);
-        }
-    }
-    pub(crate) fn u64(&mut self, v: u64) {
-        self.bytes(&v.to_le_bytes());
-    }
-    pub(crate) fn finish(self) -> u64 {
-        self.0
     }
 }
 
@@ -465,148 +435,6 @@ pub fn check_memory(hf: &HeightField, req: &TermRequest) -> Result<()> {
     ))
 }
 
-/// The cap of the cache directory in bytes: `DIFFRACT_CACHE_MAX` (bytes, or with a `K`,
-/// `M` or `G` suffix, binary), else [`DEFAULT_CACHE_MAX`]. `0` disables writing.
-pub fn cache_max_bytes() -> Result<u64> {
-    match std::env::var("DIFFRACT_CACHE_MAX") {
-        Ok(v) if !v.trim().is_empty() => parse_size(&v),
-        _ => Ok(DEFAULT_CACHE_MAX),
-    }
-}
-
-/// `"2G"`, `"500M"`, `"64K"`, `"12345"` → bytes.
-pub fn parse_size(text: &str) -> Result<u64> {
-    let t = text.trim();
-    let bad = || {
-        Error::invalid(
-            "DIFFRACT_CACHE_MAX",
-            format!("'{text}'; expected bytes, or a number with K, M or G"),
-        )
-    };
-    let (digits, shift) = match t.char_indices().last() {
-        Some((i, 'K' | 'k')) => (&t[..i], 10),
-        Some((i, 'M' | 'm')) => (&t[..i], 20),
-        Some((i, 'G' | 'g')) => (&t[..i], 30),
-        _ => (t, 0),
-    };
-    let n: u64 = digits.trim().parse().map_err(|_| bad())?;
-    n.checked_mul(1u64 << shift).ok_or_else(bad)
-}
-
-/// File name of the stack stored under `key`.
-fn file_name(key: u64) -> String {
-    format!("terms-{key:016x}.bin")
-}
-
-/// A cache file: path, size and last use.
-#[derive(Debug, Clone)]
-pub struct Entry {
-    pub path: PathBuf,
-    pub bytes: u64,
-    pub last_used: SystemTime,
-}
-
-/// Prefixes of the cache's files: DFT terms, and the sampled `G` tables of the table
-/// variants (`brdf::table_cache`). Both count towards the cap and are listed and cleared.
-pub const FILE_PREFIXES: [&str; 2] = ["terms-", "gtable-"];
-
-/// The cache files (`terms-*.bin`, `gtable-*.bin`) of `dir`, least recently used first.
-pub fn entries(dir: &Path) -> Result<Vec<Entry>> {
-    let rd = match std::fs::read_dir(dir) {
-        Ok(rd) => rd,
-        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
-        Err(e) => return Err(Error::io(dir, e)),
-    };
-    let mut out = Vec::new();
-    for entry in rd.flatten() {
-        let name = entry.file_name();
-        let name = name.to_string_lossy();
-        if !(FILE_PREFIXES.iter().any(|p| name.starts_with(p)) && name.ends_with(".bin")) {
-            continue;
-        }
-        let Ok(meta) = entry.metadata() else { continue };
-        if !meta.is_file() {
-            continue;
-        }
-        out.push(Entry {
-            path: entry.path(),
-            bytes: meta.len(),
-            last_used: meta.modified().unwrap_or(SystemTime::UNIX_EPOCH),
-        });
-    }
-    out.sort_by_key(|e| e.last_used);
-    Ok(out)
-}
-
-/// Removes the least recently used files of `dir` until the total is at most `max` bytes,
-/// never `keep` (the file just written or read). Returns the bytes removed.
-pub fn evict(dir: &Path, max: u64, keep: Option<&Path>) -> Result<u64> {
-    let list = entries(dir)?;
-    let mut total: u64 = list.iter().map(|e| e.bytes).sum();
-    let mut removed = 0;
-    for e in list {
-        if total <= max {
-            break;
-        }
-        if keep.is_some_and(|k| k == e.path) {
-            continue;
-        }
-        if std::fs::remove_file(&e.path).is_ok() {
-            total -= e.bytes;
-            removed += e.bytes;
-        }
-    }
-    Ok(removed)
-}
-
-/// Whether process `pid` is alive. Without `/proc` nothing is known, and temporaries are
-/// then judged by age alone.
-fn process_alive(pid: u32) -> Option<bool> {
-    let proc_root = Path::new("/proc");
-    proc_root
-        .is_dir()
-        .then(|| proc_root.join(pid.to_string()).exists())
-}
-
-/// Removes temporary files `.terms-*.tmp-PID-N` (and `.gtable-*`) left in `dir` by writers that died (a
-/// crash or `kill -9`; an interrupt removes its own). Returns how many were removed.
-pub fn clean_stale_temps(dir: &Path) -> usize {
-    let Ok(rd) = std::fs::read_dir(dir) else {
-        return 0;
-    };
-    let mut removed = 0;
-    for entry in rd.flatten() {
-        let name = entry.file_name();
-        let name = name.to_string_lossy();
-        if !FILE_PREFIXES
-            .iter()
-            .any(|p| name.starts_with(&format!(".{p}")))
-        {
-            continue;
-        }
-        let Some(pid) = name
-            .rsplit_once(".tmp-")
-            .and_then(|(_, rest)| rest.split('-').next())
-            .and_then(|p| p.parse::<u32>().ok())
-        else {
-            continue;
-        };
-        let dead = match process_alive(pid) {
-            Some(alive) => !alive,
-            None => entry
-                .metadata()
-                .and_then(|m| m.modified())
-                .ok()
-                .and_then(|t| t.elapsed().ok())
-                .is_some_and(|age| age.as_secs() > 24 * 3600),
-        };
-        if dead && std::fs::remove_file(entry.path()).is_ok() {
-            removed += 1;
-        }
-    }
-    removed
-}
-
 /// Rounds every term to float32 (what the cache stores and the GPU samples) and recomputes
 /// the extrema of the rounded values.
 fn round_to_f32(stack: &mut TermStack) {
@@ -632,7 +460,7 @@ fn round_to_f32(stack: &mut TermStack) {
 /// The terms of `hf` for `req`, through the cache in `dir` when one is given: a valid file
 /// `terms-{key:016x}.bin` is loaded (and marked as used); a missing one is computed,
 /// rounded to float32 and written, after which the least recently used files are evicted
-/// to keep the directory under [`cache_max_bytes`]; a corrupt or stale one is a one-line
+/// to keep the directory under [`crate::cache::cache_max_bytes`]; a corrupt or stale one is a one-line
 /// warning to `report`, recomputed and overwritten. Failing to write the cache only warns:
 /// the terms are still correct.
 pub fn terms_cached(
@@ -646,17 +474,12 @@ pub fn terms_cached(
     let Some(dir) = dir else {
         return super::compute_terms(hf, req);
     };
-    let max = cache_max_bytes()?;
-    clean_stale_temps(dir);
+    let cache = CacheDir::open(dir)?;
     let key = cache_key(hf, req);
-    let path = dir.join(file_name(key));
+    let path = cache.file(TERM_FILES, key);
     match load(&path, key) {
         Ok(stack) if matches_request(&stack, hf, req) => {
-            // Last use is the mtime: LRU eviction reads it.
-            let _ = std::fs::File::options()
-                .append(true)
-                .open(&path)
-                .and_then(|f| f.set_modified(SystemTime::now()));
+            mark_used(&path);
             return Ok(stack);
         }
         Ok(_) => report.warn(&format!(
@@ -671,19 +494,16 @@ pub fn terms_cached(
     let band = stack.band;
     let bytes = file_len(stack.term_count(), band.width * band.height, Precision::F32)
         .unwrap_or(usize::MAX) as u64;
-    if bytes > max {
+    if bytes > cache.max_bytes() {
         report.warn(&format!(
             "the terms take {} MiB, more than the cache cap of {} MiB \
              (DIFFRACT_CACHE_MAX); not cached",
             bytes >> 20,
-            max >> 20
+            cache.max_bytes() >> 20
         ));
         return Ok(stack);
     }
-    let saved = std::fs::create_dir_all(dir)
-        .map_err(|e| Error::io(dir, e))
-        .and_then(|()| save(&path, &stack, key, Precision::F32))
-        .and_then(|()| evict(dir, max, Some(&path)));
+    let saved = cache.store(&path, |p| save(p, &stack, key, Precision::F32));
     if let Err(e) = saved {
         report.warn(&format!("could not write the term cache: {e}"));
     }
@@ -709,109 +529,6 @@ pub fn read_header(path: &Path) -> std::result::Result<Header, String> {
         hash: Fnv1a::new(),
     };
     decode_header(&mut r, meta.len())
-}
-
-/// `diffract cache` options.
-#[derive(Debug, Clone, clap::Args)]
-pub struct CacheCommandArgs {
-    /// What to do.
-    #[arg(value_enum, default_value_t = CacheAction::List)]
-    pub action: CacheAction,
-    /// Directory of the DFT-term cache (default: $DIFFRACT_CACHE or ~/.cache/diffract).
-    #[arg(long)]
-    pub cache_dir: Option<PathBuf>,
-}
-
-/// `diffract cache list|clear`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum CacheAction {
-    /// One line per file (size, last use, what it holds) and the total against the cap.
-    List,
-    /// Remove every term file and stale temporary file.
-    Clear,
-}
-
-/// Runs `diffract cache`.
-pub fn run(args: &CacheCommandArgs) -> Result<()> {
-    let dir = args
-        .cache_dir
-        .clone()
-        .or_else(crate::cachedir::default_cache_dir)
-        .ok_or_else(|| {
-            Error::invalid(
-                "cache directory",
-                "none: set DIFFRACT_CACHE or HOME, or give --cache-dir",
-            )
-        })?;
-    let max = cache_max_bytes()?;
-    let temps = clean_stale_temps(&dir);
-    let list = entries(&dir)?;
-    let total: u64 = list.iter().map(|e| e.bytes).sum();
-    match args.action {
-        CacheAction::List => {
-            for e in &list {
-                let age = e
-                    .last_used
-                    .elapsed()
-                    .map_or("?".to_string(), |d| format!("{}", d.as_secs()));
-                let gtable = e
-                    .path
-                    .file_name()
-                    .is_some_and(|n| n.to_string_lossy().starts_with("gtable-"));
-                let what = match read_header(&e.path) {
-                    _ if gtable => "sampled G table of a table variant".to_string(),
-                    Ok(h) => format!(
-                        "{}×{} {} T={} band {}×{} {:?}",
-                        h.nx,
-                        h.ny,
-                        h.expansion,
-                        h.count.saturating_sub(1),
-                        h.band.width,
-                        h.band.height,
-                        h.precision
-                    ),
-                    Err(msg) => format!("unreadable: {msg}"),
-                };
-                println!(
-                    "{}  {:>8.1} MiB  used {age} s ago  {what}",
-                    e.path.display(),
-                    e.bytes as f64 / (1u64 << 20) as f64
-                );
-            }
-            println!(
-                "{}: {} file(s), {:.1} MiB of {:.1} MiB (DIFFRACT_CACHE_MAX){}",
-                dir.display(),
-                list.len(),
-                total as f64 / (1u64 << 20) as f64,
-                max as f64 / (1u64 << 20) as f64,
-                if temps > 0 {
-                    format!("; removed {temps} stale temporary file(s)")
-                } else {
-                    String::new()
-                }
-            );
-        }
-        CacheAction::Clear => {
-            let mut removed = 0u64;
-            let mut count = 0usize;
-            for e in &list {
-                std::fs::remove_file(&e.path).map_err(|err| Error::io(&e.path, err))?;
-                removed += e.bytes;
-                count += 1;
-            }
-            println!(
-                "{}: removed {count} file(s), {:.1} MiB{}",
-                dir.display(),
-                removed as f64 / (1u64 << 20) as f64,
-                if temps > 0 {
-                    format!(" and {temps} stale temporary file(s)")
-                } else {
-                    String::new()
-                }
-            );
-        }
-    }
-    Ok(())
 }
 
 #[cfg(test)]
@@ -1048,55 +765,6 @@ mod tests {
         let mut s = stack(&hf, &req);
         s.terms[1].pop();
         assert!(encode(&s, 0, Precision::F32, Vec::new(), Path::new("m")).is_err());
-    }
-
-    #[test]
-    fn sizes_parse_with_suffixes() {
-        assert_eq!(parse_size("12345").unwrap(), 12345);
-        assert_eq!(parse_size("64K").unwrap(), 64 << 10);
-        assert_eq!(parse_size(" 500m ").unwrap(), 500 << 20);
-        assert_eq!(parse_size("2G").unwrap(), 2 << 30);
-        for bad in ["", "G", "-1", "1.5G", "1T", "99999999999999999999G"] {
-            assert!(parse_size(bad).is_err(), "{bad}");
-        }
-    }
-
-    #[test]
-    fn eviction_removes_least_recently_used_first() {
-        let dir = tmpdir("lru");
-        let t0 = SystemTime::now() - std::time::Duration::from_secs(1000);
-        for (i, age) in [(0u64, 300), (1, 100), (2, 200)] {
-            let p = dir.join(file_name(i));
-            std::fs::write(&p, vec![0u8; 1000]).unwrap();
-            let f = std::fs::File::options().append(true).open(&p).unwrap();
-            f.set_modified(t0 + std::time::Duration::from_secs(age))
-                .unwrap();
-        }
-        std::fs::write(dir.join("unrelated.txt"), vec![0u8; 5000]).unwrap();
-        // Over the cap by one file: the oldest (key 1, mtime +100) goes, unless kept.
-        let keep = dir.join(file_name(1));
-        assert_eq!(evict(&dir, 2500, Some(&keep)).unwrap(), 1000);
-        assert!(keep.exists() && !dir.join(file_name(2)).exists());
-        assert_eq!(evict(&dir, 0, None).unwrap(), 2000);
-        assert!(entries(&dir).unwrap().is_empty());
-        assert!(dir.join("unrelated.txt").exists());
-        let _ = std::fs::remove_dir_all(&dir);
-    }
-
-    #[test]
-    fn temporaries_of_dead_processes_are_removed() {
-        let dir = tmpdir("tmp");
-        // PID 0 is never a user process; our own PID is alive.
-        let dead = dir.join(".terms-00000000000000aa.bin.tmp-0-0");
-        let dead2 = dir.join(format!(".terms-00.bin.tmp-{}-3", u32::MAX - 1));
-        let alive = dir.join(format!(".terms-00.bin.tmp-{}-0", std::process::id()));
-        let other = dir.join(".other.tmp-0-0");
-        for p in [&dead, &dead2, &alive, &other] {
-            std::fs::write(p, b"x").unwrap();
-        }
-        assert_eq!(clean_stale_temps(&dir), 2);
-        assert!(!dead.exists() && !dead2.exists() && alive.exists() && other.exists());
-        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

@@ -1,0 +1,302 @@
+//! The on-disk cache that the DFT terms ([`crate::spectrum::cache`]) and the sampled tables
+//! ([`crate::brdf::table_cache`]) share: the keys (64-bit FNV-1a over everything a file
+//! depends on) and file names, the directory's size cap and its least-recently-used
+//! eviction, the listing, and the removal of temporary files left by writers that died.
+//! Each cache owns its file format; this module never reads inside a file.
+//!
+//! The directory is capped at [`cache_max_bytes`] (`DIFFRACT_CACHE_MAX`, default
+//! [`DEFAULT_CACHE_MAX`]): after a write the least recently used files (mtime, refreshed
+//! on every hit by [`mark_used`]) are removed until the total fits. Temporary files of
+//! writers that died (`.terms-*.tmp-PID-N`, `.gtable-*.tmp-PID-N`) are removed when a later
+//! run opens the directory ([`CacheDir::open`]).
+
+use std::path::{Path, PathBuf};
+use std::time::SystemTime;
+
+use crate::{Error, Result};
+
+/// Default cap of the cache directory (bytes).
+pub const DEFAULT_CACHE_MAX: u64 = 2 << 30;
+
+/// File-name prefix of the DFT-term files.
+pub const TERM_FILES: &str = "terms-";
+/// File-name prefix of the sampled `G` tables of the table variants.
+pub const TABLE_FILES: &str = "gtable-";
+/// Prefixes of the cache's files: both count towards the cap and are listed and cleared.
+pub const FILE_PREFIXES: [&str; 2] = [TERM_FILES, TABLE_FILES];
+
+/// 64-bit FNV-1a, fed incrementally. Not cryptographic: it guards against corruption and
+/// accidental reuse, not against an adversary who edits cache files.
+#[derive(Clone, Copy)]
+pub struct Fnv1a(u64);
+
+impl Default for Fnv1a {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl Fnv1a {
+    const OFFSET: u64 = 0xcbf2_9ce4_8422_2325;
+    const PRIME: u64 = 0x0000_0100_0000_01b3;
+
+    pub fn new() -> Self {
+        Self(Self::OFFSET)
+    }
+    pub fn bytes(&mut self, data: &[u8]) {
+        for &b in data {
+            self.0 ^= u64::from(b);
+            self.0 = self.0.wrapping_mul(Self::PRIME);
+        }
+    }
+    pub fn u64(&mut self, v: u64) {
+        self.bytes(&v.to_le_bytes());
+    }
+    pub fn finish(self) -> u64 {
+        self.0
+    }
+}
+
+/// The file a cache with file-name prefix `prefix` stores under `key`.
+pub fn file_name(prefix: &str, key: u64) -> String {
+    format!("{prefix}{key:016x}.bin")
+}
+
+/// A cache directory opened for one lookup: its cap read and the temporaries of dead
+/// writers removed.
+pub struct CacheDir<'a> {
+    dir: &'a Path,
+    max: u64,
+}
+
+impl<'a> CacheDir<'a> {
+    /// Reads the cap ([`cache_max_bytes`]; a nonsense `DIFFRACT_CACHE_MAX` is the error)
+    /// and removes stale temporaries ([`clean_stale_temps`]).
+    pub fn open(dir: &'a Path) -> Result<Self> {
+        let max = cache_max_bytes()?;
+        clean_stale_temps(dir);
+        Ok(Self { dir, max })
+    }
+
+    /// The path of the file stored under `key` by the cache with file-name prefix `prefix`.
+    pub fn file(&self, prefix: &str, key: u64) -> PathBuf {
+        self.dir.join(file_name(prefix, key))
+    }
+
+    /// The cap in bytes: a file larger than this is not stored.
+    pub fn max_bytes(&self) -> u64 {
+        self.max
+    }
+
+    /// Stores a file: creates the directory, has `save` write `path` (which it replaces
+    /// atomically, see [`crate::fsutil::write_replacing`]) and evicts the least recently
+    /// used files, never `path`, until the directory fits the cap.
+    pub fn store(&self, path: &Path, save: impl FnOnce(&Path) -> Result<()>) -> Result<()> {
+        std::fs::create_dir_all(self.dir).map_err(|e| Error::io(self.dir, e))?;
+        save(path)?;
+        evict(self.dir, self.max, Some(path)).map(|_| ())
+    }
+}
+
+/// Marks a cache file as just used: last use is the mtime, which eviction reads.
+pub fn mark_used(path: &Path) {
+    let _ = std::fs::File::options()
+        .append(true)
+        .open(path)
+        .and_then(|f| f.set_modified(SystemTime::now()));
+}
+
+/// The cap of the cache directory in bytes: `DIFFRACT_CACHE_MAX` (bytes, or with a `K`,
+/// `M` or `G` suffix, binary), else [`DEFAULT_CACHE_MAX`]. `0` disables writing.
+pub fn cache_max_bytes() -> Result<u64> {
+    match std::env::var("DIFFRACT_CACHE_MAX") {
+        Ok(v) if !v.trim().is_empty() => parse_size(&v),
+        _ => Ok(DEFAULT_CACHE_MAX),
+    }
+}
+
+/// `"2G"`, `"500M"`, `"64K"`, `"12345"` → bytes.
+pub fn parse_size(text: &str) -> Result<u64> {
+    let t = text.trim();
+    let bad = || {
+        Error::invalid(
+            "DIFFRACT_CACHE_MAX",
+            format!("'{text}'; expected bytes, or a number with K, M or G"),
+        )
+    };
+    let (digits, shift) = match t.char_indices().last() {
+        Some((i, 'K' | 'k')) => (&t[..i], 10),
+        Some((i, 'M' | 'm')) => (&t[..i], 20),
+        Some((i, 'G' | 'g')) => (&t[..i], 30),
+        _ => (t, 0),
+    };
+    let n: u64 = digits.trim().parse().map_err(|_| bad())?;
+    n.checked_mul(1u64 << shift).ok_or_else(bad)
+}
+
+/// A cache file: path, size and last use.
+#[derive(Debug, Clone)]
+pub struct Entry {
+    pub path: PathBuf,
+    pub bytes: u64,
+    pub last_used: SystemTime,
+}
+
+/// The cache files (`terms-*.bin`, `gtable-*.bin`) of `dir`, least recently used first.
+pub fn entries(dir: &Path) -> Result<Vec<Entry>> {
+    let rd = match std::fs::read_dir(dir) {
+        Ok(rd) => rd,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => return Ok(Vec::new()),
+        Err(e) => return Err(Error::io(dir, e)),
+    };
+    let mut out = Vec::new();
+    for entry in rd.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if !(FILE_PREFIXES.iter().any(|p| name.starts_with(p)) && name.ends_with(".bin")) {
+            continue;
+        }
+        let Ok(meta) = entry.metadata() else { continue };
+        if !meta.is_file() {
+            continue;
+        }
+        out.push(Entry {
+            path: entry.path(),
+            bytes: meta.len(),
+            last_used: meta.modified().unwrap_or(SystemTime::UNIX_EPOCH),
+        });
+    }
+    out.sort_by_key(|e| e.last_used);
+    Ok(out)
+}
+
+/// Removes the least recently used files of `dir` until the total is at most `max` bytes,
+/// never `keep` (the file just written or read). Returns the bytes removed.
+pub fn evict(dir: &Path, max: u64, keep: Option<&Path>) -> Result<u64> {
+    let list = entries(dir)?;
+    let mut total: u64 = list.iter().map(|e| e.bytes).sum();
+    let mut removed = 0;
+    for e in list {
+        if total <= max {
+            break;
+        }
+        if keep.is_some_and(|k| k == e.path) {
+            continue;
+        }
+        if std::fs::remove_file(&e.path).is_ok() {
+            total -= e.bytes;
+            removed += e.bytes;
+        }
+    }
+    Ok(removed)
+}
+
+/// Whether process `pid` is alive. Without `/proc` nothing is known, and temporaries are
+/// then judged by age alone.
+fn process_alive(pid: u32) -> Option<bool> {
+    let proc_root = Path::new("/proc");
+    proc_root
+        .is_dir()
+        .then(|| proc_root.join(pid.to_string()).exists())
+}
+
+/// Removes temporary files `.terms-*.tmp-PID-N` and `.gtable-*.tmp-PID-N` left in `dir` by
+/// writers that died (a crash or `kill -9`; an interrupt removes its own). Returns how many
+/// were removed.
+pub fn clean_stale_temps(dir: &Path) -> usize {
+    let Ok(rd) = std::fs::read_dir(dir) else {
+        return 0;
+    };
+    let mut removed = 0;
+    for entry in rd.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if !FILE_PREFIXES
+            .iter()
+            .any(|p| name.starts_with(&format!(".{p}")))
+        {
+            continue;
+        }
+        let Some(pid) = name
+            .rsplit_once(".tmp-")
+            .and_then(|(_, rest)| rest.split('-').next())
+            .and_then(|p| p.parse::<u32>().ok())
+        else {
+            continue;
+        };
+        let dead = match process_alive(pid) {
+            Some(alive) => !alive,
+            None => entry
+                .metadata()
+                .and_then(|m| m.modified())
+                .ok()
+                .and_then(|t| t.elapsed().ok())
+                .is_some_and(|age| age.as_secs() > 24 * 3600),
+        };
+        if dead && std::fs::remove_file(entry.path()).is_ok() {
+            removed += 1;
+        }
+    }
+    removed
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tmpdir(name: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("diffract-cache-{name}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).expect("temp dir");
+        d
+    }
+
+    #[test]
+    fn sizes_parse_with_suffixes() {
+        assert_eq!(parse_size("12345").unwrap(), 12345);
+        assert_eq!(parse_size("64K").unwrap(), 64 << 10);
+        assert_eq!(parse_size(" 500m ").unwrap(), 500 << 20);
+        assert_eq!(parse_size("2G").unwrap(), 2 << 30);
+        for bad in ["", "G", "-1", "1.5G", "1T", "99999999999999999999G"] {
+            assert!(parse_size(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn eviction_removes_least_recently_used_first() {
+        let dir = tmpdir("lru");
+        let t0 = SystemTime::now() - std::time::Duration::from_secs(1000);
+        for (i, age) in [(0u64, 300), (1, 100), (2, 200)] {
+            let p = dir.join(file_name(TERM_FILES, i));
+            std::fs::write(&p, vec![0u8; 1000]).unwrap();
+            let f = std::fs::File::options().append(true).open(&p).unwrap();
+            f.set_modified(t0 + std::time::Duration::from_secs(age))
+                .unwrap();
+        }
+        std::fs::write(dir.join("unrelated.txt"), vec![0u8; 5000]).unwrap();
+        // Over the cap by one file: the oldest (key 1, mtime +100) goes, unless kept.
+        let keep = dir.join(file_name(TERM_FILES, 1));
+        assert_eq!(evict(&dir, 2500, Some(&keep)).unwrap(), 1000);
+        assert!(keep.exists() && !dir.join(file_name(TERM_FILES, 2)).exists());
+        assert_eq!(evict(&dir, 0, None).unwrap(), 2000);
+        assert!(entries(&dir).unwrap().is_empty());
+        assert!(dir.join("unrelated.txt").exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    #[test]
+    fn temporaries_of_dead_processes_are_removed() {
+        let dir = tmpdir("tmp");
+        // PID 0 is never a user process; our own PID is alive.
+        let dead = dir.join(".terms-00000000000000aa.bin.tmp-0-0");
+        let dead2 = dir.join(format!(".terms-00.bin.tmp-{}-3", u32::MAX - 1));
+        let alive = dir.join(format!(".terms-00.bin.tmp-{}-0", std::process::id()));
+        let other = dir.join(".other.tmp-0-0");
+        for p in [&dead, &dead2, &alive, &other] {
+            std::fs::write(p, b"x").unwrap();
+        }
+        assert_eq!(clean_stale_temps(&dir), 2);
+        assert!(!dead.exists() && !dead2.exists() && alive.exists() && other.exists());
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}
