@@ -326,12 +326,10 @@ pub fn scan_line_peak(h: &[f64], nx: usize, ny: usize) -> (f64, usize) {
     // Parseval: the k_x = 0 column holds nx·Σ_r m_r² = (nx/ny)·Σ_k |M_k|²; ±k both count.
     let power = |k: usize| 2.0 * nx as f64 / ny as f64 * m[k].norm_sqr();
     let top = ny.div_ceil(2) - 1;
-    (3..=top.saturating_sub(1))
-        .map(|k| {
-            let s = power(k - 1) + power(k) + power(k + 1);
-            (s / energy, k)
-        })
-        .fold((0.0, 0), |a, b| if b.0 > a.0 { b } else { a })
+    let Some(k) = (3..top).max_by(|&a, &b| power(a).total_cmp(&power(b))) else {
+        return (0.0, 0);
+    };
+    ((power(k - 1) + power(k) + power(k + 1)) / energy, k)
 }
 
 /// Levels `hf` by `steps` (module docs). The result keeps the grid and `dH`.
