@@ -706,3 +706,101 @@ fn bad_scan_files_give_one_error_line_each() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `--tile` on a scan that does not tile (10.5 periods of a 1.219 µm grating over 12.8 µm):
+/// the seam's share, the grating-equation period and ρ at the orders against a grating of
+/// the same profile that tiles (10 whole periods of 1.28 µm, its own orders). The numbers
+/// are the ones docs/scans.md quotes.
+#[test]
+fn tile_modes_measured_on_the_orders() {
+    let d = tmpdir("tile");
+    let period_um = 12.8 / 10.5;
+    let n = 256;
+    let v: Vec<f32> = (0..n * n)
+        .map(|i| {
+            let x = (i % n) as f64 * DH;
+            (0.1 * (1.0 + (std::f64::consts::TAU * x / period_um).cos()) * 1e-6) as f32
+        })
+        .collect();
+    let header = format!(
+        "XRes = {n}\nYRes = {n}\nXReal = {0}\nYReal = {0}\nXYUnits = m\nZUnits = m\nTitle = Height\n",
+        n as f64 * DH * 1e-6
+    );
+    let p = d.join("cut.gsf");
+    std::fs::write(&p, fixture::gsf(&header, &v)).unwrap();
+    let material = Material {
+        lambda_step_nm: 50,
+        ..Material::default()
+    };
+    let measure = |hf: HeightField, period_um: f64| {
+        let report = Collect::default();
+        let reach = diffract::brdf::truncation::Reach::ALL;
+        let f64p = diffract::brdf::truncation::Precision::F64;
+        let plan = material.plan_loaded(&hf, &reach, f64p, &report).unwrap();
+        let prep = material.prepare_planned(hf, plan, None, &report).unwrap();
+        let g = diffract::eval::grating_equation(&prep, 75.0, 0.0, &[450.0, 550.0, 650.0], 0.02)
+            .unwrap()
+            .mean_nm;
+        let wi = direction(30.0, 180.0);
+        let rho: Vec<f64> = [-2.0, -1.0, 1.0]
+            .iter()
+            .map(|order| {
+                let x: f64 = 0.5 + order * 0.5 / period_um;
+                let wr = direction(
+                    x.abs().asin().to_degrees(),
+                    if x < 0.0 { 180.0 } else { 0.0 },
+                );
+                model::rho(
+                    &prep.stack,
+                    prep.terms(),
+                    &prep.window,
+                    &prep.shading,
+                    wi,
+                    wr,
+                    500.0,
+                )
+            })
+            .collect();
+        (g, rho)
+    };
+    let tiling: Vec<f64> = (0..n * n)
+        .map(|i| 0.1 * (1.0 + (std::f64::consts::TAU * (i % n) as f64 * DH / 1.28).cos()))
+        .collect();
+    let (_, rho_ref) = measure(HeightField::new(n, n, DH, tiling).unwrap(), 1.28);
+    let mut shares = Vec::new();
+    for tile in [Tile::None, Tile::Mirror, Tile::Window, Tile::Grow] {
+        let src = Source {
+            level: Some("none".into()),
+            tile: Some(tile),
+            ..Source::new(p.to_string_lossy())
+        };
+        let hf = src.load(&Collect::default()).unwrap();
+        let share = diffract::heightfield::seam::seam_share(&hf);
+        let (g, rho) = measure(hf, period_um);
+        let rel: Vec<String> = rho
+            .iter()
+            .zip(&rho_ref)
+            .map(|(r, c)| format!("{:.1} %", r / c * 100.0))
+            .collect();
+        eprintln!(
+            "tile {tile}: seam {:.2} %, period {g:.1} nm ({:+.2} %), ρ at orders −2, −1, 1: {}",
+            share * 100.0,
+            (g / (period_um * 1e3) - 1.0) * 100.0,
+            rel.join(", ")
+        );
+        shares.push(share);
+        if tile == Tile::Mirror {
+            // 21 whole periods over the doubled side: the orders come back.
+            assert!((g / (period_um * 1e3) - 1.0).abs() < 1e-3, "{g}");
+            for (r, c) in rho.iter().zip(&rho_ref) {
+                assert!((r / c - 1.0).abs() < 0.1, "{r} vs {c}");
+            }
+        }
+    }
+    assert!(shares[0] > 0.01, "{shares:?}");
+    assert!(
+        shares[1] < 1e-6 && shares[2] < 0.1 * shares[0],
+        "{shares:?}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
