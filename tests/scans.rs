@@ -804,3 +804,65 @@ fn tile_modes_measured_on_the_orders() {
     );
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// Mutated and truncated files (seeded): the readers answer with an error or a channel,
+/// never a panic and never an allocation beyond the file.
+#[test]
+fn mutated_scan_files_never_panic() {
+    use diffract::heightfield::{gsf, gwy};
+    let p = Path::new("fuzz");
+    let gwy_good = gwy_with(vec![
+        (0, chan("Height", "m", 6, 5)),
+        (3, chan("Phase", "deg", 2, 2)),
+    ]);
+    let gsf_good = good_gsf();
+    let mut state = 0x2545_f491_4f6c_dd1du64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        state
+    };
+    let (mut errors, mut reads) = (0, 0);
+    for i in 0..4000 {
+        let mut b = if i % 2 == 0 {
+            gwy_good.clone()
+        } else {
+            gsf_good.clone()
+        };
+        match next() % 4 {
+            0 => b.truncate((next() % b.len() as u64) as usize),
+            1 => {
+                let at = (next() % b.len() as u64) as usize;
+                b[at] = next() as u8;
+            }
+            2 => {
+                let at = (next() % (b.len() as u64 - 4)) as usize;
+                b[at..at + 4].copy_from_slice(&(next() as u32).to_le_bytes());
+            }
+            _ => {
+                let at = (next() % b.len() as u64) as usize;
+                b[at] = [0u8, 0xff, b'D', b'O', b'o'][(next() % 5) as usize];
+            }
+        }
+        let ok = if i % 2 == 0 {
+            let f = gwy::GwyFile::from_bytes(b);
+            f.channels(p)
+                .and_then(|c| (0..c.len()).try_for_each(|k| f.channel(p, k).map(|_| ())))
+        } else {
+            gsf::parse(p, &b).map(|_| ())
+        };
+        match ok {
+            Ok(()) => reads += 1,
+            Err(e) => {
+                assert!(!e.to_string().contains('\n'), "{e}");
+                errors += 1;
+            }
+        }
+    }
+    eprintln!("mutated files: {reads} read, {errors} refused");
+    assert!(
+        errors > 1000 && reads > 100,
+        "{reads} read, {errors} refused"
+    );
+}

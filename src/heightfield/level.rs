@@ -335,6 +335,12 @@ pub fn scan_line_peak(h: &[f64], nx: usize, ny: usize) -> (f64, usize) {
 /// Levels `hf` by `steps` (module docs). The result keeps the grid and `dH`.
 pub fn level(hf: &HeightField, steps: &Levelling) -> Result<(HeightField, LevelReport)> {
     let (nx, ny, dh) = (hf.nx(), hf.ny(), hf.dh_um());
+    if nx.min(ny) < 3 {
+        return Err(Error::invalid(
+            "level",
+            format!("{steps}: a {nx}×{ny} field is too small to level (at least 3×3); use none"),
+        ));
+    }
     let input = hf.heights_um();
     let mut h = input.to_vec();
     let mut warnings = Vec::new();
@@ -401,8 +407,7 @@ fn measure(
     let (nx, ny, dh) = (hf.nx(), hf.ny(), hf.dh_um());
     let input = hf.heights_um();
     let (lx, ly) = (nx as f64 * dh, ny as f64 * dh);
-    let deg = if nx.min(ny) > 2 { 2 } else { 1 };
-    let fit = PolyFit::fit(input, nx, ny, deg)?;
+    let fit = PolyFit::fit(input, nx, ny, 2)?;
     // P_1(t) = t with t = 2x/L − 1 (heights and x both in µm): slope = 2·c/L.
     let (sx, sy) = (2.0 * fit.coef_of(1, 0) / lx, 2.0 * fit.coef_of(0, 1) / ly);
     let tilt_deg = sx.hypot(sy).atan().to_degrees();
