@@ -13,7 +13,7 @@ use crate::heightfield::{sidecar_path, BUILTIN_PREFIX};
 use crate::{Error, Result};
 
 /// Height-field extensions whose sidecar is `stem.toml` (see `heightfield::io`).
-const HEIGHTFIELD_EXTENSIONS: [&str; 2] = ["png", "f32"];
+const HEIGHTFIELD_EXTENSIONS: [&str; 4] = ["png", "f32", "gsf", "gwy"];
 
 pub use crate::fsutil::{check_output, check_outputs, refuse_overwrite, same_file};
 

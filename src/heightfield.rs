@@ -1,5 +1,6 @@
 //! Height fields of nanostructures (MODEL §1): a periodic grid of heights in µm with pixel
-//! size `dH`. Owns validation, loading (PNG 8/16-bit, raw f32 with a TOML sidecar), the
+//! size `dH`. Owns validation, loading (PNG 8/16-bit, raw f32 with a TOML sidecar, Gwyddion
+//! `.gsf`/`.gwy` scans with their units; one loader, [`Source`]), levelling, seams, the
 //! seeded generators of the MODEL §9 test gratings and the growing of a measured crop into a
 //! coherence-sized field. It knows nothing about spectra or GPUs.
 
@@ -7,7 +8,13 @@ use crate::{Error, Result};
 
 mod generate;
 mod grow;
+pub mod gsf;
+pub mod gwy;
 mod io;
+pub mod level;
+pub mod load;
+pub mod scan;
+pub mod seam;
 
 pub use generate::{
     generate, GratingKind, GratingSpec, LatticeWave, DEFAULT_DH_UM, DEFAULT_SIZE_UM,
@@ -17,6 +24,9 @@ pub use grow::{grow, GROW_ITERATIONS};
 pub use io::{
     sidecar_path, BUILTIN_PREFIX, GROWN_SAMPLES, MEASURED_ELAPHE_DH_UM, MEASURED_ELAPHE_H_MAX_UM,
 };
+pub use level::{LevelReport, Levelling};
+pub use load::Source;
+pub use seam::Tile;
 
 /// Largest accepted side length (samples). 4096² f64 heights are 128 MiB, and each DFT
 /// term of that size another 256 MiB: beyond this the precompute is not interactive.

@@ -6,7 +6,7 @@
 use crate::brdf::truncation::{self, Geometry, Precision, Reach, TermPlan};
 use crate::brdf::Shading;
 use crate::colour::ColourTable;
-use crate::heightfield::HeightField;
+use crate::heightfield::{HeightField, Source, Tile};
 use crate::report::Report;
 use crate::spectrum::{self, Expansion, TermRequest, TermStack, Window};
 use crate::{Error, Result};
@@ -29,8 +29,17 @@ pub struct Material {
     pub heightfield: String,
     /// Pixel size (µm); overrides the sidecar.
     pub dh_um: Option<f64>,
-    /// Height of grey level 1 (µm); overrides the sidecar.
+    /// Height of grey level 1 (µm); for scans and built-in fields the peak-to-valley
+    /// height. Overrides the sidecar.
     pub h_max_um: Option<f64>,
+    /// Scans (`.gsf`, `.gwy`): the channel, by index or title (default: the first height
+    /// channel).
+    pub channel: Option<String>,
+    /// Levelling steps, a comma list of `none`, `plane`, `poly:N`, `rows` (default:
+    /// `plane,rows` for scans, `none` for images, `.f32` and built-in fields).
+    pub level: Option<String>,
+    /// How the field is made to tile: `none` (default), `mirror`, `window` or `grow`.
+    pub tile: Option<Tile>,
     /// Chebyshev (stable, the default) or Taylor (thesis) expansion. With `terms = auto`
     /// this is a preference: where it cannot meet the tolerance the other one is used, with
     /// a warning.
@@ -60,6 +69,9 @@ impl Default for Material {
             heightfield: "builtin:elaphe".into(),
             dh_um: None,
             h_max_um: None,
+            channel: None,
+            level: None,
+            tile: None,
             expansion: Expansion::Chebyshev,
             terms: Terms::Auto,
             tolerance: truncation::DEFAULT_TOLERANCE,
@@ -159,8 +171,26 @@ impl Material {
         }
     }
 
-    /// Checks every numeric field for sense.
+    /// Where the height field comes from: the one loader's [`Source`].
+    pub fn source(&self) -> Source {
+        Source {
+            spec: self.heightfield.clone(),
+            dh_um: self.dh_um,
+            h_max_um: self.h_max_um,
+            channel: self.channel.clone(),
+            level: self.level.clone(),
+            tile: self.tile,
+        }
+    }
+
+    /// Loads (reads, levels, tiles) the height field; what was done goes to `report`.
+    pub fn load_heightfield(&self, report: &dyn Report) -> Result<HeightField> {
+        self.source().load(report)
+    }
+
+    /// Checks every numeric field (and the height field's options) for sense.
     pub fn validate(&self) -> Result<()> {
+        self.source().validate()?;
         let max_term = match self.terms {
             Terms::Auto => 0,
             Terms::Fixed(t) => t,
@@ -256,7 +286,7 @@ impl Material {
         report: &dyn Report,
     ) -> Result<(HeightField, TermPlan)> {
         self.validate()?;
-        let heightfield = HeightField::load_source(&self.heightfield, self.dh_um, self.h_max_um)?;
+        let heightfield = self.load_heightfield(report)?;
         let plan = self.plan_loaded(&heightfield, reach, precision, report)?;
         Ok((heightfield, plan))
     }

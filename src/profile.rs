@@ -817,7 +817,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     // The user's numbers and height field are checked before the device opens (each
     // variant loads the field again when it prepares; that is cheap next to its terms).
     base.validate()?;
-    crate::heightfield::HeightField::load_source(&base.heightfield, base.dh_um, base.h_max_um)?;
+    base.load_heightfield(&crate::report::Stderr)?;
     let mut renderer = Renderer::new(crate::cli::gpu::validation_requested())?;
     let mesh = (args.mesh_size > 0).then(|| {
         let mut s = Scene::default_scene();

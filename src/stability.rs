@@ -444,6 +444,13 @@ pub struct StabilityArgs {
     /// Pixel size override for --heightfield (µm).
     #[arg(long)]
     pub dh_um: Option<f64>,
+    /// Scan channel of --heightfield, by index or title [default: the first height channel].
+    #[arg(long, requires = "heightfield")]
+    pub channel: Option<String>,
+    /// Levelling of --heightfield: none, plane, poly:N, rows, comma-separated [default:
+    /// plane,rows for scans, none otherwise].
+    #[arg(long, requires = "heightfield")]
+    pub level: Option<String>,
     /// Peak-to-valley heights (µm).
     #[arg(long, num_args = 1.., default_values_t = H_MAX_UM)]
     pub hmax_um: Vec<f64>,
@@ -475,7 +482,13 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
     stability_args(args)?;
     let (field, name, period) = match &args.heightfield {
         Some(src) => (
-            HeightField::load_source(src, args.dh_um, None)?,
+            crate::heightfield::Source {
+                dh_um: args.dh_um,
+                channel: args.channel.clone(),
+                level: args.level.clone(),
+                ..crate::heightfield::Source::new(src.as_str())
+            }
+            .load(&crate::report::Stderr)?,
             src.clone(),
             None,
         ),

@@ -396,6 +396,8 @@ fn args(kind: GratingKind, out: PathBuf) -> HeightfieldArgs {
         from_sample: None,
         samples: None,
         hmax_um: None,
+        channel: None,
+        level: None,
         out,
         size_um: Some(10.0),
         dh_um: None,

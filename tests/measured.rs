@@ -407,6 +407,8 @@ fn builtin_and_cli_growing_agree() {
         samples: Some(GROWN_SAMPLES),
         dh_um: None,
         hmax_um: None,
+        channel: None,
+        level: None,
         period_um: None,
         height_um: None,
         angle_deg: None,

@@ -9,7 +9,6 @@ use crate::cli::cache::CacheArgs;
 use crate::cli::material::MaterialArgs;
 use crate::colour::ColourTable;
 use crate::fsutil::write_atomic;
-use crate::heightfield::HeightField;
 use crate::Result;
 
 /// `diffract brdf` options.
@@ -42,8 +41,7 @@ pub fn run(args: &BrdfArgs) -> Result<()> {
     let queries = parse_queries(&args.queries, &text)?;
     let answers = match args.method {
         Method::Reference => {
-            let hf =
-                HeightField::load_source(&material.heightfield, material.dh_um, material.h_max_um)?;
+            let hf = material.load_heightfield(&crate::report::Stderr)?;
             // MODEL §6.1: 1 nm steps unless a step was asked for explicitly.
             let table = ColourTable::new(args.material.lambda_step_nm.unwrap_or(1))?;
             let shading = material.shading();

@@ -15,7 +15,7 @@ pub struct HeightfieldArgs {
     /// Which grating to synthesise.
     #[arg(long, value_enum)]
     pub kind: Option<GratingKind>,
-    /// Grow this height field (PNG or .f32 with its sidecar, or builtin:…) instead: spectral
+    /// Grow this height field (PNG or .f32 with its sidecar, a .gsf/.gwy scan, or builtin:…) instead: spectral
     /// synthesis from its tapered power spectrum, random phases, its height histogram.
     #[arg(long, value_name = "F.png")]
     pub from_sample: Option<String>,
@@ -32,9 +32,17 @@ pub struct HeightfieldArgs {
     /// pixel size (overrides its sidecar); the grown field keeps it.
     #[arg(long, allow_negative_numbers = true)]
     pub dh_um: Option<f64>,
-    /// --from-sample: height of the sample's grey level 1 in µm (overrides its sidecar).
+    /// --from-sample: height of the sample's grey level 1 in µm (a scan's peak-to-valley
+    /// height; overrides its sidecar).
     #[arg(long, allow_negative_numbers = true, requires = "from_sample")]
     pub hmax_um: Option<f64>,
+    /// --from-sample: the scan channel, by index or title [default: the first height channel].
+    #[arg(long, requires = "from_sample")]
+    pub channel: Option<String>,
+    /// --from-sample: levelling, none, plane, poly:N, rows, comma-separated [default:
+    /// plane,rows for scans, none otherwise].
+    #[arg(long, requires = "from_sample")]
+    pub level: Option<String>,
     /// Ridge period in µm, snapped so a whole number fits the patch [default: per kind].
     #[arg(long, allow_negative_numbers = true, conflicts_with = "from_sample")]
     pub period_um: Option<f64>,
@@ -135,7 +143,14 @@ fn run_generate(args: &HeightfieldArgs) -> Result<()> {
 }
 
 fn run_grow(args: &HeightfieldArgs, sample: &str) -> Result<()> {
-    let crop = HeightField::load_source(sample, args.dh_um, args.hmax_um)?;
+    let source = crate::heightfield::Source {
+        dh_um: args.dh_um,
+        h_max_um: args.hmax_um,
+        channel: args.channel.clone(),
+        level: args.level.clone(),
+        ..crate::heightfield::Source::new(sample)
+    };
+    let crop = source.load(&crate::report::Stderr)?;
     let n = args.grown_samples(crop.dh_um())?;
     let hf = grow(&crop, n, args.seed.unwrap_or(1))?;
     hf.save(&args.out)?;

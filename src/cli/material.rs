@@ -8,13 +8,25 @@ use crate::spectrum::Expansion;
 /// The material flags shared by `render`, `view`, `brdf`, `profile` and `eval-grating`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct MaterialArgs {
-    /// Height field: PNG (8/16-bit grey) or .f32 with a .toml sidecar, or builtin:<kind>.
+    /// Height field: PNG (8/16-bit grey) or .f32 with a .toml sidecar, a Gwyddion scan
+    /// (.gsf, .gwy), or builtin:<kind>.
     #[arg(long)]
     pub heightfield: Option<String>,
+    /// Scan channel by index or title [default: the first height channel].
+    #[arg(long)]
+    pub channel: Option<String>,
+    /// Levelling, a comma list of none, plane, poly:N, rows [default: plane,rows for scans,
+    /// none otherwise].
+    #[arg(long)]
+    pub level: Option<String>,
+    /// Make the field tile: none, mirror, window or grow [default: none].
+    #[arg(long)]
+    pub tile: Option<crate::heightfield::Tile>,
     /// Pixel size of the height field in µm (overrides the sidecar).
     #[arg(long, allow_negative_numbers = true)]
     pub dh_um: Option<f64>,
-    /// Height of grey level 1 in µm (overrides the sidecar).
+    /// Height of grey level 1 in µm; scans and builtin: the peak-to-valley height (overrides
+    /// the sidecar).
     #[arg(long, allow_negative_numbers = true)]
     pub hmax_um: Option<f64>,
     /// Highest expansion term T (terms 0..=T), or auto: the smallest T (and the expansion)
@@ -53,6 +65,15 @@ impl MaterialArgs {
         }
         if self.dh_um.is_some() {
             base.dh_um = self.dh_um;
+        }
+        if self.channel.is_some() {
+            base.channel.clone_from(&self.channel);
+        }
+        if self.level.is_some() {
+            base.level.clone_from(&self.level);
+        }
+        if self.tile.is_some() {
+            base.tile = self.tile;
         }
         if self.hmax_um.is_some() {
             base.h_max_um = self.hmax_um;

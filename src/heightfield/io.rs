@@ -45,8 +45,8 @@ fn format_of(path: &Path) -> Result<Format> {
         Some("f32") => Ok(Format::RawF32),
         _ => Err(Error::Image {
             path: path.to_path_buf(),
-            msg: "unknown height-field format; expected .png (8/16-bit grayscale) or .f32 \
-                  (raw little-endian heights in µm)"
+            msg: "unknown height-field format; expected .png (8/16-bit grayscale), .f32 \
+                  (raw little-endian heights in µm), or a Gwyddion scan (.gsf, .gwy)"
                 .into(),
         }),
     }
@@ -188,44 +188,76 @@ impl HeightField {
     /// grown to [`GROWN_SAMPLES`]² samples with seed 1 ([`super::grow()`]); for both,
     /// `dh_um` and `h_max_um` override the crop's calibration (pixel size, height of grey
     /// level 1) as a sidecar would. Anything else is a path for [`HeightField::load`].
+    ///
+    /// Scan files (`.gsf`, `.gwy`) are read, levelled and reported as
+    /// [`super::load::Source::load`] does with its defaults; what it reports is dropped here.
     pub fn load_source(
         spec: &str,
         dh_um: Option<f64>,
         h_max_um: Option<f64>,
     ) -> Result<HeightField> {
-        let Some(name) = spec.strip_prefix(BUILTIN_PREFIX) else {
-            return HeightField::load(Path::new(spec), dh_um, h_max_um);
+        let source = super::load::Source {
+            dh_um,
+            h_max_um,
+            ..super::load::Source::new(spec)
         };
-        match name.to_ascii_lowercase().as_str() {
-            "elaphe-measured" => return measured_elaphe(dh_um, h_max_um),
-            "elaphe-grown" => {
-                return super::grow::grow(&measured_elaphe(dh_um, h_max_um)?, GROWN_SAMPLES, 1)
-            }
-            _ => {}
+        source.load(&crate::report::Collect::default())
+    }
+}
+
+/// The field a source names as stored, before any levelling: a built-in field or a PNG or
+/// `.f32` file ([`HeightField::load`]). Scans are [`super::load`]'s.
+pub(super) fn read_source(
+    spec: &str,
+    dh_um: Option<f64>,
+    h_max_um: Option<f64>,
+) -> Result<HeightField> {
+    let Some(name) = spec.strip_prefix(BUILTIN_PREFIX) else {
+        return HeightField::load(Path::new(spec), dh_um, h_max_um);
+    };
+    match name.to_ascii_lowercase().as_str() {
+        "elaphe-measured" => return measured_elaphe(dh_um, h_max_um),
+        "elaphe-grown" => {
+            return super::grow::grow(&measured_elaphe(dh_um, h_max_um)?, GROWN_SAMPLES, 1)
         }
-        let kind: GratingKind = name.parse()?;
-        let mut grating = GratingSpec::default_for(kind);
-        if let Some(dh) = dh_um {
-            grating.dh_um = dh;
-        }
-        let hf = generate(&grating)?;
-        match h_max_um {
-            None => Ok(hf),
-            Some(h_max) => {
-                if !(h_max.is_finite() && h_max >= 0.0) {
-                    return Err(Error::invalid(
-                        "h_max",
-                        format!("{h_max} µm; must be finite and ≥ 0"),
-                    ));
-                }
-                let (lo, hi) = hf.range();
-                let scale = if hi > lo { h_max / (hi - lo) } else { 0.0 };
-                let heights = hf.heights_um.iter().map(|h| (h - lo) * scale).collect();
-                HeightField::new(hf.nx, hf.ny, hf.dh_um, heights)
+        _ => {}
+    }
+    let kind: GratingKind = name.parse()?;
+    let mut grating = GratingSpec::default_for(kind);
+    if let Some(dh) = dh_um {
+        grating.dh_um = dh;
+    }
+    let hf = generate(&grating)?;
+    match h_max_um {
+        None => Ok(hf),
+        Some(h_max) => {
+            if !(h_max.is_finite() && h_max >= 0.0) {
+                return Err(Error::invalid(
+                    "h_max",
+                    format!("{h_max} µm; must be finite and ≥ 0"),
+                ));
             }
+            let (lo, hi) = hf.range();
+            let scale = if hi > lo { h_max / (hi - lo) } else { 0.0 };
+            let heights = hf.heights_um.iter().map(|h| (h - lo) * scale).collect();
+            HeightField::new(hf.nx, hf.ny, hf.dh_um, heights)
         }
     }
+}
 
+/// A scan's sidecar overrides: `dh_um` and `h_max_um` (the peak-to-valley height).
+pub(super) fn sidecar_scale(path: &Path) -> Result<(Option<f64>, Option<f64>)> {
+    let side = read_sidecar(path)?;
+    if side.nx.is_some() || side.ny.is_some() {
+        return Err(Error::parse(
+            sidecar_path(path),
+            "nx and ny do not apply to a scan file; its header gives the size",
+        ));
+    }
+    Ok((side.dh_um, side.h_max_um))
+}
+
+impl HeightField {
     /// Saves by extension: `.png` → 16-bit grayscale with heights shifted so the minimum is
     /// 0 and the sidecar giving `dh_um` and `h_max_um = max − min`; `.f32` → raw
     /// little-endian µm with `nx`, `ny`, `dh_um` in the sidecar. PNG quantises heights to

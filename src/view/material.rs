@@ -14,8 +14,15 @@ use crate::heightfield::HeightField;
 use crate::material::{Material, PreparedMaterial};
 use crate::{Error, Result};
 
-/// Which loaded field: its source and the overrides it was loaded with.
-type FieldKey = (String, Option<u64>, Option<u64>);
+/// Which loaded field: its source and everything it was loaded with.
+type FieldKey = (
+    String,
+    Option<u64>,
+    Option<u64>,
+    Option<String>,
+    Option<String>,
+    Option<crate::heightfield::Tile>,
+);
 
 /// Loads edited materials one at a time on a worker thread; the newest edit wins.
 pub(super) struct MaterialLoader {
@@ -45,6 +52,9 @@ fn edited(base: &Material, edit: MaterialEdit) -> Edited {
         m.heightfield = edit.heightfield(&base.heightfield).to_string();
         m.dh_um = None;
         m.h_max_um = None;
+        m.channel = None;
+        m.level = None;
+        m.tile = None;
     }
     m.coherence_um *= edit.coherence_scale();
     Edited {
@@ -58,6 +68,9 @@ fn field_key(m: &Material) -> FieldKey {
         m.heightfield.clone(),
         m.dh_um.map(f64::to_bits),
         m.h_max_um.map(f64::to_bits),
+        m.channel.clone(),
+        m.level.clone(),
+        m.tile,
     )
 }
 
@@ -155,11 +168,7 @@ fn load(
     let field = match kept {
         Some(f) => f,
         None => {
-            let f = Arc::new(HeightField::load_source(
-                &material.heightfield,
-                material.dh_um,
-                material.h_max_um,
-            )?);
+            let f = Arc::new(material.load_heightfield(&crate::report::Collect::default())?);
             if let Ok(mut m) = fields.lock() {
                 m.insert(key, Arc::clone(&f));
             }

@@ -574,11 +574,7 @@ pub(crate) trait PreparedVariant: Send + Sync {
 /// BRDF map at θi = 60° (its automatic `T` planned, not computed).
 pub fn list() -> String {
     let material = Material::default();
-    let hf = crate::heightfield::HeightField::load_source(
-        &material.heightfield,
-        material.dh_um,
-        material.h_max_um,
-    );
+    let hf = material.load_heightfield(&crate::report::Collect::default());
     let terms = hf
         .as_ref()
         .ok()
