@@ -33,6 +33,7 @@ pub mod scene;
 pub mod skin;
 pub mod spectrum;
 pub mod stability;
+pub mod validity;
 pub mod view;
 
 pub use error::{Error, Result};

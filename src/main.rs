@@ -36,6 +36,9 @@ enum Command {
     /// Stability matrix: error of each evaluator against the f64 reference over heights,
     /// light angles, wavelengths and expansions, with the terms used and pass/warned/refused.
     Stability(diffract::stability::StabilityArgs),
+    /// Where the scalar model is wrong: each diffraction order's power against a rigorous
+    /// (RCWA) solution for the material's 1-D grating, with a verdict and a validity map.
+    Validity(diffract::cli::validity::ValidityArgs),
     /// Show a scene in a window: orbit camera, light, exposure, variants, hot reload.
     View(diffract::view::ViewArgs),
 }
@@ -176,6 +179,7 @@ fn main() -> ExitCode {
         }
         Command::Cache(a) => diffract::cli::cache::run(a),
         Command::Stability(a) => diffract::stability::run(a),
+        Command::Validity(a) => diffract::cli::validity::run(a),
     };
     match result {
         Ok(()) => ExitCode::SUCCESS,

@@ -11,6 +11,7 @@ pub mod model;
 pub mod nmm;
 pub mod pq;
 pub mod query;
+pub mod rcwa;
 pub mod reference;
 pub mod table;
 pub mod table_cache;

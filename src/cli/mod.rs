@@ -25,3 +25,4 @@ pub mod heightfield;
 pub mod material;
 pub mod render;
 pub mod scene;
+pub mod validity;

@@ -1,0 +1,697 @@
+//! Where the scalar model is wrong: the power diffract's own (Stam, scalar) model puts in each
+//! diffraction order, against a rigorous solution of Maxwell's equations ([`rcwa`]) for the
+//! same 1-D grating (MODEL §11).
+//!
+//! **The grating.** A height field's dominant period and the direction across its ridges come
+//! from its spectrum ([`estimate_grating`], as the NMM variant and `eval-grating` find them).
+//! Averaging the heights along the ridges gives one period's mean profile; the share of the
+//! field's height variance (its non-DC spectral energy, by Parseval) that this 1-D profile
+//! reproduces says how much of the material the check speaks for.
+//!
+//! **The light** lies in the plane across the ridges, on the side the grating vector points
+//! to when it is turned to the height field's `+x` (growing column index): `ωi = (sinθi ĝ,
+//! cosθi)`. Order `m` leaves at `sinθr = −sinθi + mλ/Λ`, `θr` positive on the light's side
+//! (specular is `θr = −θi`).
+//!
+//! **Order powers, in one unit.** RCWA gives efficiencies: each order's share of the incident
+//! power. The scalar model gives a relative BRDF `ρ = C·|P̂|²` (MODEL §2), 1 at a flat
+//! mirror's specular peak. The reflected share of the incident power is
+//! `∫ f_r cosθr dΩr = ∫ f_r du dv` (at fixed `ωi`, `du dv = cosθr dΩr`). A flat surface's
+//! `|P̂|²` is the window's lobe `exp(−k²σs²(u² + v²))`, of area `A = π/(kσs)²` in `(u, v)`,
+//! and `C = R(θi)/R0` at specular; so `f_r = R0·ρ/A` makes a flat surface reflect exactly its
+//! Fresnel factor `R(θi)` (the model's Schlick `R`; `R0` at normal incidence, where it is
+//! Fresnel's exactly). A tiled grating's `P̂` is a sum of the same lobes, one per order, each
+//! weighted by the Fourier coefficient `a_m(w) = (1/Λ)∫ exp(ikwh(x)) e^{−2πimx/Λ} dx`;
+//! so the model's power in order `m` is
+//!
+//! `η_scalar,m = R0 · (1/A) ∫_lobe C(ωi, ωr) |a_m(w)|² |ĝ(u − u_m, v)|² du dv`,
+//!
+//! integrated here by a 3×3 Gauss–Hermite rule over the lobe (the gain `C` and `w` vary
+//! little across it). Both sides use the same 1-D profile, so their difference is the
+//! model's, not the profile's.
+//!
+//! **The verdict.** As in the external check that motivated it, the comparison is of order
+//! ratios, unpolarised (`(η_TE + η_TM)/2`): `η±1/η0` and `η±2/η±1`. An order `m ≠ 0`'s error is
+//! `|(η_s,m/η_s,m') / (η_m/η_m') − 1|`, `m'` its neighbour towards specular; the specular
+//! order's is `|η_s,0/η_0 − 1|`. The overall error is the worst ratio error over `|m| ≤ 2`
+//! (orders fainter than [`rcwa::FAINT_SHARE`] of the reflectance on both sides are skipped);
+//! without any ratio, the specular order's. Within 10 %, within 25 %, or not valid.
+
+pub mod plot;
+
+use std::path::Path;
+
+use rayon::prelude::*;
+
+use crate::brdf::nmm::estimate_grating;
+use crate::brdf::rcwa::{self, Grating, Pair};
+use crate::brdf::{gain, schlick_r0, Shading};
+use crate::heightfield::HeightField;
+use crate::material::Material;
+use crate::spectrum::num_complex::Complex64;
+use crate::{Error, Result};
+
+/// Samples of the mean profile over one period.
+pub const PROFILE_BINS: usize = 64;
+
+/// A height field's dominant 1-D grating.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Profile {
+    /// Period across the ridges (µm).
+    pub period_um: f64,
+    /// Direction of the grating vector from `+x`, turned to `+x`'s side (degrees, in
+    /// `(−90, 90]`).
+    pub direction_deg: f64,
+    /// Mean height (µm) along the ridges at `t = (b + ½)/M` of a period, `b = 0..M`.
+    pub heights_um: Vec<f64>,
+    /// Share of the height variance the 1-D profile reproduces (0..1).
+    pub explained: f64,
+}
+
+impl Profile {
+    /// Peak-to-valley depth of the mean profile (µm).
+    pub fn depth_um(&self) -> f64 {
+        let (lo, hi) = self
+            .heights_um
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &h| {
+                (a.min(h), b.max(h))
+            });
+        hi - lo
+    }
+
+    /// The grating on a substrate of index `n`.
+    pub fn grating(&self, n: f64) -> Grating {
+        Grating {
+            period_um: self.period_um,
+            profile_um: self.heights_um.clone(),
+            index: Complex64::new(n, 0.0),
+        }
+    }
+
+    /// Height at phase `t` (periods), linear between bins, periodic.
+    fn at(&self, t: f64) -> f64 {
+        let m = self.heights_um.len();
+        let x = (t.rem_euclid(1.0) * m as f64 - 0.5).rem_euclid(m as f64);
+        let i = x.floor() as usize % m;
+        let f = x - x.floor();
+        self.heights_um[i] * (1.0 - f) + self.heights_um[(i + 1) % m] * f
+    }
+}
+
+/// The dominant grating of `hf` and its mean profile along the ridges.
+///
+/// The peak of the spectrum is taken at whole cycles per patch when it lies within 0.1 of
+/// them (a tiled field's lines sit on bins; the sub-bin refinement is for crops).
+pub fn extract_profile(hf: &HeightField) -> Result<Profile> {
+    let g = estimate_grating(hf).map_err(|e| {
+        Error::invalid(
+            "validity",
+            format!("{e}; the rigorous check needs a field with one dominant period"),
+        )
+    })?;
+    let snap = |f: f64| {
+        if (f - f.round()).abs() < 0.1 {
+            f.round()
+        } else {
+            f
+        }
+    };
+    let (mut fx, mut fy) = (snap(g.peak_cycles[0]), snap(g.peak_cycles[1]));
+    if fx < 0.0 || (fx == 0.0 && fy < 0.0) {
+        (fx, fy) = (-fx, -fy);
+    }
+    let (nx, ny) = (hf.nx(), hf.ny());
+    let (lx, ly) = hf.extent_um();
+    let (kx, ky) = (fx / lx, fy / ly);
+    let norm = kx.hypot(ky);
+    if norm <= 0.0 {
+        return Err(Error::invalid("validity", "no grating period found"));
+    }
+    let phase = |c: usize, r: usize| c as f64 * fx / nx as f64 + r as f64 * fy / ny as f64;
+    let h = hf.heights_um();
+    let mut sum = vec![0.0f64; PROFILE_BINS];
+    let mut count = vec![0usize; PROFILE_BINS];
+    for r in 0..ny {
+        for c in 0..nx {
+            let b = (phase(c, r).rem_euclid(1.0) * PROFILE_BINS as f64) as usize % PROFILE_BINS;
+            sum[b] += h[r * nx + c];
+            count[b] += 1;
+        }
+    }
+    let heights = fill_empty(&sum, &count);
+    let mut profile = Profile {
+        period_um: 1.0 / norm,
+        direction_deg: ky.atan2(kx).to_degrees(),
+        heights_um: heights,
+        explained: 0.0,
+    };
+    let mean = hf.mean();
+    let (mut total, mut residual) = (0.0, 0.0);
+    for r in 0..ny {
+        for c in 0..nx {
+            let v = h[r * nx + c];
+            total += (v - mean).powi(2);
+            residual += (v - profile.at(phase(c, r))).powi(2);
+        }
+    }
+    profile.explained = if total > 0.0 {
+        (1.0 - residual / total).max(0.0)
+    } else {
+        0.0
+    };
+    Ok(profile)
+}
+
+/// Bin means, with empty bins interpolated between their filled neighbours (cyclically).
+fn fill_empty(sum: &[f64], count: &[usize]) -> Vec<f64> {
+    let m = sum.len();
+    let filled: Vec<usize> = (0..m).filter(|&b| count[b] > 0).collect();
+    (0..m)
+        .map(|b| {
+            if count[b] > 0 {
+                return sum[b] / count[b] as f64;
+            }
+            let next = filled
+                .iter()
+                .copied()
+                .find(|&f| f > b)
+                .unwrap_or(filled[0] + m);
+            let prev = filled.iter().rev().copied().find(|&f| f < b);
+            let prev = prev.map_or(filled[filled.len() - 1] as i64 - m as i64, |p| p as i64);
+            let value = |i: i64| {
+                let i = i.rem_euclid(m as i64) as usize;
+                sum[i] / count[i] as f64
+            };
+            let f = (b as i64 - prev) as f64 / (next as i64 - prev) as f64;
+            value(prev) * (1.0 - f) + value(next as i64) * f
+        })
+        .collect()
+}
+
+/// The material's numbers the scalar model needs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScalarModel {
+    pub shading: Shading,
+    /// Spatial coherence length (µm); the window std is a quarter of it.
+    pub coherence_um: f64,
+}
+
+impl ScalarModel {
+    pub fn of(material: &Material) -> Self {
+        Self {
+            shading: material.shading(),
+            coherence_um: material.coherence_um,
+        }
+    }
+}
+
+/// `a_m(w) = ∫₀¹ exp(i·k·w·h(t)) e^{−2πimt} dt` for the linear-between-samples profile
+/// (exact per segment).
+pub fn fourier_coefficient(heights_um: &[f64], k: f64, w: f64, m: i64) -> Complex64 {
+    let n = heights_um.len();
+    let dt = 1.0 / n as f64;
+    let two_pi = 2.0 * std::f64::consts::PI;
+    let mut acc = Complex64::new(0.0, 0.0);
+    for j in 0..n {
+        let (t0, t1) = (j as f64 * dt, (j + 1) as f64 * dt);
+        let p0 = k * w * heights_um[j] - two_pi * m as f64 * t0;
+        let p1 = k * w * heights_um[(j + 1) % n] - two_pi * m as f64 * t1;
+        let d = p1 - p0;
+        // ∫ e^{i(p0 + d s)} dt over the segment, s ∈ [0, 1]: dt·e^{ip0}(e^{id} − 1)/(id).
+        let factor = if d.abs() < 1e-8 {
+            Complex64::new(1.0, 0.5 * d)
+        } else {
+            (Complex64::from_polar(1.0, d) - 1.0) / Complex64::new(0.0, d)
+        };
+        acc += Complex64::from_polar(dt, p0) * factor;
+    }
+    acc
+}
+
+/// The scalar model's power in reflected order `m` (see the module's documentation):
+/// `R0·∫ C |a_m|² over the lobe / A`; 0 when the order's centre does not propagate.
+pub fn eta_scalar(
+    profile: &Profile,
+    model: &ScalarModel,
+    lambda_nm: f64,
+    theta_i_deg: f64,
+    m: i64,
+) -> f64 {
+    let lambda_um = lambda_nm * 1e-3;
+    let k = 2.0 * std::f64::consts::PI / lambda_um;
+    let (si, ci) = theta_i_deg.to_radians().sin_cos();
+    let wi = [si, 0.0, ci];
+    let u_m = -(m as f64) * lambda_um / profile.period_um;
+    if (si + u_m).abs() >= 1.0 {
+        return 0.0;
+    }
+    let sigma_s = model.coherence_um / 4.0;
+    // Gauss–Hermite (weight e^{−t²}), 3 nodes, normalised weights; |ĝ|² = e^{−(kσs δu)²}.
+    let nodes = [
+        (-(1.5f64).sqrt(), 1.0 / 6.0),
+        (0.0, 2.0 / 3.0),
+        ((1.5f64).sqrt(), 1.0 / 6.0),
+    ];
+    let step = 1.0 / (k * sigma_s);
+    let mut eta = 0.0;
+    for &(tu, wu) in &nodes {
+        for &(tv, wv) in &nodes {
+            let (u, v) = (u_m + tu * step, tv * step);
+            let (x, y) = (-si - u, -v);
+            let z2 = 1.0 - x * x - y * y;
+            if z2 <= 0.0 {
+                continue;
+            }
+            let wr = [x, y, z2.sqrt()];
+            let c = gain(wi, wr, &model.shading);
+            if c == 0.0 {
+                continue;
+            }
+            let w = -(ci + wr[2]);
+            eta += wu * wv * c * fourier_coefficient(&profile.heights_um, k, w, m).norm_sqr();
+        }
+    }
+    schlick_r0(model.shading.ior) * eta
+}
+
+/// How well the scalar model holds.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Verdict {
+    Within10,
+    Within25,
+    NotValid,
+}
+
+impl Verdict {
+    /// The class of a relative error (NaN: not valid).
+    pub fn of(error: f64) -> Self {
+        if error <= 0.10 {
+            Verdict::Within10
+        } else if error <= 0.25 {
+            Verdict::Within25
+        } else {
+            Verdict::NotValid
+        }
+    }
+
+    pub fn label(self) -> &'static str {
+        match self {
+            Verdict::Within10 => "within 10 %",
+            Verdict::Within25 => "within 25 %",
+            Verdict::NotValid => "not valid",
+        }
+    }
+}
+
+/// One propagating reflected order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct OrderRow {
+    pub m: i64,
+    /// Signed angle (degrees), positive on the light's side.
+    pub theta_r_deg: f64,
+    pub eta_te: f64,
+    pub eta_tm: f64,
+    pub eta_unpolarised: f64,
+    pub eta_scalar: f64,
+    /// `η_scalar/η_unpolarised − 1`.
+    pub rel_error: f64,
+    /// Error of the ratio to the neighbour towards specular (see the module's docs).
+    pub ratio_error: Option<f64>,
+    pub verdict: Verdict,
+}
+
+/// The comparison at one wavelength and angle.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Check {
+    pub lambda_nm: f64,
+    pub theta_i_deg: f64,
+    pub rows: Vec<OrderRow>,
+    /// The overall error (see the module's docs) and what it was measured on.
+    pub error: f64,
+    pub error_of: String,
+    pub verdict: Verdict,
+    pub harmonics: usize,
+    pub slices: usize,
+    /// How far the last refinement in harmonics and in slices moved an order (NaN where the
+    /// solve used fixed numbers).
+    pub harmonic_change: f64,
+    pub slice_change: f64,
+    /// `max |R + T − 1|` over both polarisations.
+    pub energy_error: f64,
+}
+
+/// How the rigorous side is solved: converged to a tolerance, or at fixed numbers.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Solve {
+    Converge(f64),
+    Fixed { harmonics: usize, slices: usize },
+}
+
+/// Compares the two models for `profile` on a substrate of index `n`.
+pub fn check(
+    profile: &Profile,
+    model: &ScalarModel,
+    lambda_nm: f64,
+    theta_i_deg: f64,
+    how: Solve,
+) -> Result<Check> {
+    let grating = profile.grating(model.shading.ior);
+    let lambda_um = lambda_nm * 1e-3;
+    let (pair, hc, sc) = match how {
+        Solve::Converge(tol) => {
+            let c = rcwa::converge(&grating, lambda_um, theta_i_deg, tol, None)?;
+            (c.pair, c.harmonic_change, c.slice_change)
+        }
+        Solve::Fixed { harmonics, slices } => (
+            Pair::solve(&grating, lambda_um, theta_i_deg, harmonics, slices)?,
+            f64::NAN,
+            f64::NAN,
+        ),
+    };
+    Ok(compare(
+        profile,
+        model,
+        lambda_nm,
+        theta_i_deg,
+        &pair,
+        hc,
+        sc,
+    ))
+}
+
+fn compare(
+    profile: &Profile,
+    model: &ScalarModel,
+    lambda_nm: f64,
+    theta_i_deg: f64,
+    pair: &Pair,
+    harmonic_change: f64,
+    slice_change: f64,
+) -> Check {
+    let total: f64 = pair
+        .te
+        .reflected
+        .iter()
+        .chain(&pair.tm.reflected)
+        .map(|o| 0.5 * o.eta)
+        .sum();
+    let faint = rcwa::FAINT_SHARE * total;
+    let mut rows: Vec<OrderRow> = pair
+        .te
+        .reflected
+        .iter()
+        .map(|o| {
+            let eta_u = pair.eta_unpolarised(o.m);
+            let eta_s = eta_scalar(profile, model, lambda_nm, theta_i_deg, o.m);
+            OrderRow {
+                m: o.m,
+                theta_r_deg: o.sin_theta.clamp(-1.0, 1.0).asin().to_degrees(),
+                eta_te: o.eta,
+                eta_tm: pair.tm.eta_r(o.m),
+                eta_unpolarised: eta_u,
+                eta_scalar: eta_s,
+                rel_error: eta_s / eta_u - 1.0,
+                ratio_error: None,
+                verdict: Verdict::NotValid,
+            }
+        })
+        .collect();
+    let find = |rows: &[OrderRow], m: i64| rows.iter().position(|r| r.m == m);
+    for i in 0..rows.len() {
+        let m = rows[i].m;
+        if m != 0 {
+            if let Some(j) = find(&rows, m - m.signum()) {
+                let (a, b) = (&rows[i], &rows[j]);
+                let e = ((a.eta_scalar / b.eta_scalar) / (a.eta_unpolarised / b.eta_unpolarised)
+                    - 1.0)
+                    .abs();
+                rows[i].ratio_error = Some(if e.is_finite() { e } else { f64::INFINITY });
+            }
+        }
+        let r = &rows[i];
+        rows[i].verdict = Verdict::of(r.ratio_error.unwrap_or(r.rel_error.abs()));
+    }
+    let mut error = f64::NAN;
+    let mut error_of = String::new();
+    for r in &rows {
+        let Some(e) = r.ratio_error else { continue };
+        let j = find(&rows, r.m - r.m.signum()).unwrap_or(0);
+        let significant = |x: &OrderRow| x.eta_unpolarised >= faint || x.eta_scalar >= faint;
+        if r.m.abs() > 2 || !(significant(r) || significant(&rows[j])) {
+            continue;
+        }
+        if error.is_nan() || e > error {
+            error = e;
+            error_of = format!("η{:+}/η{}", r.m, fmt_order(rows[j].m));
+        }
+    }
+    if error.is_nan() {
+        if let Some(r) = rows.iter().find(|r| r.m == 0) {
+            error = r.rel_error.abs();
+            error_of = "η0 (no other order propagates)".into();
+        }
+    }
+    let energy_error = (pair.te.total() - 1.0)
+        .abs()
+        .max((pair.tm.total() - 1.0).abs());
+    Check {
+        lambda_nm,
+        theta_i_deg,
+        rows,
+        verdict: Verdict::of(error),
+        error,
+        error_of,
+        harmonics: pair.te.harmonics,
+        slices: pair.te.slices,
+        harmonic_change,
+        slice_change,
+        energy_error,
+    }
+}
+
+fn fmt_order(m: i64) -> String {
+    if m == 0 {
+        "0".into()
+    } else {
+        format!("{m:+}")
+    }
+}
+
+/// A validity map: the overall error over angles and wavelengths.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Map {
+    pub thetas_deg: Vec<f64>,
+    pub lambdas_nm: Vec<f64>,
+    /// `error[θ index][λ index]`.
+    pub error: Vec<Vec<f64>>,
+    pub harmonics: usize,
+    pub slices: usize,
+}
+
+/// The map's angles and wavelengths: θi = 0..80° by 5°, λ = 400..700 nm by 25 nm.
+pub fn map_grid() -> (Vec<f64>, Vec<f64>) {
+    (
+        (0..=16).map(|i| 5.0 * i as f64).collect(),
+        (0..=12).map(|i| 400.0 + 25.0 * i as f64).collect(),
+    )
+}
+
+/// The harmonics and slices a map uses everywhere: converged (to `tolerance`) at its
+/// shortest wavelength and steepest angle, where the most orders propagate.
+pub fn map_numbers(
+    profile: &Profile,
+    model: &ScalarModel,
+    lambda_nm: f64,
+    theta_deg: f64,
+    tolerance: f64,
+) -> Result<(usize, usize)> {
+    let c = rcwa::converge(
+        &profile.grating(model.shading.ior),
+        lambda_nm * 1e-3,
+        theta_deg,
+        tolerance,
+        None,
+    )?;
+    Ok((c.pair.te.harmonics, c.pair.te.slices))
+}
+
+/// Computes the validity map over `thetas_deg × lambdas_nm` (rayon), ticking `progress`.
+pub fn map(
+    profile: &Profile,
+    model: &ScalarModel,
+    thetas_deg: &[f64],
+    lambdas_nm: &[f64],
+    tolerance: f64,
+    progress: &indicatif::ProgressBar,
+) -> Result<Map> {
+    let l_min = lambdas_nm.iter().copied().fold(f64::INFINITY, f64::min);
+    let t_max = thetas_deg.iter().copied().fold(0.0, f64::max);
+    let (harmonics, slices) = map_numbers(profile, model, l_min, t_max, tolerance)?;
+    let how = Solve::Fixed { harmonics, slices };
+    let cells: Vec<(usize, usize)> = (0..thetas_deg.len())
+        .flat_map(|i| (0..lambdas_nm.len()).map(move |j| (i, j)))
+        .collect();
+    let values: Vec<f64> = cells
+        .par_iter()
+        .map(|&(i, j)| {
+            let c = check(profile, model, lambdas_nm[j], thetas_deg[i], how);
+            progress.inc(1);
+            c.map(|c| c.error)
+        })
+        .collect::<Result<_>>()?;
+    let error = values
+        .chunks(lambdas_nm.len())
+        .map(<[f64]>::to_vec)
+        .collect();
+    Ok(Map {
+        thetas_deg: thetas_deg.to_vec(),
+        lambdas_nm: lambdas_nm.to_vec(),
+        error,
+        harmonics,
+        slices,
+    })
+}
+
+/// Wavelengths of the one-line summary.
+pub const SUMMARY_LAMBDAS_NM: [f64; 3] = [450.0, 550.0, 650.0];
+/// Angle grid of the cached summary (degrees): requests are rounded to it.
+pub const SUMMARY_THETA_STEP: f64 = 15.0;
+
+/// Convergence tolerance of the cached summary's solves.
+pub const SUMMARY_TOLERANCE: f64 = 0.02;
+
+/// The scalar model's expected error against the rigorous solver for `material` with light
+/// at `thetas_deg` (rounded to [`SUMMARY_THETA_STEP`]), at [`SUMMARY_LAMBDAS_NM`], as one
+/// line pointing to `diffract validity`. The cells come from a small validity map cached
+/// in `cache_dir` (computed on the first request, a few seconds). A field without one
+/// dominant period, or an error, gives a line that says so instead.
+pub fn expected_error_line(
+    material: &Material,
+    thetas_deg: &[f64],
+    cache_dir: Option<&Path>,
+) -> String {
+    match summary(material, thetas_deg, cache_dir) {
+        Ok(line) => line,
+        Err(e) => format!("model check: not available ({e}); see diffract validity"),
+    }
+}
+
+fn summary(material: &Material, thetas_deg: &[f64], cache_dir: Option<&Path>) -> Result<String> {
+    let hf = HeightField::load_source(&material.heightfield, material.dh_um, material.h_max_um)?;
+    let profile = extract_profile(&hf)?;
+    let model = ScalarModel::of(material);
+    let mut thetas: Vec<f64> = thetas_deg
+        .iter()
+        .map(|t| ((t.abs().min(89.0)) / SUMMARY_THETA_STEP).round() * SUMMARY_THETA_STEP)
+        .map(|t| t.min(75.0))
+        .collect();
+    thetas.sort_by(f64::total_cmp);
+    thetas.dedup();
+    let key = cache_key(&profile, &model);
+    let path = cache_dir.map(|d| d.join(format!("validity-{key:016x}.txt")));
+    let mut cells = path.as_deref().map(read_cells).unwrap_or_default();
+    let missing: Vec<(f64, f64)> = thetas
+        .iter()
+        .flat_map(|&t| SUMMARY_LAMBDAS_NM.iter().map(move |&l| (t, l)))
+        .filter(|&(t, l)| !cells.iter().any(|c| c.0 == t && c.1 == l))
+        .collect();
+    if !missing.is_empty() {
+        let found: Vec<(f64, f64, f64)> = missing
+            .par_iter()
+            .map(|&(t, l)| {
+                check(&profile, &model, l, t, Solve::Converge(SUMMARY_TOLERANCE))
+                    .map(|c| (t, l, c.error))
+            })
+            .collect::<Result<_>>()?;
+        cells.extend(found);
+        if let Some(p) = &path {
+            // A cache that cannot be written only costs the next run the same few seconds.
+            let _ = write_cells(p, &cells);
+        }
+    }
+    let worst_at = |t: f64| {
+        cells
+            .iter()
+            .filter(|c| c.0 == t && SUMMARY_LAMBDAS_NM.contains(&c.1))
+            .map(|c| c.2)
+            .fold(0.0f64, |a, e| if e.is_nan() { a } else { a.max(e) })
+    };
+    let parts: Vec<String> = thetas
+        .iter()
+        .map(|&t| format!("{} at θi ≈ {t}°", percent(worst_at(t))))
+        .collect();
+    let worst = thetas.iter().map(|&t| worst_at(t)).fold(0.0, f64::max);
+    Ok(format!(
+        "model check: scalar order ratios vs rigorous (RCWA, n = {}) for the {:.3} µm ridges ({:.0} % of the field), 450–650 nm: off by up to {} ({}): {}; see diffract validity",
+        model.shading.ior,
+        profile.period_um,
+        100.0 * profile.explained,
+        parts.join(", "),
+        Verdict::of(worst).label(),
+        if worst <= 0.25 { "colours and their strengths hold" } else { "colours (angles) hold, order strengths do not" }
+    ))
+}
+
+/// A relative error as a percentage (≥ 10: "×N").
+pub fn percent(e: f64) -> String {
+    if !e.is_finite() {
+        "∞".into()
+    } else if e >= 10.0 {
+        format!("{:.0}×", e + 1.0)
+    } else {
+        format!("{:.0} %", 100.0 * e)
+    }
+}
+
+/// FNV-1a over the profile and the model's numbers: the cache file's name.
+fn cache_key(profile: &Profile, model: &ScalarModel) -> u64 {
+    let mut words = vec![
+        1.0, // format version
+        profile.period_um,
+        model.shading.ior,
+        model.coherence_um,
+        f64::from(u8::from(model.shading.fresnel)),
+        f64::from(u8::from(model.shading.shadowing)),
+        SUMMARY_TOLERANCE,
+    ];
+    words.extend(&profile.heights_um);
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for w in words {
+        for b in w.to_le_bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    }
+    h
+}
+
+/// Cached cells `(θi, λ, error)`, one per line; a missing or damaged file gives none.
+fn read_cells(path: &Path) -> Vec<(f64, f64, f64)> {
+    let Ok(text) = crate::fsutil::read_text_bounded(path, "validity cache", 1 << 20) else {
+        return Vec::new();
+    };
+    text.lines()
+        .filter(|l| !l.starts_with('#'))
+        .filter_map(|l| {
+            let v: Vec<f64> = l
+                .split_whitespace()
+                .filter_map(|x| x.parse().ok())
+                .collect();
+            (v.len() == 3).then(|| (v[0], v[1], v[2]))
+        })
+        .collect()
+}
+
+fn write_cells(path: &Path, cells: &[(f64, f64, f64)]) -> Result<()> {
+    let mut text =
+        String::from("# diffract validity cells: theta_i_deg lambda_nm worst_order_ratio_error\n");
+    for (t, l, e) in cells {
+        text.push_str(&format!("{t} {l} {e:e}\n"));
+    }
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::invalid("validity cache", e.to_string()))?;
+    }
+    crate::fsutil::write_atomic(path, text.as_bytes())
+}
