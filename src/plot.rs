@@ -8,6 +8,8 @@ use std::path::Path;
 use std::sync::Once;
 
 use image::ImageEncoder;
+use plotters::coord::types::RangedCoordf64;
+use plotters::coord::Shift;
 use plotters::prelude::*;
 use plotters::style::text_anchor::{HPos, Pos, VPos};
 
@@ -402,80 +404,135 @@ pub fn ticks_every(lo: f64, hi: f64, step: f64, unit: &str) -> Vec<(f64, String)
         .collect()
 }
 
-/// Writes `map` as an RGB PNG: the title on top, the cells with the overlays and their
-/// legend, ticks and group labels on both axes, and a colour bar with its scale on the right.
-pub fn write_heat_map(path: &Path, map: &HeatMap) -> Result<()> {
-    register_font();
-    let rows = map.values.len();
-    let cols = map.values.first().map_or(0, Vec::len);
-    if rows == 0 || cols == 0 || map.values.iter().any(|r| r.len() != cols) {
-        return Err(Error::invalid("plot", "empty or ragged grid"));
-    }
-    let (width, height) = map.size;
-    if width < 200 || height < 150 {
-        return Err(Error::invalid(
-            "plot",
-            format!("{width}×{height} is too small for a labelled heat map (200×150 at least)"),
-        ));
-    }
-    let scale = |v: f64| if map.log { v.log10() } else { v };
-    let shown = |v: f64| v.is_finite() && (!map.log || v > 0.0);
-    let finite: Vec<f64> = map
-        .values
-        .iter()
-        .flatten()
-        .filter(|v| shown(**v))
-        .map(|&v| scale(v))
-        .collect();
-    let (mut lo, mut hi) = finite
-        .iter()
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
-            (a.min(v), b.max(v))
-        });
-    if !(lo.is_finite() && hi.is_finite()) {
-        (lo, hi) = (0.0, 1.0);
-    }
-    let (data_lo, data_hi) = (lo, hi);
-    if let Some(min) = map.scale_limits.0 {
-        lo = min;
-        hi = hi.max(min);
-    }
-    if let Some(max) = map.scale_limits.1 {
-        hi = max;
-        lo = lo.min(max);
-    }
-    if hi <= lo {
-        (lo, hi) = (lo - 0.5, hi + 0.5);
-    }
-    let span = hi - lo;
-    let bar_step = nice_step(span, 6);
-    let mut bar_ticks = ticks_every(lo, hi, bar_step, "");
-    // Say where the scale cuts the data off.
-    for (end, cut, sign) in [(lo, data_lo < lo, "≤ "), (hi, data_hi > hi, "≥ ")] {
-        if cut {
-            let near = |t: &(f64, String)| (t.0 - end).abs() < 1e-6 * bar_step;
-            match bar_ticks.iter_mut().find(|t| near(t)) {
-                Some(t) => t.1 = format!("{sign}{}", t.1),
-                None => bar_ticks.push((end, format!("{sign}{}", format_tick(end)))),
+/// The drawing area of a plot's bitmap.
+type Area<'a> = DrawingArea<BitMapBackend<'a>, Shift>;
+/// A chart over `f64 × f64` on a plot's bitmap.
+type Chart<'a, 'b> =
+    ChartContext<'a, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>;
+
+/// A heat map's colour scale: the range the ramp spans (in log10 where the map is
+/// logarithmic) and the colour bar's tick labels, which say where the range cuts the data
+/// off.
+struct ColourScale {
+    log: bool,
+    lo: f64,
+    hi: f64,
+    ticks: Vec<(f64, String)>,
+}
+
+impl ColourScale {
+    fn of(map: &HeatMap) -> Self {
+        let mut s = ColourScale {
+            log: map.log,
+            lo: 0.0,
+            hi: 1.0,
+            ticks: Vec::new(),
+        };
+        let finite: Vec<f64> = map
+            .values
+            .iter()
+            .flatten()
+            .filter(|v| s.shown(**v))
+            .map(|&v| s.scale(v))
+            .collect();
+        let (mut lo, mut hi) = finite
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), &v| {
+                (a.min(v), b.max(v))
+            });
+        if !(lo.is_finite() && hi.is_finite()) {
+            (lo, hi) = (0.0, 1.0);
+        }
+        let (data_lo, data_hi) = (lo, hi);
+        if let Some(min) = map.scale_limits.0 {
+            lo = min;
+            hi = hi.max(min);
+        }
+        if let Some(max) = map.scale_limits.1 {
+            hi = max;
+            lo = lo.min(max);
+        }
+        if hi <= lo {
+            (lo, hi) = (lo - 0.5, hi + 0.5);
+        }
+        let bar_step = nice_step(hi - lo, 6);
+        let mut ticks = ticks_every(lo, hi, bar_step, "");
+        // Say where the scale cuts the data off.
+        for (end, cut, sign) in [(lo, data_lo < lo, "≤ "), (hi, data_hi > hi, "≥ ")] {
+            if cut {
+                let near = |t: &(f64, String)| (t.0 - end).abs() < 1e-6 * bar_step;
+                match ticks.iter_mut().find(|t| near(t)) {
+                    Some(t) => t.1 = format!("{sign}{}", t.1),
+                    None => ticks.push((end, format!("{sign}{}", format_tick(end)))),
+                }
             }
+        }
+        s.lo = lo;
+        s.hi = hi;
+        s.ticks = ticks;
+        s
+    }
+
+    fn span(&self) -> f64 {
+        self.hi - self.lo
+    }
+
+    /// Whether a value has a colour (finite, and positive on a log scale).
+    fn shown(&self, v: f64) -> bool {
+        v.is_finite() && (!self.log || v > 0.0)
+    }
+
+    fn scale(&self, v: f64) -> f64 {
+        if self.log {
+            v.log10()
+        } else {
+            v
         }
     }
 
-    let mut buf = vec![0u8; (width * height * 3) as usize];
-    {
-        let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
-        root.fill(&WHITE).map_err(plot_error)?;
+    /// The cell colour of a value: the ramp, or grey where it has none.
+    fn colour(&self, v: f64) -> RGBColor {
+        if self.shown(v) {
+            let (r, g, b) = ramp((self.scale(v) - self.lo) / self.span());
+            RGBColor(r, g, b)
+        } else {
+            MISSING
+        }
+    }
+}
+
+/// The text styles of a heat map and the margins around its cells (pixels).
+struct Margins {
+    title: TextStyle<'static>,
+    desc: TextStyle<'static>,
+    tick: TextStyle<'static>,
+    group: TextStyle<'static>,
+    /// Height of a line of tick labels.
+    line_h: i32,
+    top: i32,
+    bottom: i32,
+    left: i32,
+    right: i32,
+    /// Widest `y` tick label, and widest label of each level of `y` groups.
+    y_tick_w: i32,
+    y_group_w: Vec<i32>,
+    bar_w: i32,
+}
+
+impl Margins {
+    /// Measures the labels: the title's font shrinks (to 12 px at least) until it fits the
+    /// width; the margins hold the ticks, groups, descriptions and the colour bar.
+    fn measure(root: &Area, map: &HeatMap, scale: &ColourScale) -> Result<Self> {
         let (desc, tick, group) = (text(15), text(13), text(13));
         let size_of = |s: &str, style: &TextStyle| {
             root.estimate_text_size(s, style)
                 .map(|(w, h)| (w as i32, h as i32))
                 .map_err(plot_error)
         };
-        // The title's font shrinks (to 12 px at least) until it fits the width.
         let mut title = text(20);
         for px in (12..=20).rev() {
             title = text(px);
-            if size_of(&map.title, &title)?.0 <= width as i32 - 20 {
+            if size_of(&map.title, &title)?.0 <= map.size.0 as i32 - 20 {
                 break;
             }
         }
@@ -488,8 +545,6 @@ pub fn write_heat_map(path: &Path, map: &HeatMap) -> Result<()> {
         };
         let line_h = size_of("Ag", &tick)?.1;
         let desc_h = size_of("Ag", &desc)?.1;
-
-        // Margins around the cells.
         let top = 12 + size_of(&map.title, &title)?.1 + 14;
         let y_tick_w = widest(
             &map.y_axis
@@ -515,7 +570,8 @@ pub fn write_heat_map(path: &Path, map: &HeatMap) -> Result<()> {
         let bottom =
             TICK + 4 + line_h + map.x_axis.groups.len() as i32 * (line_h + 12) + 10 + desc_h + 10;
         let bar_label_w = widest(
-            &bar_ticks
+            &scale
+                .ticks
                 .iter()
                 .map(|t| t.1.as_str())
                 .chain(map.missing_label.as_deref())
@@ -525,273 +581,353 @@ pub fn write_heat_map(path: &Path, map: &HeatMap) -> Result<()> {
         )?;
         let bar_w = 22;
         let right = 26 + bar_w + TICK + 4 + bar_label_w + 12 + desc_h + 10;
+        Ok(Self {
+            title,
+            desc,
+            tick,
+            group,
+            line_h,
+            top,
+            bottom,
+            left,
+            right,
+            y_tick_w,
+            y_group_w,
+            bar_w,
+        })
+    }
+}
+
+/// Rows and columns of the grid; an empty or ragged grid is an error.
+fn grid_size(map: &HeatMap) -> Result<(usize, usize)> {
+    let rows = map.values.len();
+    let cols = map.values.first().map_or(0, Vec::len);
+    if rows == 0 || cols == 0 || map.values.iter().any(|r| r.len() != cols) {
+        return Err(Error::invalid("plot", "empty or ragged grid"));
+    }
+    Ok((rows, cols))
+}
+
+/// Writes `map` as an RGB PNG: the title on top, the cells with the overlays and their
+/// legend, ticks and group labels on both axes, and a colour bar with its scale on the right.
+pub fn write_heat_map(path: &Path, map: &HeatMap) -> Result<()> {
+    register_font();
+    let (rows, cols) = grid_size(map)?;
+    let (width, height) = map.size;
+    if width < 200 || height < 150 {
+        return Err(Error::invalid(
+            "plot",
+            format!("{width}×{height} is too small for a labelled heat map (200×150 at least)"),
+        ));
+    }
+    let scale = ColourScale::of(map);
+    let mut buf = vec![0u8; (width * height * 3) as usize];
+    {
+        let root = BitMapBackend::with_buffer(&mut buf, (width, height)).into_drawing_area();
+        root.fill(&WHITE).map_err(plot_error)?;
+        let m = Margins::measure(&root, map, &scale)?;
         let (w, h) = (width as i32, height as i32);
-        if left + right + cols as i32 > w || top + bottom + rows as i32 > h {
+        if m.left + m.right + cols as i32 > w || m.top + m.bottom + rows as i32 > h {
             return Err(Error::invalid(
                 "plot",
                 format!("{width}×{height} leaves no room for the {cols}×{rows} cells"),
             ));
         }
-
         root.draw_text(
             &map.title,
-            &title.pos(Pos::new(HPos::Center, VPos::Top)),
+            &m.title.pos(Pos::new(HPos::Center, VPos::Top)),
             (w / 2, 12),
         )
         .map_err(plot_error)?;
-
         let mut chart = ChartBuilder::on(&root)
-            .margin_top(top)
-            .margin_bottom(bottom)
-            .margin_left(left)
-            .margin_right(right)
+            .margin_top(m.top)
+            .margin_bottom(m.bottom)
+            .margin_left(m.left)
+            .margin_right(m.right)
             .build_cartesian_2d(map.x.0..map.x.1, map.y.0..map.y.1)
             .map_err(plot_error)?;
-        let dx = (map.x.1 - map.x.0) / cols as f64;
-        let dy = (map.y.1 - map.y.0) / rows as f64;
-        let cells = map.values.iter().enumerate().flat_map(|(r, row)| {
-            row.iter().enumerate().map(move |(c, &v)| {
-                let colour = if shown(v) {
-                    let (r, g, b) = ramp((scale(v) - lo) / span);
-                    RGBColor(r, g, b)
-                } else {
-                    MISSING
-                };
-                let x = map.x.0 + c as f64 * dx;
-                let y = map.y.0 + r as f64 * dy;
-                Rectangle::new([(x, y), (x + dx, y + dy)], colour.filled())
-            })
-        });
-        chart.draw_series(cells).map_err(plot_error)?;
-        let rule = WHITE.stroke_width(2);
-        for &x in &map.x_axis.rules {
+        draw_cells(&mut chart, map, &scale)?;
+        draw_rules(&mut chart, map)?;
+        draw_curves(&mut chart, map)?;
+        draw_axes(&root, &chart, map, &m)?;
+        draw_colour_bar(&root, &chart, map, &scale, &m)?;
+        root.present().map_err(plot_error)?;
+    }
+    write_png(path, &buf, width, height)
+}
+
+/// One rectangle a cell, coloured by the scale.
+fn draw_cells(chart: &mut Chart, map: &HeatMap, scale: &ColourScale) -> Result<()> {
+    let rows = map.values.len();
+    let cols = map.values.first().map_or(0, Vec::len);
+    let dx = (map.x.1 - map.x.0) / cols as f64;
+    let dy = (map.y.1 - map.y.0) / rows as f64;
+    let cells = map.values.iter().enumerate().flat_map(|(r, row)| {
+        row.iter().enumerate().map(move |(c, &v)| {
+            let x = map.x.0 + c as f64 * dx;
+            let y = map.y.0 + r as f64 * dy;
+            Rectangle::new([(x, y), (x + dx, y + dy)], scale.colour(v).filled())
+        })
+    });
+    chart.draw_series(cells).map_err(plot_error)?;
+    Ok(())
+}
+
+/// White rules across the cells between groups.
+fn draw_rules(chart: &mut Chart, map: &HeatMap) -> Result<()> {
+    let rule = WHITE.stroke_width(2);
+    for &x in &map.x_axis.rules {
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                vec![(x, map.y.0), (x, map.y.1)],
+                rule,
+            )))
+            .map_err(plot_error)?;
+    }
+    for &y in &map.y_axis.rules {
+        chart
+            .draw_series(std::iter::once(PathElement::new(
+                vec![(map.x.0, y), (map.x.1, y)],
+                rule,
+            )))
+            .map_err(plot_error)?;
+    }
+    Ok(())
+}
+
+/// The overlaid curves (lines broken at non-finite points, or markers) and their legend.
+fn draw_curves<'a, 'b: 'a>(chart: &mut Chart<'a, 'b>, map: &HeatMap) -> Result<()> {
+    for curve in &map.curves {
+        let (r, g, b) = curve.colour;
+        let colour = RGBColor(r, g, b);
+        if curve.markers {
+            let points: Vec<(f64, f64)> = curve
+                .points
+                .iter()
+                .copied()
+                .filter(|p| p.0.is_finite() && p.1.is_finite())
+                .collect();
             chart
-                .draw_series(std::iter::once(PathElement::new(
-                    vec![(x, map.y.0), (x, map.y.1)],
-                    rule,
-                )))
+                .draw_series(points.iter().map(|&p| Circle::new(p, 5, BLACK.filled())))
                 .map_err(plot_error)?;
-        }
-        for &y in &map.y_axis.rules {
-            chart
-                .draw_series(std::iter::once(PathElement::new(
-                    vec![(map.x.0, y), (map.x.1, y)],
-                    rule,
-                )))
+            let anno = chart
+                .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
                 .map_err(plot_error)?;
-        }
-        for curve in &map.curves {
-            let (r, g, b) = curve.colour;
-            let colour = RGBColor(r, g, b);
-            if curve.markers {
-                let points: Vec<(f64, f64)> = curve
-                    .points
-                    .iter()
-                    .copied()
-                    .filter(|p| p.0.is_finite() && p.1.is_finite())
-                    .collect();
-                chart
-                    .draw_series(points.iter().map(|&p| Circle::new(p, 5, BLACK.filled())))
-                    .map_err(plot_error)?;
+            if !points.is_empty() && !curve.label.is_empty() {
+                anno.label(curve.label.clone()).legend(move |(x, y)| {
+                    EmptyElement::at((x + 10, y))
+                        + Circle::new((0, 0), 5, BLACK.filled())
+                        + Circle::new((0, 0), 3, colour.filled())
+                });
+            }
+        } else {
+            let mut labelled = curve.label.is_empty();
+            for piece in curve
+                .points
+                .split(|p| !(p.0.is_finite() && p.1.is_finite()))
+                .filter(|piece| piece.len() > 1)
+            {
                 let anno = chart
-                    .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
+                    .draw_series(LineSeries::new(
+                        piece.iter().copied(),
+                        colour.stroke_width(2),
+                    ))
                     .map_err(plot_error)?;
-                if !points.is_empty() && !curve.label.is_empty() {
+                if !labelled {
+                    labelled = true;
                     anno.label(curve.label.clone()).legend(move |(x, y)| {
-                        EmptyElement::at((x + 10, y))
-                            + Circle::new((0, 0), 5, BLACK.filled())
-                            + Circle::new((0, 0), 3, colour.filled())
+                        PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
                     });
                 }
-            } else {
-                let mut labelled = curve.label.is_empty();
-                for piece in curve
-                    .points
-                    .split(|p| !(p.0.is_finite() && p.1.is_finite()))
-                    .filter(|piece| piece.len() > 1)
-                {
-                    let anno = chart
-                        .draw_series(LineSeries::new(
-                            piece.iter().copied(),
-                            colour.stroke_width(2),
-                        ))
-                        .map_err(plot_error)?;
-                    if !labelled {
-                        labelled = true;
-                        anno.label(curve.label.clone()).legend(move |(x, y)| {
-                            PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-                        });
-                    }
-                }
             }
         }
-        if map.curves.iter().any(|c| !c.label.is_empty()) {
-            chart
-                .configure_series_labels()
-                .position(SeriesLabelPosition::UpperRight)
-                .border_style(BLACK)
-                .background_style(WHITE.mix(0.85))
-                .label_font(text(14))
-                .draw()
-                .map_err(plot_error)?;
-        }
-
-        // Frame, ticks and group labels, in pixels.
-        let (x0, y0) = chart.backend_coord(&(map.x.0, map.y.0));
-        let (x1, y1) = chart.backend_coord(&(map.x.1, map.y.1));
-        let px = |x: f64| chart.backend_coord(&(x, map.y.0)).0;
-        let py = |y: f64| chart.backend_coord(&(map.x.0, y)).1;
-        let ink = BLACK.stroke_width(1);
-        let line = |a: (i32, i32), b: (i32, i32)| {
-            root.draw(&PathElement::new(vec![a, b], ink))
-                .map_err(plot_error)
-        };
-        root.draw(&Rectangle::new([(x0, y1), (x1, y0)], ink))
+    }
+    if map.curves.iter().any(|c| !c.label.is_empty()) {
+        chart
+            .configure_series_labels()
+            .position(SeriesLabelPosition::UpperRight)
+            .border_style(BLACK)
+            .background_style(WHITE.mix(0.85))
+            .label_font(text(14))
+            .draw()
             .map_err(plot_error)?;
-        for (x, label) in &map.x_axis.ticks {
-            let p = px(*x);
-            line((p, y0), (p, y0 + TICK))?;
+    }
+    Ok(())
+}
+
+/// A one-pixel black line on the bitmap.
+fn ink_line(root: &Area, a: (i32, i32), b: (i32, i32)) -> Result<()> {
+    root.draw(&PathElement::new(vec![a, b], BLACK.stroke_width(1)))
+        .map_err(plot_error)
+}
+
+/// The frame around the cells, the ticks and group labels of both axes and the axis
+/// descriptions, in pixels.
+fn draw_axes(root: &Area, chart: &Chart, map: &HeatMap, m: &Margins) -> Result<()> {
+    let (x0, y0) = chart.backend_coord(&(map.x.0, map.y.0));
+    let (x1, y1) = chart.backend_coord(&(map.x.1, map.y.1));
+    let px = |x: f64| chart.backend_coord(&(x, map.y.0)).0;
+    let py = |y: f64| chart.backend_coord(&(map.x.0, y)).1;
+    let line = |a, b| ink_line(root, a, b);
+    root.draw(&Rectangle::new([(x0, y1), (x1, y0)], BLACK.stroke_width(1)))
+        .map_err(plot_error)?;
+    for (x, label) in &map.x_axis.ticks {
+        let p = px(*x);
+        line((p, y0), (p, y0 + TICK))?;
+        root.draw_text(
+            label,
+            &m.tick.pos(Pos::new(HPos::Center, VPos::Top)),
+            (p, y0 + TICK + 3),
+        )
+        .map_err(plot_error)?;
+    }
+    for (level, spans) in map.x_axis.groups.iter().enumerate() {
+        let y = y0 + TICK + 4 + m.line_h + 6 + level as i32 * (m.line_h + 12);
+        for (a, b, label) in spans {
+            let (a, b) = (px(*a) + 3, px(*b) - 3);
+            line((a, y - 4), (a, y))?;
+            line((a, y), (b, y))?;
+            line((b, y - 4), (b, y))?;
             root.draw_text(
                 label,
-                &tick.pos(Pos::new(HPos::Center, VPos::Top)),
-                (p, y0 + TICK + 3),
+                &m.group.pos(Pos::new(HPos::Center, VPos::Top)),
+                ((a + b) / 2, y + 2),
             )
             .map_err(plot_error)?;
         }
-        for (level, spans) in map.x_axis.groups.iter().enumerate() {
-            let y = y0 + TICK + 4 + line_h + 6 + level as i32 * (line_h + 12);
-            for (a, b, label) in spans {
-                let (a, b) = (px(*a) + 3, px(*b) - 3);
-                line((a, y - 4), (a, y))?;
-                line((a, y), (b, y))?;
-                line((b, y - 4), (b, y))?;
-                root.draw_text(
-                    label,
-                    &group.pos(Pos::new(HPos::Center, VPos::Top)),
-                    ((a + b) / 2, y + 2),
-                )
-                .map_err(plot_error)?;
-            }
-        }
-        for (y, label) in &map.y_axis.ticks {
-            let p = py(*y);
-            line((x0 - TICK, p), (x0, p))?;
+    }
+    for (y, label) in &map.y_axis.ticks {
+        let p = py(*y);
+        line((x0 - TICK, p), (x0, p))?;
+        root.draw_text(
+            label,
+            &m.tick.pos(Pos::new(HPos::Right, VPos::Center)),
+            (x0 - TICK - 3, p),
+        )
+        .map_err(plot_error)?;
+    }
+    let mut x = x0 - TICK - 6 - m.y_tick_w - 6;
+    for (spans, gw) in map.y_axis.groups.iter().zip(&m.y_group_w) {
+        for (a, b, label) in spans {
+            let (a, b) = (py(*a) - 3, py(*b) + 3);
+            line((x + 4, a), (x, a))?;
+            line((x, a), (x, b))?;
+            line((x + 4, b), (x, b))?;
             root.draw_text(
                 label,
-                &tick.pos(Pos::new(HPos::Right, VPos::Center)),
-                (x0 - TICK - 3, p),
+                &m.group.pos(Pos::new(HPos::Right, VPos::Center)),
+                (x - 5, (a + b) / 2),
             )
             .map_err(plot_error)?;
         }
-        let mut x = x0 - TICK - 6 - y_tick_w - 6;
-        for (spans, gw) in map.y_axis.groups.iter().zip(&y_group_w) {
-            for (a, b, label) in spans {
-                let (a, b) = (py(*a) - 3, py(*b) + 3);
-                line((x + 4, a), (x, a))?;
-                line((x, a), (x, b))?;
-                line((x + 4, b), (x, b))?;
-                root.draw_text(
-                    label,
-                    &group.pos(Pos::new(HPos::Right, VPos::Center)),
-                    (x - 5, (a + b) / 2),
-                )
-                .map_err(plot_error)?;
-            }
-            x -= gw + 16;
-        }
-        root.draw_text(
-            &map.x_axis.label,
-            &desc.pos(Pos::new(HPos::Center, VPos::Bottom)),
-            ((x0 + x1) / 2, h - 10),
-        )
-        .map_err(plot_error)?;
-        root.draw_text(
-            &map.y_axis.label,
-            &desc
-                .transform(FontTransform::Rotate270)
-                .pos(Pos::new(HPos::Center, VPos::Top)),
-            (10, (y0 + y1) / 2),
-        )
-        .map_err(plot_error)?;
+        x -= gw + 16;
+    }
+    root.draw_text(
+        &map.x_axis.label,
+        &m.desc.pos(Pos::new(HPos::Center, VPos::Bottom)),
+        ((x0 + x1) / 2, map.size.1 as i32 - 10),
+    )
+    .map_err(plot_error)?;
+    root.draw_text(
+        &map.y_axis.label,
+        &m.desc
+            .transform(FontTransform::Rotate270)
+            .pos(Pos::new(HPos::Center, VPos::Top)),
+        (10, (y0 + y1) / 2),
+    )
+    .map_err(plot_error)
+}
 
-        // The colour bar.
-        let bx0 = x1 + 26;
-        let bx1 = bx0 + bar_w;
-        let mut bar = ChartBuilder::on(&root)
-            .margin_top(top)
-            .margin_bottom(bottom)
-            .margin_left(bx0)
-            .margin_right(w - bx1)
-            .build_cartesian_2d(0.0..1.0, lo..hi)
-            .map_err(plot_error)?;
-        const STEPS: usize = 128;
-        bar.draw_series((0..STEPS).map(|i| {
-            let (r, g, b) = ramp((i as f64 + 0.5) / STEPS as f64);
-            let v = |k: usize| lo + span * k as f64 / STEPS as f64;
-            Rectangle::new([(0.0, v(i)), (1.0, v(i + 1))], RGBColor(r, g, b).filled())
-        }))
+/// The colour bar right of the cells: the ramp, its ticks, the marks on the scale (a mark's
+/// label wins over a tick label it would overlap), its description and the swatch of the
+/// cells without a value.
+fn draw_colour_bar(
+    root: &Area,
+    chart: &Chart,
+    map: &HeatMap,
+    scale: &ColourScale,
+    m: &Margins,
+) -> Result<()> {
+    let (_, y0) = chart.backend_coord(&(map.x.0, map.y.0));
+    let (x1, y1) = chart.backend_coord(&(map.x.1, map.y.1));
+    let w = map.size.0 as i32;
+    let (lo, hi, span) = (scale.lo, scale.hi, scale.span());
+    let line = |a, b| ink_line(root, a, b);
+    let ink = BLACK.stroke_width(1);
+    let bx0 = x1 + 26;
+    let bx1 = bx0 + m.bar_w;
+    let mut bar = ChartBuilder::on(root)
+        .margin_top(m.top)
+        .margin_bottom(m.bottom)
+        .margin_left(bx0)
+        .margin_right(w - bx1)
+        .build_cartesian_2d(0.0..1.0, lo..hi)
         .map_err(plot_error)?;
-        root.draw(&Rectangle::new([(bx0, y1), (bx1, y0)], ink))
-            .map_err(plot_error)?;
-        let marks: Vec<(i32, &String)> = map
-            .scale_marks
-            .iter()
-            .filter(|m| m.0 >= lo && m.0 <= hi)
-            .map(|(v, label)| (bar.backend_coord(&(1.0, *v)).1, label))
-            .collect();
-        for (v, label) in &bar_ticks {
-            let p = bar.backend_coord(&(1.0, *v)).1;
-            line((bx1, p), (bx1 + TICK, p))?;
-            // A mark's label wins over a tick label it would overlap.
-            if marks.iter().all(|m| (m.0 - p).abs() >= line_h) {
-                root.draw_text(
-                    label,
-                    &tick.pos(Pos::new(HPos::Left, VPos::Center)),
-                    (bx1 + TICK + 4, p),
-                )
-                .map_err(plot_error)?;
-            }
-        }
-        for (p, label) in marks {
-            root.draw(&Rectangle::new(
-                [(bx0 - 4, p - 1), (bx1 + TICK, p + 1)],
-                BLACK.filled(),
-            ))
-            .map_err(plot_error)?;
+    const STEPS: usize = 128;
+    bar.draw_series((0..STEPS).map(|i| {
+        let (r, g, b) = ramp((i as f64 + 0.5) / STEPS as f64);
+        let v = |k: usize| lo + span * k as f64 / STEPS as f64;
+        Rectangle::new([(0.0, v(i)), (1.0, v(i + 1))], RGBColor(r, g, b).filled())
+    }))
+    .map_err(plot_error)?;
+    root.draw(&Rectangle::new([(bx0, y1), (bx1, y0)], ink))
+        .map_err(plot_error)?;
+    let marks: Vec<(i32, &String)> = map
+        .scale_marks
+        .iter()
+        .filter(|mk| mk.0 >= lo && mk.0 <= hi)
+        .map(|(v, label)| (bar.backend_coord(&(1.0, *v)).1, label))
+        .collect();
+    for (v, label) in &scale.ticks {
+        let p = bar.backend_coord(&(1.0, *v)).1;
+        line((bx1, p), (bx1 + TICK, p))?;
+        if marks.iter().all(|mk| (mk.0 - p).abs() >= m.line_h) {
             root.draw_text(
                 label,
-                &tick.pos(Pos::new(HPos::Left, VPos::Center)),
+                &m.tick.pos(Pos::new(HPos::Left, VPos::Center)),
                 (bx1 + TICK + 4, p),
             )
             .map_err(plot_error)?;
         }
+    }
+    for (p, label) in marks {
+        root.draw(&Rectangle::new(
+            [(bx0 - 4, p - 1), (bx1 + TICK, p + 1)],
+            BLACK.filled(),
+        ))
+        .map_err(plot_error)?;
         root.draw_text(
-            &map.scale_label,
-            &desc
-                .transform(FontTransform::Rotate90)
-                .pos(Pos::new(HPos::Center, VPos::Top)),
-            (w - 10, (y0 + y1) / 2),
+            label,
+            &m.tick.pos(Pos::new(HPos::Left, VPos::Center)),
+            (bx1 + TICK + 4, p),
         )
         .map_err(plot_error)?;
-        if let Some(label) = &map.missing_label {
-            let y = y0 + TICK + 6;
-            root.draw(&Rectangle::new(
-                [(bx0, y), (bx1, y + line_h)],
-                MISSING.filled(),
-            ))
-            .map_err(plot_error)?;
-            root.draw(&Rectangle::new([(bx0, y), (bx1, y + line_h)], ink))
-                .map_err(plot_error)?;
-            root.draw_text(
-                label,
-                &tick.pos(Pos::new(HPos::Left, VPos::Center)),
-                (bx1 + TICK + 4, y + line_h / 2),
-            )
-            .map_err(plot_error)?;
-        }
-        root.present().map_err(plot_error)?;
     }
-    write_png(path, &buf, width, height)
+    root.draw_text(
+        &map.scale_label,
+        &m.desc
+            .transform(FontTransform::Rotate90)
+            .pos(Pos::new(HPos::Center, VPos::Top)),
+        (w - 10, (y0 + y1) / 2),
+    )
+    .map_err(plot_error)?;
+    if let Some(label) = &map.missing_label {
+        let y = y0 + TICK + 6;
+        root.draw(&Rectangle::new(
+            [(bx0, y), (bx1, y + m.line_h)],
+            MISSING.filled(),
+        ))
+        .map_err(plot_error)?;
+        root.draw(&Rectangle::new([(bx0, y), (bx1, y + m.line_h)], ink))
+            .map_err(plot_error)?;
+        root.draw_text(
+            label,
+            &m.tick.pos(Pos::new(HPos::Left, VPos::Center)),
+            (bx1 + TICK + 4, y + m.line_h / 2),
+        )
+        .map_err(plot_error)?;
+    }
+    Ok(())
 }
 
 /// Encodes an RGB8 buffer as PNG and writes it atomically.

@@ -490,23 +490,26 @@ impl Scene {
         self.mesh.model_matrix()
     }
 
-    /// Semantic checks; the message names the section and key.
+    /// Semantic checks, section by section; the message names the section and key.
     fn validate(&self) -> std::result::Result<(), String> {
-        let finite3 = |what: &str, v: [f32; 3]| {
-            if v.iter().all(|c| c.is_finite()) {
-                Ok(())
-            } else {
-                Err(format!("{what} = {v:?}: all components must be finite"))
-            }
-        };
-        let positive = |what: &str, x: f32| {
-            if x.is_finite() && x > 0.0 {
-                Ok(())
-            } else {
-                Err(format!("{what} = {x}: must be positive and finite"))
-            }
-        };
+        self.validate_camera()?;
+        self.validate_light()?;
+        self.validate_mesh()?;
+        self.validate_output()?;
+        if let Some(t) = &self.texture {
+            validate_texture(t)?;
+        }
+        if self.material.heightfield.is_empty() {
+            return Err("[material] heightfield is empty".into());
+        }
+        self.material
+            .validate()
+            .map_err(|e| format!("[material] {e}"))
+    }
 
+    /// `[camera]`: finite vectors, a field of view and clip planes that make sense, and an
+    /// up direction not along the view.
+    fn validate_camera(&self) -> std::result::Result<(), String> {
         let c = &self.camera;
         finite3("[camera] eye", c.eye)?;
         finite3("[camera] target", c.target)?;
@@ -538,7 +541,11 @@ impl Scene {
                 c.up
             ));
         }
+        Ok(())
+    }
 
+    /// `[light]`: a direction, a non-negative intensity and the sun's disc within bounds.
+    fn validate_light(&self) -> std::result::Result<(), String> {
         let l = &self.light;
         finite3("[light] direction", l.direction)?;
         if Vec3::from(l.direction).try_normalize().is_none() {
@@ -563,7 +570,11 @@ impl Scene {
                 l.disk_samples
             ));
         }
+        Ok(())
+    }
 
+    /// `[mesh]`: one source, and its placement and scales within bounds.
+    fn validate_mesh(&self) -> std::result::Result<(), String> {
         let m = &self.mesh;
         match (&m.path, &m.builtin) {
             (Some(_), Some(_)) => {
@@ -597,7 +608,11 @@ impl Scene {
                 return Err(format!("[mesh] {name} = {a}: expected 0 to 45 degrees"));
             }
         }
+        Ok(())
+    }
 
+    /// `[output]`: the image size, exposure, background, supersampling and white point.
+    fn validate_output(&self) -> std::result::Result<(), String> {
         let o = &self.output;
         for (what, v) in [("width", o.width), ("height", o.height)] {
             if !(1..=8192).contains(&v) {
@@ -620,32 +635,46 @@ impl Scene {
             ));
         }
         positive("[output] white", o.white)?;
+        Ok(())
+    }
+}
 
-        if let Some(t) = &self.texture {
-            if t.path.as_os_str().is_empty() {
-                return Err("[texture] path is empty".into());
-            }
-            if !(t.w_diffuse.is_finite() && (0.0..=1.0).contains(&t.w_diffuse)) {
-                return Err(format!(
-                    "[texture] w_diffuse = {}: must be in [0, 1]",
-                    t.w_diffuse
-                ));
-            }
-            positive("[texture] gain", t.gain)?;
-            if !(0.0..=1.0).contains(&t.ambient) {
-                return Err(format!(
-                    "[texture] ambient = {}: must be in [0, 1]",
-                    t.ambient
-                ));
-            }
-        }
+/// `[texture]`: a path, and weights within bounds.
+fn validate_texture(t: &TextureSpec) -> std::result::Result<(), String> {
+    if t.path.as_os_str().is_empty() {
+        return Err("[texture] path is empty".into());
+    }
+    if !(t.w_diffuse.is_finite() && (0.0..=1.0).contains(&t.w_diffuse)) {
+        return Err(format!(
+            "[texture] w_diffuse = {}: must be in [0, 1]",
+            t.w_diffuse
+        ));
+    }
+    positive("[texture] gain", t.gain)?;
+    if !(0.0..=1.0).contains(&t.ambient) {
+        return Err(format!(
+            "[texture] ambient = {}: must be in [0, 1]",
+            t.ambient
+        ));
+    }
+    Ok(())
+}
 
-        if self.material.heightfield.is_empty() {
-            return Err("[material] heightfield is empty".into());
-        }
-        self.material
-            .validate()
-            .map_err(|e| format!("[material] {e}"))
+/// `Err` naming `what` unless every component of `v` is finite.
+fn finite3(what: &str, v: [f32; 3]) -> std::result::Result<(), String> {
+    if v.iter().all(|c| c.is_finite()) {
+        Ok(())
+    } else {
+        Err(format!("{what} = {v:?}: all components must be finite"))
+    }
+}
+
+/// `Err` naming `what` unless `x` is positive and finite.
+fn positive(what: &str, x: f32) -> std::result::Result<(), String> {
+    if x.is_finite() && x > 0.0 {
+        Ok(())
+    } else {
+        Err(format!("{what} = {x}: must be positive and finite"))
     }
 }
 

@@ -144,93 +144,14 @@ impl Instance {
         Self::create(validation, required)
     }
 
+    /// The instance: the loader checked ([`load_entry`]), the layers and extensions chosen
+    /// ([`InstanceSetup::choose`]), the instance created with the validation messenger
+    /// chained, then the messenger that outlives creation attached.
     fn create(validation: bool, surface_extensions: &[*const c_char]) -> Result<Arc<Self>> {
-        // SAFETY: loading the system Vulkan library runs its initialisers; we trust the
-        // installed loader like any Vulkan application does.
-        let entry = unsafe { ash::Entry::load() }
-            .map_err(|e| Error::NoVulkan(format!("cannot load the Vulkan loader: {e}")))?;
-
-        // SAFETY: entry is a loaded Vulkan entry point table.
-        let version = unsafe { entry.try_enumerate_instance_version() }
-            .map_err(Error::vk("vkEnumerateInstanceVersion"))?
-            .unwrap_or(vk::API_VERSION_1_0);
-        if version < vk::API_VERSION_1_1 {
-            return Err(Error::NoVulkan(format!(
-                "the Vulkan loader supports only version {}.{}; 1.1 is needed",
-                vk::api_version_major(version),
-                vk::api_version_minor(version)
-            )));
-        }
-
-        // SAFETY: plain enumeration calls on a loaded entry.
-        let extensions = unsafe { entry.enumerate_instance_extension_properties(None) }
-            .map_err(Error::vk("vkEnumerateInstanceExtensionProperties"))?;
-        let has_ext = |list: &[vk::ExtensionProperties], name: &CStr| {
-            list.iter()
-                .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == name))
-        };
-        let debug_utils_enabled = has_ext(&extensions, ash::ext::debug_utils::NAME);
-        if validation && !debug_utils_enabled {
-            return Err(Error::invalid(
-                "validation",
-                "VK_EXT_debug_utils is not available, so validation messages cannot be collected",
-            ));
-        }
-
-        let mut layers: Vec<*const c_char> = Vec::new();
-        let mut ext_names: Vec<*const c_char> = Vec::new();
-        for &name in surface_extensions {
-            // SAFETY: ash_window returns pointers to NUL-terminated 'static extension names.
-            let name_c = unsafe { CStr::from_ptr(name) };
-            if !has_ext(&extensions, name_c) {
-                return Err(Error::NoPresentation(format!(
-                    "the Vulkan loader lacks {}",
-                    name_c.to_string_lossy()
-                )));
-            }
-            ext_names.push(name);
-        }
-        if debug_utils_enabled {
-            ext_names.push(ash::ext::debug_utils::NAME.as_ptr());
-        }
-        let mut sync_validation = false;
-        if validation {
-            // SAFETY: plain enumeration call on a loaded entry.
-            let available = unsafe { entry.enumerate_instance_layer_properties() }
-                .map_err(Error::vk("vkEnumerateInstanceLayerProperties"))?;
-            if !available
-                .iter()
-                .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER))
-            {
-                return Err(Error::invalid(
-                    "validation",
-                    "VK_LAYER_KHRONOS_validation is not installed (e.g. apt install vulkan-validationlayers)",
-                ));
-            }
-            layers.push(VALIDATION_LAYER.as_ptr());
-            // SAFETY: enumeration of the extensions a present layer provides.
-            let layer_exts =
-                unsafe { entry.enumerate_instance_extension_properties(Some(VALIDATION_LAYER)) }
-                    .map_err(Error::vk("vkEnumerateInstanceExtensionProperties"))?;
-            if has_ext(&layer_exts, ash::ext::validation_features::NAME) {
-                ext_names.push(ash::ext::validation_features::NAME.as_ptr());
-                sync_validation = true;
-            }
-        }
-
+        let entry = load_entry()?;
+        let setup = InstanceSetup::choose(&entry, validation, surface_extensions)?;
         let canary = Arc::new(Canary::default());
-        let mut messenger_info = vk::DebugUtilsMessengerCreateInfoEXT::default()
-            .message_severity(
-                vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
-                    | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
-            )
-            .message_type(
-                vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
-                    | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
-                    | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
-            )
-            .pfn_user_callback(Some(debug_callback))
-            .user_data(Arc::as_ptr(&canary) as *mut c_void);
+        let mut messenger_info = messenger_info(&canary);
         let enabled_features = [vk::ValidationFeatureEnableEXT::SYNCHRONIZATION_VALIDATION];
         let mut validation_features =
             vk::ValidationFeaturesEXT::default().enabled_validation_features(&enabled_features);
@@ -242,12 +163,12 @@ impl Instance {
             .api_version(vk::API_VERSION_1_1);
         let mut create_info = vk::InstanceCreateInfo::default()
             .application_info(&app)
-            .enabled_layer_names(&layers)
-            .enabled_extension_names(&ext_names);
+            .enabled_layer_names(&setup.layers)
+            .enabled_extension_names(&setup.extensions);
         if validation {
             // Chained so that messages of vkCreateInstance/vkDestroyInstance are caught too.
             create_info = create_info.push_next(&mut messenger_info);
-            if sync_validation {
+            if setup.sync_validation {
                 create_info = create_info.push_next(&mut validation_features);
             }
         }
@@ -265,7 +186,7 @@ impl Instance {
             entry,
             raw,
             messenger: None,
-            debug_utils_enabled,
+            debug_utils_enabled: setup.debug_utils_enabled,
             canary,
         };
         if validation {
@@ -293,6 +214,124 @@ impl Instance {
     pub(crate) fn entry(&self) -> &ash::Entry {
         &self.entry
     }
+}
+
+/// The system's Vulkan loader, refused below version 1.1.
+fn load_entry() -> Result<ash::Entry> {
+    // SAFETY: loading the system Vulkan library runs its initialisers; we trust the
+    // installed loader like any Vulkan application does.
+    let entry = unsafe { ash::Entry::load() }
+        .map_err(|e| Error::NoVulkan(format!("cannot load the Vulkan loader: {e}")))?;
+
+    // SAFETY: entry is a loaded Vulkan entry point table.
+    let version = unsafe { entry.try_enumerate_instance_version() }
+        .map_err(Error::vk("vkEnumerateInstanceVersion"))?
+        .unwrap_or(vk::API_VERSION_1_0);
+    if version < vk::API_VERSION_1_1 {
+        return Err(Error::NoVulkan(format!(
+            "the Vulkan loader supports only version {}.{}; 1.1 is needed",
+            vk::api_version_major(version),
+            vk::api_version_minor(version)
+        )));
+    }
+    Ok(entry)
+}
+
+/// The instance's layers and extensions.
+struct InstanceSetup {
+    layers: Vec<*const c_char>,
+    extensions: Vec<*const c_char>,
+    debug_utils_enabled: bool,
+    /// The validation layer offers synchronisation validation.
+    sync_validation: bool,
+}
+
+impl InstanceSetup {
+    /// The window system's surface extensions (each must be present), debug utils where
+    /// available (required with `validation`), and with `validation` the Khronos layer and
+    /// its synchronisation validation where offered.
+    fn choose(
+        entry: &ash::Entry,
+        validation: bool,
+        surface_extensions: &[*const c_char],
+    ) -> Result<Self> {
+        // SAFETY: plain enumeration calls on a loaded entry.
+        let available = unsafe { entry.enumerate_instance_extension_properties(None) }
+            .map_err(Error::vk("vkEnumerateInstanceExtensionProperties"))?;
+        let has_ext = |list: &[vk::ExtensionProperties], name: &CStr| {
+            list.iter()
+                .any(|e| e.extension_name_as_c_str().is_ok_and(|n| n == name))
+        };
+        let debug_utils_enabled = has_ext(&available, ash::ext::debug_utils::NAME);
+        if validation && !debug_utils_enabled {
+            return Err(Error::invalid(
+                "validation",
+                "VK_EXT_debug_utils is not available, so validation messages cannot be collected",
+            ));
+        }
+        let mut layers: Vec<*const c_char> = Vec::new();
+        let mut extensions: Vec<*const c_char> = Vec::new();
+        for &name in surface_extensions {
+            // SAFETY: ash_window returns pointers to NUL-terminated 'static extension names.
+            let name_c = unsafe { CStr::from_ptr(name) };
+            if !has_ext(&available, name_c) {
+                return Err(Error::NoPresentation(format!(
+                    "the Vulkan loader lacks {}",
+                    name_c.to_string_lossy()
+                )));
+            }
+            extensions.push(name);
+        }
+        if debug_utils_enabled {
+            extensions.push(ash::ext::debug_utils::NAME.as_ptr());
+        }
+        let mut sync_validation = false;
+        if validation {
+            // SAFETY: plain enumeration call on a loaded entry.
+            let present = unsafe { entry.enumerate_instance_layer_properties() }
+                .map_err(Error::vk("vkEnumerateInstanceLayerProperties"))?;
+            if !present
+                .iter()
+                .any(|l| l.layer_name_as_c_str().is_ok_and(|n| n == VALIDATION_LAYER))
+            {
+                return Err(Error::invalid(
+                    "validation",
+                    "VK_LAYER_KHRONOS_validation is not installed (e.g. apt install vulkan-validationlayers)",
+                ));
+            }
+            layers.push(VALIDATION_LAYER.as_ptr());
+            // SAFETY: enumeration of the extensions a present layer provides.
+            let layer_exts =
+                unsafe { entry.enumerate_instance_extension_properties(Some(VALIDATION_LAYER)) }
+                    .map_err(Error::vk("vkEnumerateInstanceExtensionProperties"))?;
+            if has_ext(&layer_exts, ash::ext::validation_features::NAME) {
+                extensions.push(ash::ext::validation_features::NAME.as_ptr());
+                sync_validation = true;
+            }
+        }
+        Ok(Self {
+            layers,
+            extensions,
+            debug_utils_enabled,
+            sync_validation,
+        })
+    }
+}
+
+/// The validation messenger: warnings and errors of every type, counted by `canary`.
+fn messenger_info(canary: &Arc<Canary>) -> vk::DebugUtilsMessengerCreateInfoEXT<'static> {
+    vk::DebugUtilsMessengerCreateInfoEXT::default()
+        .message_severity(
+            vk::DebugUtilsMessageSeverityFlagsEXT::WARNING
+                | vk::DebugUtilsMessageSeverityFlagsEXT::ERROR,
+        )
+        .message_type(
+            vk::DebugUtilsMessageTypeFlagsEXT::GENERAL
+                | vk::DebugUtilsMessageTypeFlagsEXT::VALIDATION
+                | vk::DebugUtilsMessageTypeFlagsEXT::PERFORMANCE,
+        )
+        .pfn_user_callback(Some(debug_callback))
+        .user_data(Arc::as_ptr(canary) as *mut c_void)
 }
 
 impl Drop for Instance {
@@ -387,6 +426,149 @@ fn type_rank(t: vk::PhysicalDeviceType) -> u32 {
     }
 }
 
+/// The physical device a [`Device`] is made on, with its graphics queue family.
+struct ChosenPhysical {
+    physical: vk::PhysicalDevice,
+    queue_family: u32,
+    props: vk::PhysicalDeviceProperties,
+}
+
+/// The best-ranked (discrete first) Vulkan 1.1 device with a graphics queue that meets
+/// `req`: its queue family and extensions.
+fn choose_physical(inst: &ash::Instance, req: Option<&Requirements<'_>>) -> Result<ChosenPhysical> {
+    // SAFETY: inst is a live instance.
+    let physicals = unsafe { inst.enumerate_physical_devices() }
+        .map_err(Error::vk("vkEnumeratePhysicalDevices"))?;
+    let mut best: Option<(u32, ChosenPhysical)> = None;
+    for pd in physicals {
+        // SAFETY: pd was enumerated from this instance.
+        let props = unsafe { inst.get_physical_device_properties(pd) };
+        if props.api_version < vk::API_VERSION_1_1 {
+            continue;
+        }
+        // SAFETY: as above.
+        let families = unsafe { inst.get_physical_device_queue_family_properties(pd) };
+        let Some(family) = families.iter().enumerate().position(|(i, f)| {
+            f.queue_flags.contains(vk::QueueFlags::GRAPHICS)
+                && req.is_none_or(|r| (r.queue_family)(pd, i as u32))
+        }) else {
+            continue;
+        };
+        if req.is_some_and(|r| {
+            r.extensions
+                .iter()
+                .any(|e| !device_has_extension(inst, pd, e))
+        }) {
+            continue;
+        }
+        let rank = type_rank(props.device_type);
+        if best.as_ref().is_none_or(|b| rank < b.0) {
+            let chosen = ChosenPhysical {
+                physical: pd,
+                queue_family: family as u32,
+                props,
+            };
+            best = Some((rank, chosen));
+        }
+    }
+    match (best, req) {
+        (Some((_, chosen)), _) => Ok(chosen),
+        (None, Some(r)) => Err((r.unmet)()),
+        (None, None) => Err(Error::NoVulkan(
+            "no Vulkan 1.1 device with a graphics queue was found".into(),
+        )),
+    }
+}
+
+/// The logical device: one graphics queue, the required extensions, and float64 in
+/// compute shaders (the device table build) where the device has it (the second value).
+fn create_logical(
+    inst: &ash::Instance,
+    chosen: &ChosenPhysical,
+    req: Option<&Requirements<'_>>,
+) -> Result<(ash::Device, bool)> {
+    let priorities = [1.0f32];
+    let queue_info = [vk::DeviceQueueCreateInfo::default()
+        .queue_family_index(chosen.queue_family)
+        .queue_priorities(&priorities)];
+    let device_exts: Vec<*const c_char> = req
+        .map(|r| r.extensions.iter().map(|e| e.as_ptr()).collect())
+        .unwrap_or_default();
+    // SAFETY: physical is a valid handle of this instance.
+    let supported = unsafe { inst.get_physical_device_features(chosen.physical) };
+    let shader_float64 = supported.shader_float64 == vk::TRUE;
+    let features = vk::PhysicalDeviceFeatures::default().shader_float64(shader_float64);
+    let create_info = vk::DeviceCreateInfo::default()
+        .queue_create_infos(&queue_info)
+        .enabled_extension_names(&device_exts)
+        .enabled_features(&features);
+    // SAFETY: create_info and its arrays outlive the call; the only feature requested
+    // (shaderFloat64) was checked to be supported, and the required extensions were
+    // checked to exist.
+    let raw = unsafe { inst.create_device(chosen.physical, &create_info, None) }
+        .map_err(Error::vk("vkCreateDevice"))?;
+    Ok((raw, shader_float64))
+}
+
+/// What the device owns besides its queue: the allocator, the one-shot command pool and
+/// the pipeline cache. On failure everything made so far, `raw` included, is destroyed.
+fn create_owned(
+    inst: &ash::Instance,
+    raw: &ash::Device,
+    physical: vk::PhysicalDevice,
+    queue_family: u32,
+) -> Result<(Allocator, vk::CommandPool, vk::PipelineCache)> {
+    // The default settings already log leaks on shutdown; make sure they stay on.
+    let mut debug_settings = gpu_allocator::AllocatorDebugSettings::default();
+    debug_settings.log_leaks_on_shutdown = true;
+    let allocator = Allocator::new(&AllocatorCreateDesc {
+        instance: inst.clone(),
+        device: raw.clone(),
+        physical_device: physical,
+        debug_settings,
+        buffer_device_address: false,
+        allocation_sizes: Default::default(),
+    });
+    let allocator = match allocator {
+        Ok(a) => a,
+        Err(e) => {
+            // SAFETY: nothing was created on the device yet.
+            unsafe { raw.destroy_device(None) };
+            return Err(e.into());
+        }
+    };
+
+    let pool_info = vk::CommandPoolCreateInfo::default()
+        .queue_family_index(queue_family)
+        .flags(vk::CommandPoolCreateFlags::TRANSIENT);
+    // SAFETY: raw is a live device; the family index is valid.
+    let command_pool = match unsafe { raw.create_command_pool(&pool_info, None) } {
+        Ok(p) => p,
+        Err(e) => {
+            drop(allocator);
+            // SAFETY: the allocator (which frees its blocks) is gone; nothing else lives.
+            unsafe { raw.destroy_device(None) };
+            return Err(Error::vk("vkCreateCommandPool")(e));
+        }
+    };
+
+    // SAFETY: live device; an empty cache (initial data is merged in later from a file,
+    // Device::load_pipeline_cache).
+    let pipeline_cache =
+        match unsafe { raw.create_pipeline_cache(&vk::PipelineCacheCreateInfo::default(), None) } {
+            Ok(c) => c,
+            Err(e) => {
+                // SAFETY: only the pool and the allocator's blocks exist; freed in order.
+                unsafe { raw.destroy_command_pool(command_pool, None) };
+                drop(allocator);
+                // SAFETY: nothing else lives on the device.
+                unsafe { raw.destroy_device(None) };
+                return Err(Error::vk("vkCreatePipelineCache")(e));
+            }
+        };
+    Ok((allocator, command_pool, pipeline_cache))
+}
+
 impl Device {
     /// Creates an instance (see [`Instance::new`]) and a device on the preferred GPU.
     pub fn new(validation: bool) -> Result<Arc<Self>> {
@@ -406,46 +588,13 @@ impl Device {
         Self::create(instance, Some(req))
     }
 
+    /// The device: the best physical device that meets `req` ([`choose_physical`]), the
+    /// logical device with one graphics queue ([`create_logical`]), its allocator, one-shot
+    /// command pool and pipeline cache ([`create_owned`]).
     fn create(instance: Arc<Instance>, req: Option<&Requirements<'_>>) -> Result<Arc<Self>> {
         let inst = &instance.raw;
-        // SAFETY: inst is a live instance.
-        let physicals = unsafe { inst.enumerate_physical_devices() }
-            .map_err(Error::vk("vkEnumeratePhysicalDevices"))?;
-        let mut best: Option<(u32, vk::PhysicalDevice, u32, vk::PhysicalDeviceProperties)> = None;
-        for pd in physicals {
-            // SAFETY: pd was enumerated from this instance.
-            let props = unsafe { inst.get_physical_device_properties(pd) };
-            if props.api_version < vk::API_VERSION_1_1 {
-                continue;
-            }
-            // SAFETY: as above.
-            let families = unsafe { inst.get_physical_device_queue_family_properties(pd) };
-            let Some(family) = families.iter().enumerate().position(|(i, f)| {
-                f.queue_flags.contains(vk::QueueFlags::GRAPHICS)
-                    && req.is_none_or(|r| (r.queue_family)(pd, i as u32))
-            }) else {
-                continue;
-            };
-            if req.is_some_and(|r| {
-                r.extensions
-                    .iter()
-                    .any(|e| !device_has_extension(inst, pd, e))
-            }) {
-                continue;
-            }
-            let rank = type_rank(props.device_type);
-            if best.as_ref().is_none_or(|b| rank < b.0) {
-                best = Some((rank, pd, family as u32, props));
-            }
-        }
-        let Some((_, physical, queue_family, props)) = best else {
-            if let Some(r) = req {
-                return Err((r.unmet)());
-            }
-            return Err(Error::NoVulkan(
-                "no Vulkan 1.1 device with a graphics queue was found".into(),
-            ));
-        };
+        let chosen = choose_physical(inst, req)?;
+        let (physical, queue_family, props) = (chosen.physical, chosen.queue_family, chosen.props);
         // SAFETY: physical is a valid handle of this instance.
         let families = unsafe { inst.get_physical_device_queue_family_properties(physical) };
         let timestamp_valid_bits = if props.limits.timestamp_compute_and_graphics == vk::TRUE {
@@ -457,80 +606,11 @@ impl Device {
             .device_name_as_c_str()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|_| "unnamed device".into());
-
-        let priorities = [1.0f32];
-        let queue_info = [vk::DeviceQueueCreateInfo::default()
-            .queue_family_index(queue_family)
-            .queue_priorities(&priorities)];
-        let device_exts: Vec<*const c_char> = req
-            .map(|r| r.extensions.iter().map(|e| e.as_ptr()).collect())
-            .unwrap_or_default();
-        // SAFETY: physical is a valid handle of this instance.
-        let supported = unsafe { inst.get_physical_device_features(physical) };
-        // float64 in compute shaders (the device table build) where the device has it.
-        let features = vk::PhysicalDeviceFeatures::default()
-            .shader_float64(supported.shader_float64 == vk::TRUE);
-        let create_info = vk::DeviceCreateInfo::default()
-            .queue_create_infos(&queue_info)
-            .enabled_extension_names(&device_exts)
-            .enabled_features(&features);
-        // SAFETY: create_info and its arrays outlive the call; the only feature requested
-        // (shaderFloat64) was checked to be supported, and the required extensions were
-        // checked to exist.
-        let raw = unsafe { inst.create_device(physical, &create_info, None) }
-            .map_err(Error::vk("vkCreateDevice"))?;
-        // SAFETY: one queue of this family was requested above.
+        let (raw, shader_float64) = create_logical(inst, &chosen, req)?;
+        // SAFETY: one queue of this family was requested.
         let queue = unsafe { raw.get_device_queue(queue_family, 0) };
-
-        // The default settings already log leaks on shutdown; make sure they stay on.
-        let mut debug_settings = gpu_allocator::AllocatorDebugSettings::default();
-        debug_settings.log_leaks_on_shutdown = true;
-        let allocator = Allocator::new(&AllocatorCreateDesc {
-            instance: inst.clone(),
-            device: raw.clone(),
-            physical_device: physical,
-            debug_settings,
-            buffer_device_address: false,
-            allocation_sizes: Default::default(),
-        });
-        let allocator = match allocator {
-            Ok(a) => a,
-            Err(e) => {
-                // SAFETY: nothing was created on the device yet.
-                unsafe { raw.destroy_device(None) };
-                return Err(e.into());
-            }
-        };
-
-        let pool_info = vk::CommandPoolCreateInfo::default()
-            .queue_family_index(queue_family)
-            .flags(vk::CommandPoolCreateFlags::TRANSIENT);
-        // SAFETY: raw is a live device; the family index is valid.
-        let command_pool = match unsafe { raw.create_command_pool(&pool_info, None) } {
-            Ok(p) => p,
-            Err(e) => {
-                drop(allocator);
-                // SAFETY: the allocator (which frees its blocks) is gone; nothing else lives.
-                unsafe { raw.destroy_device(None) };
-                return Err(Error::vk("vkCreateCommandPool")(e));
-            }
-        };
-
-        // SAFETY: live device; an empty cache (initial data is merged in later from a file,
-        // Device::load_pipeline_cache).
-        let pipeline_cache = match unsafe {
-            raw.create_pipeline_cache(&vk::PipelineCacheCreateInfo::default(), None)
-        } {
-            Ok(c) => c,
-            Err(e) => {
-                // SAFETY: only the pool and the allocator's blocks exist; freed in order.
-                unsafe { raw.destroy_command_pool(command_pool, None) };
-                drop(allocator);
-                // SAFETY: nothing else lives on the device.
-                unsafe { raw.destroy_device(None) };
-                return Err(Error::vk("vkCreatePipelineCache")(e));
-            }
-        };
+        let (allocator, command_pool, pipeline_cache) =
+            create_owned(inst, &raw, physical, queue_family)?;
         let cache_identity = CacheIdentity {
             vendor_id: props.vendor_id,
             device_id: props.device_id,
@@ -553,7 +633,7 @@ impl Device {
                 max_image_dimension_2d: props.limits.max_image_dimension2_d,
                 max_image_dimension_3d: props.limits.max_image_dimension3_d,
                 max_image_array_layers: props.limits.max_image_array_layers,
-                shader_float64: supported.shader_float64 == vk::TRUE,
+                shader_float64,
             },
             command_pool,
             one_shot_pool_lock: Mutex::new(()),

@@ -182,26 +182,27 @@ pub struct Swapchain {
     depth: Option<Image>,
 }
 
-impl Swapchain {
-    /// A swapchain of `surface` sized `want` (used when the surface leaves the extent to the
-    /// application). `Ok(None)` when the surface has zero area (a minimised window).
-    pub fn new(
-        dev: &Arc<Device>,
-        surface: &Surface,
-        want: vk::Extent2D,
-        vsync: Vsync,
-    ) -> Result<Option<Self>> {
-        Self::create(dev, surface, want, vsync, None)
-    }
+/// What a swapchain of a surface is made with: its capabilities, the extent (the window's,
+/// clamped where the surface leaves it to the application), an 8-bit sRGB format, the
+/// present mode `vsync` asks for where offered, one image more than the minimum, colour
+/// attachment and copy-source usage, and opaque composition where offered.
+struct SurfaceChoice {
+    caps: vk::SurfaceCapabilitiesKHR,
+    extent: vk::Extent2D,
+    format: vk::SurfaceFormatKHR,
+    present_mode: vk::PresentModeKHR,
+    image_count: u32,
+    usage: vk::ImageUsageFlags,
+    composite: vk::CompositeAlphaFlagsKHR,
+}
 
-    /// [`Swapchain::new`], replacing `old` (passed as `oldSwapchain`, whose render pass is
-    /// reused when the format is the same).
-    fn create(
+impl SurfaceChoice {
+    /// `Ok(None)` when the surface has zero area (a minimised window).
+    fn query(
         dev: &Arc<Device>,
         surface: &Surface,
         want: vk::Extent2D,
         vsync: Vsync,
-        old: Option<&Swapchain>,
     ) -> Result<Option<Self>> {
         let pd = dev.physical();
         // SAFETY: pd and the surface belong to the same live instance.
@@ -282,6 +283,51 @@ impl Swapchain {
         } else {
             vk::CompositeAlphaFlagsKHR::INHERIT
         };
+        Ok(Some(Self {
+            caps,
+            extent,
+            format,
+            present_mode,
+            image_count,
+            usage,
+            composite,
+        }))
+    }
+}
+
+impl Swapchain {
+    /// A swapchain of `surface` sized `want` (used when the surface leaves the extent to the
+    /// application). `Ok(None)` when the surface has zero area (a minimised window).
+    pub fn new(
+        dev: &Arc<Device>,
+        surface: &Surface,
+        want: vk::Extent2D,
+        vsync: Vsync,
+    ) -> Result<Option<Self>> {
+        Self::create(dev, surface, want, vsync, None)
+    }
+
+    /// [`Swapchain::new`], replacing `old` (passed as `oldSwapchain`, whose render pass is
+    /// reused when the format is the same).
+    fn create(
+        dev: &Arc<Device>,
+        surface: &Surface,
+        want: vk::Extent2D,
+        vsync: Vsync,
+        old: Option<&Swapchain>,
+    ) -> Result<Option<Self>> {
+        let Some(choice) = SurfaceChoice::query(dev, surface, want, vsync)? else {
+            return Ok(None);
+        };
+        let SurfaceChoice {
+            caps,
+            extent,
+            format,
+            present_mode,
+            image_count,
+            usage,
+            composite,
+        } = choice;
         let loader = ash::khr::swapchain::Device::new(&dev.instance().raw, dev.raw());
         let info = vk::SwapchainCreateInfoKHR::default()
             .surface(surface.raw)

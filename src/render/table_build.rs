@@ -190,6 +190,12 @@ fn small(x: i64, what: &str) -> Result<i32> {
 /// [`sample_g_kept`](crate::brdf::table::sample_g_kept) on `dev` in `precision`: the same
 /// sampling of `G` (same nodes, lookups, window and weights), built with Vulkan compute.
 /// `progress` is called once per finished `(w, λ)` pair.
+///
+/// The steps: check the request ([`check_request`]), plan the lookups of every wavelength
+/// ([`Lookups::plan`]), size the batches of wavelengths one dispatch round holds
+/// ([`Batches::of`]), upload the inputs ([`BuildBuffers::new`]), build the pipelines of the
+/// passes ([`Passes::new`]), then per `w` node record and run every batch
+/// ([`record_slice`]) and read the slice back ([`read_slice`]).
 #[allow(clippy::too_many_arguments)]
 pub fn sample_g_device(
     dev: &Arc<Device>,
@@ -202,6 +208,43 @@ pub fn sample_g_device(
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
     let (nu, nv) = spec.validate()?;
+    check_request(dev, coherence_um, precision)?;
+    let samples = spec.spectral_samples(keep)?;
+    let lookups = Lookups::plan(hf, coherence_um, spec, (nu, nv), &samples, w_nodes)?;
+    let batches = Batches::of(dev, &lookups, precision)?;
+    let buffers = BuildBuffers::new(dev, hf, &lookups, &batches, precision)?;
+    let layout = ComputeLayout::new(dev, "table build", BINDINGS, Push::BYTES)?;
+    let set = StorageSet::new(dev, "table build", &layout, &buffers.bindings())?;
+    let passes = Passes::new(dev, &layout, &lookups, precision)?;
+    let mut data = Vec::with_capacity(w_nodes.len());
+    for (k, &w) in w_nodes.iter().enumerate() {
+        let build = SliceBuild {
+            dev,
+            layout: &layout,
+            set: &set,
+            passes: &passes,
+            lookups: &lookups,
+            batches: &batches,
+            buffers: &buffers,
+        };
+        dev.submit_once(&format!("table build w = {w:.4}"), |cb| {
+            record_slice(&build, cb, k)
+        })?;
+        data.push(read_slice(&buffers.readback, &lookups, precision)?);
+        for _ in 0..lookups.lambdas {
+            progress();
+        }
+    }
+    Ok(Slices {
+        nu,
+        nv,
+        w: w_nodes.to_vec(),
+        data,
+    })
+}
+
+/// A positive coherence length, and float64 shaders for a float64 build.
+fn check_request(dev: &Arc<Device>, coherence_um: f64, precision: Precision) -> Result<()> {
     if !(coherence_um.is_finite() && coherence_um > 0.0) {
         return Err(Error::invalid(
             "coherence length",
@@ -217,277 +260,426 @@ pub fn sample_g_device(
             ),
         ));
     }
-    let samples = spec.spectral_samples(keep)?;
-    let (u, v) = spec.node_coords(nu, nv);
-    let (nx, ny, dh) = (hf.nx(), hf.ny(), hf.dh_um());
-    let mean = hf.mean();
-    let heights: Vec<f64> = hf.heights_um().iter().map(|h| h - mean).collect();
-    let sigma_s = coherence_um / 4.0;
-    let sigma = |n: usize| n as f64 * dh / (2.0 * PI * sigma_s);
-    let (sx, sy) = (sigma(nx), sigma(ny));
-    let rx = (6.0 * sx).ceil() as i64;
-    let ry = (6.0 * sy).ceil() as i64;
+    Ok(())
+}
 
-    // Per wavelength: lookups, and the shifted texels they reach (as the CPU build).
-    let lambdas = samples.len();
-    let mut qx = Vec::with_capacity(lambdas * nu);
-    let mut qy = Vec::with_capacity(lambdas * nv);
-    let mut job_int = Vec::with_capacity(lambdas * 4);
-    let (mut cmax, mut rmax) = (1i64, 1i64);
-    for &(l_nm, _) in &samples {
-        let lambda_um = l_nm * 1e-3;
-        let x: Vec<f64> = u
-            .iter()
-            .map(|u| (nx / 2) as f64 + u * nx as f64 * dh / lambda_um)
-            .collect();
-        let y: Vec<f64> = v
-            .iter()
-            .map(|v| (ny / 2) as f64 + v * ny as f64 * dh / lambda_um)
-            .collect();
-        let cx0 = x[0].floor() as i64 - rx;
-        let cols = x[nu - 1].floor() as i64 + rx - cx0 + 1;
-        let cy0 = y[0].floor() as i64 - ry;
-        let rows = y[nv - 1].floor() as i64 + ry - cy0 + 1;
-        cmax = cmax.max(cols);
-        rmax = rmax.max(rows);
-        for value in [cx0, cols, cy0, rows] {
-            job_int.push(small(value, "lookup texel")?);
-        }
-        qx.extend(x);
-        qy.extend(y);
-    }
-    let jobs_real: Vec<f64> = w_nodes
-        .iter()
-        .flat_map(|&w| {
-            samples.iter().flat_map(move |&(l_nm, wt)| {
-                let lambda_um = l_nm * 1e-3;
-                [2.0 * PI * w / lambda_um, wt[0], wt[1], wt[2]]
-            })
-        })
-        .collect();
+/// The lookups of every wavelength over the node grid, the shifted texels they reach (as
+/// the CPU build computes them) and the jobs, one per `(w, λ)`.
+struct Lookups {
+    nu: usize,
+    nv: usize,
+    nx: usize,
+    ny: usize,
+    /// Mean-centred heights.
+    heights: Vec<f64>,
+    /// Gaussian window std (texels) along x and y, and its reach, 6σ up.
+    sigma: [f64; 2],
+    reach: [i64; 2],
+    /// Widest band of shifted texels one wavelength reads: columns and rows.
+    cmax: i64,
+    rmax: i64,
+    lambdas: usize,
+    /// Lookup positions along x (per wavelength, one per `u` node) and y (one per `v`).
+    qx: Vec<f64>,
+    qy: Vec<f64>,
+    /// Per wavelength: first column, columns, first row and rows of the texels it reads.
+    job_int: Vec<i32>,
+    /// Per job: phase scale `s = 2πw/λ` and the wavelength's XYZ weight.
+    jobs_real: Vec<f64>,
+}
 
-    // Batch size: as many jobs as the field buffers (and the descriptor range) hold.
-    let cplx = 2 * precision.real_bytes();
-    let slot = (nx as u64 * ny as u64).max(cmax as u64 * ny as u64);
-    let range = compute::max_storage_range(dev);
-    let per_job = slot * cplx;
-    let xpass_per_job = rmax as u64 * nu as u64 * cplx;
-    if per_job > range || xpass_per_job > range {
-        return Err(Error::invalid(
-            "device table build",
-            format!(
-                "a {nx}×{ny} field ({per_job} bytes a job) exceeds the device's storage-buffer range of {range} bytes; build on the CPU"
-            ),
-        ));
-    }
-    let batch = (FIELD_BUDGET.min(range) / per_job)
-        .min(range / xpass_per_job)
-        .clamp(1, lambdas.max(1) as u64) as usize;
-    small(batch as i64 * slot as i64, "batch elements")?;
-    let taps_per_job = nu as u64 * (2 * rx as u64 + 1) + nv as u64 * (2 * ry as u64 + 1);
-
-    let b = |name: &str, bytes: &[u8]| {
-        compute::storage_with_data(dev, &format!("table build {name}"), bytes)
-    };
-    let heights_buf = b("heights", &precision.reals(&heights))?;
-    let field_a = compute::storage(dev, "table build field A", batch as u64 * per_job)?;
-    let field_b = compute::storage(dev, "table build field B", batch as u64 * per_job)?;
-    let twx = b("twiddles x", &precision.reals(&twiddles(nx)))?;
-    let twy = b("twiddles y", &precision.reals(&twiddles(ny)))?;
-    let jobs_buf = b("jobs", &precision.reals(&jobs_real))?;
-    let ints: Vec<u8> = job_int.iter().flat_map(|v| v.to_le_bytes()).collect();
-    let ints_buf = b("job texels", &ints)?;
-    let qx_buf = b("lookups x", &precision.reals(&qx))?;
-    let qy_buf = b("lookups y", &precision.reals(&qy))?;
-    let taps = compute::storage(
-        dev,
-        "table build taps",
-        batch as u64 * taps_per_job * precision.real_bytes(),
-    )?;
-    let xpass = compute::storage(dev, "table build x pass", batch as u64 * xpass_per_job)?;
-    let acc_bytes = (nu * nv * 3) as u64 * precision.real_bytes();
-    let acc = compute::storage(dev, "table build slice", acc_bytes)?;
-    let norm = 1.0 / (nx as f64 * ny as f64);
-    let consts = b("constants", &precision.reals(&[sx, sy, norm]))?;
-    let readback = Buffer::new(
-        dev,
-        "table build readback",
-        acc_bytes,
-        vk::BufferUsageFlags::TRANSFER_DST,
-        MemoryLocation::GpuToCpu,
-    )?;
-
-    let layout = ComputeLayout::new(dev, "table build", BINDINGS, Push::BYTES)?;
-    let set = StorageSet::new(
-        dev,
-        "table build",
-        &layout,
-        &[
-            &heights_buf,
-            &field_a,
-            &field_b,
-            &twx,
-            &twy,
-            &jobs_buf,
-            &ints_buf,
-            &qx_buf,
-            &qy_buf,
-            &taps,
-            &xpass,
-            &acc,
-            &consts,
-        ],
-    )?;
-    let spirv = match precision {
-        Precision::F64 => SPIRV_F64,
-        Precision::F32 => SPIRV_F32,
-    };
-    let grid = [
-        nx,
-        ny,
-        nu,
-        nv,
-        rx as usize,
-        ry as usize,
-        cmax as usize,
-        rmax as usize,
-    ]
-    .map(|x| x as u32);
-    let pipeline = |pass: Pass, name: &str| {
-        let mut spec = vec![pass as u32];
-        spec.extend_from_slice(&grid);
-        ComputePipeline::new(
-            dev,
-            &format!("table build {name} ({})", precision.name()),
-            &layout,
-            spirv,
-            &spec,
-        )
-    };
-    let phase = pipeline(Pass::Phase, "phase")?;
-    let fft = pipeline(Pass::Fft, "FFT stage")?;
-    let gather = pipeline(Pass::Gather, "gather columns")?;
-    let tap_pass = pipeline(Pass::Taps, "window taps")?;
-    let window_x = pipeline(Pass::WindowX, "window x")?;
-    let window_y = pipeline(Pass::WindowY, "window y")?;
-    let (plan_x, plan_y) = (radices(nx), radices(ny));
-
-    let mut data = Vec::with_capacity(w_nodes.len());
-    for (k, &w) in w_nodes.iter().enumerate() {
-        dev.submit_once(&format!("table build w = {w:.4}"), |cb| {
-            let all = vk::AccessFlags::SHADER_READ
-                | vk::AccessFlags::SHADER_WRITE
-                | vk::AccessFlags::TRANSFER_READ
-                | vk::AccessFlags::TRANSFER_WRITE;
-            let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
-            compute::barrier(dev, cb, (stages, all), (stages, all));
-            // SAFETY: cb is recording; acc is a live buffer with TRANSFER_DST usage.
-            unsafe { dev.raw().cmd_fill_buffer(cb, acc.raw, 0, vk::WHOLE_SIZE, 0) };
-            compute::barrier(
-                dev,
-                cb,
-                (
-                    vk::PipelineStageFlags::TRANSFER,
-                    vk::AccessFlags::TRANSFER_WRITE,
-                ),
-                (
-                    vk::PipelineStageFlags::COMPUTE_SHADER,
-                    vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
-                ),
-            );
-            for lam0 in (0..lambdas).step_by(batch) {
-                let jobs = batch.min(lambdas - lam0);
-                let base = Push {
-                    jobs: jobs as i32,
-                    job_base: (k * lambdas + lam0) as i32,
-                    lam_base: lam0 as i32,
-                    slot: slot as i32,
-                    ..Push::default()
-                };
-                let run = |p: &ComputePipeline, push: Push, n: u64| -> Result<()> {
-                    let push = Push {
-                        total: u32::try_from(n).map_err(|_| {
-                            Error::invalid(
-                                "device table build",
-                                "dispatch exceeds 2^32 invocations",
-                            )
-                        })?,
-                        ..push
-                    };
-                    layout.dispatch(cb, p, &set, &push.bytes(), n)?;
-                    compute::compute_barrier(dev, cb);
-                    Ok(())
-                };
-                let jobs64 = jobs as u64;
-                run(&phase, base, jobs64 * (nx * ny) as u64)?;
-                let mut src = 0;
-                // Rows: every row of every job.
-                let mut ns = 1;
-                for &radix in &plan_x {
-                    let p = Push {
-                        n: nx as i32,
-                        ns,
-                        radix: radix as i32,
-                        lines: ny as i32,
-                        axis: 0,
-                        src,
-                        ..base
-                    };
-                    run(&fft, p, jobs64 * (nx * ny) as u64)?;
-                    ns *= radix as i32;
-                    src = 1 - src;
-                }
-                run(
-                    &gather,
-                    Push { src, ..base },
-                    jobs64 * cmax as u64 * ny as u64,
-                )?;
-                src = 1 - src;
-                // Columns: the gathered ones.
-                let mut ns = 1;
-                for &radix in &plan_y {
-                    let p = Push {
-                        n: ny as i32,
-                        ns,
-                        radix: radix as i32,
-                        lines: cmax as i32,
-                        axis: 1,
-                        src,
-                        ..base
-                    };
-                    run(&fft, p, jobs64 * cmax as u64 * ny as u64)?;
-                    ns *= radix as i32;
-                    src = 1 - src;
-                }
-                run(&tap_pass, base, jobs64 * (nu + nv) as u64)?;
-                run(
-                    &window_x,
-                    Push { src, ..base },
-                    jobs64 * rmax as u64 * nu as u64,
-                )?;
-                run(&window_y, base, (nu * nv) as u64)?;
+impl Lookups {
+    fn plan(
+        hf: &HeightField,
+        coherence_um: f64,
+        spec: &TableSpec,
+        (nu, nv): (usize, usize),
+        samples: &[(f64, [f64; 3])],
+        w_nodes: &[f64],
+    ) -> Result<Self> {
+        let (u, v) = spec.node_coords(nu, nv);
+        let (nx, ny, dh) = (hf.nx(), hf.ny(), hf.dh_um());
+        let mean = hf.mean();
+        let heights: Vec<f64> = hf.heights_um().iter().map(|h| h - mean).collect();
+        let sigma_s = coherence_um / 4.0;
+        let sigma = |n: usize| n as f64 * dh / (2.0 * PI * sigma_s);
+        let (sx, sy) = (sigma(nx), sigma(ny));
+        let rx = (6.0 * sx).ceil() as i64;
+        let ry = (6.0 * sy).ceil() as i64;
+        let lambdas = samples.len();
+        let mut qx = Vec::with_capacity(lambdas * nu);
+        let mut qy = Vec::with_capacity(lambdas * nv);
+        let mut job_int = Vec::with_capacity(lambdas * 4);
+        let (mut cmax, mut rmax) = (1i64, 1i64);
+        for &(l_nm, _) in samples {
+            let lambda_um = l_nm * 1e-3;
+            let x: Vec<f64> = u
+                .iter()
+                .map(|u| (nx / 2) as f64 + u * nx as f64 * dh / lambda_um)
+                .collect();
+            let y: Vec<f64> = v
+                .iter()
+                .map(|v| (ny / 2) as f64 + v * ny as f64 * dh / lambda_um)
+                .collect();
+            let cx0 = x[0].floor() as i64 - rx;
+            let cols = x[nu - 1].floor() as i64 + rx - cx0 + 1;
+            let cy0 = y[0].floor() as i64 - ry;
+            let rows = y[nv - 1].floor() as i64 + ry - cy0 + 1;
+            cmax = cmax.max(cols);
+            rmax = rmax.max(rows);
+            for value in [cx0, cols, cy0, rows] {
+                job_int.push(small(value, "lookup texel")?);
             }
-            compute::copy_to_host(dev, cb, &acc, &readback, acc_bytes);
-            Ok(())
-        })?;
-        // The device stores the slice u-major; Slices are v-major.
-        let values = precision.read(readback.mapped()?);
-        let mut slice = vec![[0.0f64; 3]; nu * nv];
-        for (node, c) in values.chunks_exact(3).enumerate() {
-            let (i, j) = (node / nv, node % nv);
-            slice[j * nu + i] = [c[0], c[1], c[2]];
+            qx.extend(x);
+            qy.extend(y);
         }
-        data.push(slice);
-        for _ in 0..lambdas {
-            progress();
-        }
+        let jobs_real: Vec<f64> = w_nodes
+            .iter()
+            .flat_map(|&w| {
+                samples.iter().flat_map(move |&(l_nm, wt)| {
+                    let lambda_um = l_nm * 1e-3;
+                    [2.0 * PI * w / lambda_um, wt[0], wt[1], wt[2]]
+                })
+            })
+            .collect();
+        Ok(Self {
+            nu,
+            nv,
+            nx,
+            ny,
+            heights,
+            sigma: [sx, sy],
+            reach: [rx, ry],
+            cmax,
+            rmax,
+            lambdas,
+            qx,
+            qy,
+            job_int,
+            jobs_real,
+        })
     }
-    Ok(Slices {
-        nu,
-        nv,
-        w: w_nodes.to_vec(),
-        data,
-    })
+}
+
+/// How many wavelengths one dispatch round transforms: as many as the field buffers (and
+/// the descriptor range) hold.
+struct Batches {
+    /// Complex samples of one job's field.
+    slot: u64,
+    /// Bytes of one job's field, and of its x-pass output.
+    per_job: u64,
+    xpass_per_job: u64,
+    /// Window taps of one job.
+    taps_per_job: u64,
+    /// Jobs a round.
+    batch: usize,
+}
+
+impl Batches {
+    fn of(dev: &Arc<Device>, l: &Lookups, precision: Precision) -> Result<Self> {
+        let (nx, ny) = (l.nx, l.ny);
+        let cplx = 2 * precision.real_bytes();
+        let slot = (nx as u64 * ny as u64).max(l.cmax as u64 * ny as u64);
+        let range = compute::max_storage_range(dev);
+        let per_job = slot * cplx;
+        let xpass_per_job = l.rmax as u64 * l.nu as u64 * cplx;
+        if per_job > range || xpass_per_job > range {
+            return Err(Error::invalid(
+                "device table build",
+                format!(
+                    "a {nx}×{ny} field ({per_job} bytes a job) exceeds the device's storage-buffer range of {range} bytes; build on the CPU"
+                ),
+            ));
+        }
+        let batch = (FIELD_BUDGET.min(range) / per_job)
+            .min(range / xpass_per_job)
+            .clamp(1, l.lambdas.max(1) as u64) as usize;
+        small(batch as i64 * slot as i64, "batch elements")?;
+        let [rx, ry] = l.reach;
+        let taps_per_job = l.nu as u64 * (2 * rx as u64 + 1) + l.nv as u64 * (2 * ry as u64 + 1);
+        Ok(Self {
+            slot,
+            per_job,
+            xpass_per_job,
+            taps_per_job,
+            batch,
+        })
+    }
+}
+
+/// The build's storage buffers, in binding order, and the slice's readback.
+struct BuildBuffers {
+    heights: Buffer,
+    field_a: Buffer,
+    field_b: Buffer,
+    twiddles_x: Buffer,
+    twiddles_y: Buffer,
+    jobs: Buffer,
+    job_texels: Buffer,
+    lookups_x: Buffer,
+    lookups_y: Buffer,
+    taps: Buffer,
+    xpass: Buffer,
+    /// The slice being accumulated, and its bytes.
+    acc: Buffer,
+    acc_bytes: u64,
+    constants: Buffer,
+    readback: Buffer,
+}
+
+impl BuildBuffers {
+    fn new(
+        dev: &Arc<Device>,
+        hf: &HeightField,
+        l: &Lookups,
+        b: &Batches,
+        precision: Precision,
+    ) -> Result<Self> {
+        let data = |name: &str, bytes: &[u8]| {
+            compute::storage_with_data(dev, &format!("table build {name}"), bytes)
+        };
+        let batch = b.batch as u64;
+        let ints: Vec<u8> = l.job_int.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let acc_bytes = (l.nu * l.nv * 3) as u64 * precision.real_bytes();
+        let norm = 1.0 / (hf.nx() as f64 * hf.ny() as f64);
+        Ok(Self {
+            heights: data("heights", &precision.reals(&l.heights))?,
+            field_a: compute::storage(dev, "table build field A", batch * b.per_job)?,
+            field_b: compute::storage(dev, "table build field B", batch * b.per_job)?,
+            twiddles_x: data("twiddles x", &precision.reals(&twiddles(l.nx)))?,
+            twiddles_y: data("twiddles y", &precision.reals(&twiddles(l.ny)))?,
+            jobs: data("jobs", &precision.reals(&l.jobs_real))?,
+            job_texels: data("job texels", &ints)?,
+            lookups_x: data("lookups x", &precision.reals(&l.qx))?,
+            lookups_y: data("lookups y", &precision.reals(&l.qy))?,
+            taps: compute::storage(
+                dev,
+                "table build taps",
+                batch * b.taps_per_job * precision.real_bytes(),
+            )?,
+            xpass: compute::storage(dev, "table build x pass", batch * b.xpass_per_job)?,
+            acc: compute::storage(dev, "table build slice", acc_bytes)?,
+            acc_bytes,
+            constants: data(
+                "constants",
+                &precision.reals(&[l.sigma[0], l.sigma[1], norm]),
+            )?,
+            readback: Buffer::new(
+                dev,
+                "table build readback",
+                acc_bytes,
+                vk::BufferUsageFlags::TRANSFER_DST,
+                MemoryLocation::GpuToCpu,
+            )?,
+        })
+    }
+
+    /// The storage buffers in binding order (glsl/table_build.glsl).
+    fn bindings(&self) -> [&Buffer; BINDINGS as usize] {
+        [
+            &self.heights,
+            &self.field_a,
+            &self.field_b,
+            &self.twiddles_x,
+            &self.twiddles_y,
+            &self.jobs,
+            &self.job_texels,
+            &self.lookups_x,
+            &self.lookups_y,
+            &self.taps,
+            &self.xpass,
+            &self.acc,
+            &self.constants,
+        ]
+    }
+}
+
+/// The pipelines of the build's passes and the radix plans of its transforms.
+struct Passes {
+    phase: ComputePipeline,
+    fft: ComputePipeline,
+    gather: ComputePipeline,
+    taps: ComputePipeline,
+    window_x: ComputePipeline,
+    window_y: ComputePipeline,
+    plan_x: Vec<usize>,
+    plan_y: Vec<usize>,
+}
+
+impl Passes {
+    fn new(
+        dev: &Arc<Device>,
+        layout: &ComputeLayout,
+        l: &Lookups,
+        precision: Precision,
+    ) -> Result<Self> {
+        let spirv = match precision {
+            Precision::F64 => SPIRV_F64,
+            Precision::F32 => SPIRV_F32,
+        };
+        let grid = [
+            l.nx,
+            l.ny,
+            l.nu,
+            l.nv,
+            l.reach[0] as usize,
+            l.reach[1] as usize,
+            l.cmax as usize,
+            l.rmax as usize,
+        ]
+        .map(|x| x as u32);
+        let pipeline = |pass: Pass, name: &str| {
+            let mut spec = vec![pass as u32];
+            spec.extend_from_slice(&grid);
+            ComputePipeline::new(
+                dev,
+                &format!("table build {name} ({})", precision.name()),
+                layout,
+                spirv,
+                &spec,
+            )
+        };
+        Ok(Self {
+            phase: pipeline(Pass::Phase, "phase")?,
+            fft: pipeline(Pass::Fft, "FFT stage")?,
+            gather: pipeline(Pass::Gather, "gather columns")?,
+            taps: pipeline(Pass::Taps, "window taps")?,
+            window_x: pipeline(Pass::WindowX, "window x")?,
+            window_y: pipeline(Pass::WindowY, "window y")?,
+            plan_x: radices(l.nx),
+            plan_y: radices(l.ny),
+        })
+    }
+}
+
+/// What recording one `w` node's slice reads.
+struct SliceBuild<'a> {
+    dev: &'a Arc<Device>,
+    layout: &'a ComputeLayout,
+    set: &'a StorageSet,
+    passes: &'a Passes,
+    lookups: &'a Lookups,
+    batches: &'a Batches,
+    buffers: &'a BuildBuffers,
+}
+
+/// Records the slice of `w` node `k`: the accumulator cleared, then every batch of
+/// wavelengths ([`record_batch`]), then the copy of the slice to the readback buffer.
+fn record_slice(s: &SliceBuild<'_>, cb: vk::CommandBuffer, k: usize) -> Result<()> {
+    let dev = s.dev;
+    let acc = &s.buffers.acc;
+    let all = vk::AccessFlags::SHADER_READ
+        | vk::AccessFlags::SHADER_WRITE
+        | vk::AccessFlags::TRANSFER_READ
+        | vk::AccessFlags::TRANSFER_WRITE;
+    let stages = vk::PipelineStageFlags::COMPUTE_SHADER | vk::PipelineStageFlags::TRANSFER;
+    compute::barrier(dev, cb, (stages, all), (stages, all));
+    // SAFETY: cb is recording; acc is a live buffer with TRANSFER_DST usage.
+    unsafe { dev.raw().cmd_fill_buffer(cb, acc.raw, 0, vk::WHOLE_SIZE, 0) };
+    compute::barrier(
+        dev,
+        cb,
+        (
+            vk::PipelineStageFlags::TRANSFER,
+            vk::AccessFlags::TRANSFER_WRITE,
+        ),
+        (
+            vk::PipelineStageFlags::COMPUTE_SHADER,
+            vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
+        ),
+    );
+    let (lambdas, batch) = (s.lookups.lambdas, s.batches.batch);
+    for lam0 in (0..lambdas).step_by(batch) {
+        let jobs = batch.min(lambdas - lam0);
+        let base = Push {
+            jobs: jobs as i32,
+            job_base: (k * lambdas + lam0) as i32,
+            lam_base: lam0 as i32,
+            slot: s.batches.slot as i32,
+            ..Push::default()
+        };
+        record_batch(s, cb, base, jobs as u64)?;
+    }
+    compute::copy_to_host(dev, cb, acc, &s.buffers.readback, s.buffers.acc_bytes);
+    Ok(())
+}
+
+/// Records one batch of `jobs` wavelengths: the phase fields, their transforms (rows, the
+/// gathered columns), the window taps and the two window passes into the slice.
+fn record_batch(s: &SliceBuild<'_>, cb: vk::CommandBuffer, base: Push, jobs: u64) -> Result<()> {
+    let l = s.lookups;
+    let p = s.passes;
+    let (nx, ny, nu, nv) = (l.nx, l.ny, l.nu, l.nv);
+    let run = |pipeline: &ComputePipeline, push: Push, n: u64| -> Result<()> {
+        let push = Push {
+            total: u32::try_from(n).map_err(|_| {
+                Error::invalid("device table build", "dispatch exceeds 2^32 invocations")
+            })?,
+            ..push
+        };
+        s.layout.dispatch(cb, pipeline, s.set, &push.bytes(), n)?;
+        compute::compute_barrier(s.dev, cb);
+        Ok(())
+    };
+    run(&p.phase, base, jobs * (nx * ny) as u64)?;
+    let mut src = 0;
+    // Rows: every row of every job.
+    let mut ns = 1;
+    for &radix in &p.plan_x {
+        let push = Push {
+            n: nx as i32,
+            ns,
+            radix: radix as i32,
+            lines: ny as i32,
+            axis: 0,
+            src,
+            ..base
+        };
+        run(&p.fft, push, jobs * (nx * ny) as u64)?;
+        ns *= radix as i32;
+        src = 1 - src;
+    }
+    run(
+        &p.gather,
+        Push { src, ..base },
+        jobs * l.cmax as u64 * ny as u64,
+    )?;
+    src = 1 - src;
+    // Columns: the gathered ones.
+    let mut ns = 1;
+    for &radix in &p.plan_y {
+        let push = Push {
+            n: ny as i32,
+            ns,
+            radix: radix as i32,
+            lines: l.cmax as i32,
+            axis: 1,
+            src,
+            ..base
+        };
+        run(&p.fft, push, jobs * l.cmax as u64 * ny as u64)?;
+        ns *= radix as i32;
+        src = 1 - src;
+    }
+    run(&p.taps, base, jobs * (nu + nv) as u64)?;
+    run(
+        &p.window_x,
+        Push { src, ..base },
+        jobs * l.rmax as u64 * nu as u64,
+    )?;
+    run(&p.window_y, base, (nu * nv) as u64)
+}
+
+/// The slice read back: the device stores it u-major; [`Slices`] are v-major.
+fn read_slice(readback: &Buffer, l: &Lookups, precision: Precision) -> Result<Vec<[f64; 3]>> {
+    let (nu, nv) = (l.nu, l.nv);
+    let values = precision.read(readback.mapped()?);
+    let mut slice = vec![[0.0f64; 3]; nu * nv];
+    for (node, c) in values.chunks_exact(3).enumerate() {
+        let (i, j) = (node / nv, node % nv);
+        slice[j * nu + i] = [c[0], c[1], c[2]];
+    }
+    Ok(slice)
 }
 
 /// Where the table variants sample `G` (`--table-build`).
