@@ -311,6 +311,13 @@ fn the_shipped_elaphe_gsf_loads_to_the_png_heights_and_keeps_its_ridges() {
         .fold(0.0, f64::max);
     // float32 rounding of heights below 0.44 µm: 2⁻²⁴·0.44 µm ≈ 2.6e-8 µm.
     assert!(worst <= 3e-8, "{worst}");
+    assert_eq!(HeightField::load(&gsf, None, None).unwrap(), from_gsf);
+    // Images keep their heights as stored: no levelling unless asked, nothing reported.
+    let png = assets().join("measured/elaphe_afm_100x100.png");
+    let report = Collect::default();
+    let via_source = Source::new(png.to_string_lossy()).load(&report).unwrap();
+    assert_eq!(via_source, HeightField::load(&png, None, None).unwrap());
+    assert!(report.notes().is_empty() && report.warnings().is_empty());
     // The default levelling: its ridges run along the scan lines (6 periods over the rows),
     // so `rows` is skipped with the warning and the row-mean spectrum keeps its peak.
     let report = Collect::default();

@@ -109,7 +109,19 @@ impl HeightField {
     /// Loads a PNG (8/16-bit grey; RGB/RGBA/palette with R = G = B; alpha ignored) or raw `.f32` height field. `dh_um`
     /// and `h_max_um` override the sidecar; a value missing from both is an error naming
     /// both places. Never panics on a bad file.
+    ///
+    /// A Gwyddion scan (`.gsf`, `.gwy`) is read as stored: its first height channel, in its
+    /// units, not levelled ([`super::load::Source`] levels and reports).
     pub fn load(path: &Path, dh_um: Option<f64>, h_max_um: Option<f64>) -> Result<HeightField> {
+        if super::load::is_scan(&path.to_string_lossy()) {
+            let source = super::load::Source {
+                dh_um,
+                h_max_um,
+                level: Some("none".into()),
+                ..super::load::Source::new(path.to_string_lossy())
+            };
+            return source.load(&crate::report::Collect::default());
+        }
         let format = format_of(path)?;
         // A missing file (or a device, or a huge file) is the first thing to report, before
         // any complaint about its scale.
