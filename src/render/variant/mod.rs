@@ -16,6 +16,7 @@ mod dhillon;
 mod flss;
 mod nmm;
 mod pq;
+mod spec;
 mod table;
 mod volume;
 
@@ -30,9 +31,7 @@ use crate::{Error, Result};
 
 use super::{OutputMode, ParamsUbo};
 
-/// Number of specialisation constants (`constant_id` 0..=9 of glsl/interface.glsl, 10 of
-/// glsl/shade.glsl).
-pub(crate) const SPEC_COUNT: usize = 11;
+pub(crate) use spec::{SpecConstant, Specialisation};
 
 /// Declares the registry: the enum of variants (plus the `default` alias), [`VariantKind::ALL`]
 /// in listing order, each variant's implementation, and `--variant` parsing by the names the
@@ -90,6 +89,10 @@ impl VariantKind {
     /// What `default` stands for: the fastest variant whose error against the 1 nm
     /// reference stays within ΔE2000 p99 ≤ 1 on the shipped gratings (README, profile).
     pub const DEFAULT: VariantKind = VariantKind::ChebyshevW;
+
+    /// The variant exact to its own `T`, `R` and `Δλ`: the reference of the mesh view
+    /// (`profile --per-vertex`), where no direct sum is affordable.
+    pub const REFERENCE: VariantKind = VariantKind::Flss;
 
     /// The variant an alias stands for.
     pub fn resolve(self) -> VariantKind {
@@ -465,7 +468,7 @@ pub(crate) struct DrawSetup<'a> {
     pub output: OutputMode,
     pub storage: StorageFormat,
     pub table: &'a TableOptions,
-    /// Keep the f64 table on the CPU after upload ([`PreparedVariant::table_model`]).
+    /// Keep the f64 table on the CPU after upload ([`PreparedVariant::model`]).
     pub keep_model: bool,
     /// Where sampled tables are cached (none: always build).
     pub cache_dir: Option<&'a std::path::Path>,
@@ -526,6 +529,8 @@ pub(crate) trait Variant: Sync {
     fn profile_presets(&self) -> &'static [Preset] {
         &[]
     }
+    /// Its cases in `diffract stability`.
+    fn stability(&self) -> Stability;
     /// Builds and uploads what the shader reads for `setup`.
     fn prepare(&self, dev: &Arc<Device>, setup: &DrawSetup<'_>)
         -> Result<Box<dyn PreparedVariant>>;
@@ -548,7 +553,7 @@ pub(crate) trait PreparedVariant: Send + Sync {
         self.base().map_or_else(Vec::new, |b| b.resources())
     }
     /// Sets its specialisation constants.
-    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
+    fn specialise(&self, spec: &mut Specialisation) {
         if let Some(b) = self.base() {
             b.specialise(spec);
         }
@@ -560,18 +565,10 @@ pub(crate) trait PreparedVariant: Send + Sync {
         }
     }
     fn stats(&self) -> VariantStats;
-    /// The grating NMM estimated from the height field.
-    fn grating(&self) -> Option<crate::brdf::nmm::Grating> {
-        self.base().and_then(|b| b.grating())
-    }
-    /// The periodic structure `pq` found in the height field.
-    fn periodicity(&self) -> Option<crate::brdf::pq::Periodicity> {
-        self.base().and_then(|b| b.periodicity())
-    }
-    /// The f64 CPU model of a table variant, when it was kept.
-    fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
-        self.base().and_then(|b| b.table_model())
-    }
+    /// What its shader computes, on the CPU in f64 (`None`: a debug view, which draws no
+    /// BRDF, or a table built without [`DrawSetup::keep_model`]). Required of every
+    /// variant, so a new one cannot be scored against another's model by default.
+    fn model(&self) -> Option<&dyn CpuModel>;
     /// The pipeline's name (validation messages and captures show it).
     fn pipeline_name(&self) -> String {
         self.stats().name
@@ -585,6 +582,58 @@ pub(crate) trait PreparedVariant: Send + Sync {
     fn left_out(&self) -> Option<crate::leave_out::LeftOut> {
         self.base().and_then(|b| b.left_out())
     }
+}
+
+/// The CPU model of a prepared variant: what its shader computes, in f64, with the
+/// inputs the shader saw (ωi and ωr as uploaded, the wavelengths the draw kept). The
+/// profiler scores the GPU against it, which separates float32 and driver error from the
+/// variant's approximation.
+pub trait CpuModel: Send + Sync {
+    /// XYZ at `wr` under light from `wi` for `prepared`, summing `colour`'s weights (the
+    /// material's colour table with the wavelengths the draw left out at weight 0).
+    fn xyz(
+        &self,
+        prepared: &PreparedMaterial,
+        colour: &crate::colour::ColourTable,
+        wi: [f64; 3],
+        wr: [f64; 3],
+    ) -> [f64; 3];
+    /// Table variants: the f64 table itself (its conditioning, its overshoot below zero).
+    fn table(&self) -> Option<&dyn crate::brdf::table::GTable> {
+        None
+    }
+}
+
+/// A table variant's representation, built on the CPU for a [`TableSpec`] and evaluated
+/// in float32 as its shader does: the stability matrix's table cases.
+pub(crate) type TableMirror =
+    fn(&crate::heightfield::HeightField, f64, &TableSpec, f64) -> Result<Mirrored>;
+
+/// A spectral variant's f64 model at one wavelength, `ρ(ωi, ωr, λ)`: the stability
+/// matrix's model cells and the reference of its GPU cells.
+pub(crate) type SpectralModel =
+    fn(&PreparedMaterial, &crate::brdf::Shading, [f64; 3], [f64; 3], f64) -> f64;
+
+/// A representation built for the stability matrix, or the variant's refusal of it.
+pub(crate) enum Mirrored {
+    /// `G` at `(u, v)` node `t` (row-major over the spec's nodes) and `w`, in float32 as
+    /// the shader evaluates it (stored planes rounded, the sum in float32, clamped to
+    /// `G ≥ 0`).
+    Eval(Box<dyn Fn(usize, f64) -> [f64; 3]>),
+    /// Refused, with the error the variant expected and its message.
+    Refused { expected: f64, message: String },
+}
+
+/// What a variant contributes to `diffract stability`.
+pub(crate) enum Stability {
+    /// The spectral matrix (heights × angles × wavelengths × expansions × term counts): its
+    /// f64 model and its GPU spectral map against the direct sum.
+    Spectral(SpectralModel),
+    /// The narrow-region table cases, its float32 mirror against `G` sampled exactly.
+    Table(TableMirror),
+    /// Not in the matrix, and why (a phrase that follows the variant's name: "is a debug
+    /// view and draws no BRDF").
+    Excluded(&'static str),
 }
 
 /// `diffract variants`: the list, with fetches and memory for the default material on a
@@ -708,6 +757,46 @@ pub fn markdown_table() -> String {
         ));
     }
     s
+}
+
+#[cfg(test)]
+pub(super) mod testing {
+    use crate::brdf::table::{Region, Slices, TableSpec};
+
+    /// A 2×1-node region over `w ∈ [−1.6, −1.1]`.
+    pub fn spec(w_nodes: usize) -> TableSpec {
+        TableSpec {
+            region: Region {
+                lo: [-0.1, 0.0, -1.6],
+                hi: [0.1, 0.0, -1.1],
+            },
+            texel_uv: 0.2,
+            w_nodes,
+            step_nm: 10,
+        }
+    }
+
+    /// A cubic in `ŵ` per texel and channel, positive over `[−1, 1]`.
+    pub fn g(t: usize, w_hat: f64) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            let a = 0.1 * (1 + t + c) as f64;
+            0.5 + a * w_hat - 0.2 * w_hat.powi(3) + 0.05 * w_hat * w_hat
+        })
+    }
+
+    /// `g` sampled at `w_nodes` on the two texels.
+    pub fn slices(spec: &TableSpec, w_nodes: &[f64]) -> Slices {
+        let (lo, hi) = (spec.region.lo[2], spec.region.hi[2]);
+        Slices {
+            nu: 2,
+            nv: 1,
+            w: w_nodes.to_vec(),
+            data: w_nodes
+                .iter()
+                .map(|w| (0..2).map(|t| g(t, (2.0 * w - lo - hi) / (hi - lo))).collect())
+                .collect(),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -8,11 +8,15 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::flss::{prepare_terms, FlssGpu};
-use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant, VariantStats};
+use super::{
+    CpuModel, DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Stability, Variant,
+    VariantStats,
+};
 use crate::brdf::nmm::{estimate_grating, Density, Grating};
 use crate::gpu::memory::{Buffer, Pod};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::Device;
+use crate::material::PreparedMaterial;
 use crate::Result;
 
 pub(crate) struct Nmm;
@@ -59,6 +63,10 @@ impl Variant for Nmm {
     fn profile_presets(&self) -> &'static [Preset] {
         const ROWS: &[Preset] = &[Preset::named("nmm taylor R=2")];
         ROWS
+    }
+
+    fn stability(&self) -> Stability {
+        Stability::Excluded("sums the orders' wavelengths and draws no single one")
     }
 
     fn prepare(
@@ -141,7 +149,10 @@ impl Variant for Nmm {
             flss,
             info,
             density,
-            grating,
+            model: NmmModel {
+                grating,
+                density: Density::new(),
+            },
         }))
     }
 }
@@ -150,7 +161,37 @@ struct NmmGpu {
     flss: FlssGpu,
     info: Buffer,
     density: Buffer,
+    model: NmmModel,
+}
+
+/// NMM in f64: FLSS's series at the orders' wavelengths, Jacobian-weighted, for the
+/// grating the shader was given.
+struct NmmModel {
     grating: Grating,
+    density: Density,
+}
+
+impl CpuModel for NmmModel {
+    fn xyz(
+        &self,
+        p: &PreparedMaterial,
+        colour: &crate::colour::ColourTable,
+        wi: [f64; 3],
+        wr: [f64; 3],
+    ) -> [f64; 3] {
+        crate::brdf::nmm::xyz(
+            &p.stack,
+            p.terms(),
+            &p.window,
+            &p.shading,
+            colour,
+            &self.grating,
+            &self.density,
+            wi,
+            wr,
+            true,
+        )
+    }
 }
 
 impl PreparedVariant for NmmGpu {
@@ -184,7 +225,7 @@ impl PreparedVariant for NmmGpu {
         self.flss.stats()
     }
 
-    fn grating(&self) -> Option<Grating> {
-        Some(self.grating)
+    fn model(&self) -> Option<&dyn CpuModel> {
+        Some(&self.model)
     }
 }

@@ -10,7 +10,8 @@ use ash::vk;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{
-    DrawSetup, PreparedVariant, TableFormat, TableOptions, VariantKind, VariantStats, SPEC_COUNT,
+    CpuModel, DrawSetup, PreparedVariant, SpecConstant, Specialisation, TableFormat, TableOptions, VariantKind,
+    VariantStats,
 };
 use crate::brdf::table::{prefilter_disc, GTable, Region, Slices, TableSpec};
 use crate::colour::ColourTable;
@@ -147,14 +148,34 @@ pub(crate) fn prepare<T: GTable + 'static>(
         gpu_bytes_keep_all: gpu.stats.gpu_bytes,
     });
     if setup.keep_model {
-        gpu.model = Some(Box::new(table));
+        gpu.model = Some(TableModel(Box::new(table)));
     }
     Ok(Box::new(gpu))
 }
 
+/// A table variant in f64: `C(ωi, ωr)·G` with the f64 table the shader's planes were
+/// rounded from, interpolated as the shader interpolates them.
+struct TableModel(Box<dyn GTable>);
+
+impl CpuModel for TableModel {
+    fn xyz(
+        &self,
+        p: &crate::material::PreparedMaterial,
+        _colour: &ColourTable,
+        wi: [f64; 3],
+        wr: [f64; 3],
+    ) -> [f64; 3] {
+        self.0.xyz(&p.shading, wi, wr)
+    }
+
+    fn table(&self) -> Option<&dyn GTable> {
+        Some(&*self.0)
+    }
+}
+
 struct TableGpu {
     stats: VariantStats,
-    model: Option<Box<dyn GTable>>,
+    model: Option<TableModel>,
     left_out: Option<LeftOut>,
     terms: u32,
     info: Buffer,
@@ -345,17 +366,17 @@ impl PreparedVariant for TableGpu {
         ]
     }
 
-    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
-        spec[9] = self.terms;
-        spec[10] = self.stats.disc_prefiltered as u32;
+    fn specialise(&self, spec: &mut Specialisation) {
+        spec[SpecConstant::TableTerms] = self.terms;
+        spec[SpecConstant::DiscPrefiltered] = self.stats.disc_prefiltered as u32;
     }
 
     fn stats(&self) -> VariantStats {
         self.stats.clone()
     }
 
-    fn table_model(&self) -> Option<&dyn GTable> {
-        self.model.as_deref()
+    fn model(&self) -> Option<&dyn CpuModel> {
+        self.model.as_ref().map(|m| m as &dyn CpuModel)
     }
 
     fn left_out(&self) -> Option<LeftOut> {
