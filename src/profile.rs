@@ -342,6 +342,8 @@ pub struct VariantReport {
     pub spread_ms: Option<(f64, f64)>,
     /// Timed map frames after the warm-up.
     pub frames: usize,
+    /// Wall time of the warm-up frame (ms): preparing the row (terms, table) and its draw.
+    pub warm_up_ms: f64,
     /// Median wall time of a map frame after the warm-up (ms), upload and readback included.
     pub wall_ms: f64,
     /// Building and uploading the variant's resources (ms): table build or term upload.
@@ -426,7 +428,10 @@ type Samples = (Vec<(u32, u32)>, Vec<[f64; 3]>);
 
 /// The unwinding payload of a table build stopped because it would not fit the budget:
 /// the build's estimated total (s).
-struct OverBudget(f64);
+struct OverBudget {
+    projected_s: f64,
+    steps: u64,
+}
 
 /// The renderer's report during a budgeted row: passes lines and bars on to stderr, and
 /// stops a table build (see [`crate::report::Report::checkpoint`]) once the build, at the
@@ -480,7 +485,10 @@ impl crate::report::Report for Deadline {
         let projected = spent * total as f64 / done as f64;
         let end = self.start + std::time::Duration::from_secs_f64(projected);
         if end > deadline {
-            std::panic::resume_unwind(Box::new(OverBudget(projected)));
+            std::panic::resume_unwind(Box::new(OverBudget {
+                projected_s: projected,
+                steps: total,
+            }));
         }
     }
 }
@@ -494,6 +502,9 @@ struct Pace {
     frame_overhead_ms: f64,
     /// A warm-up's preparation beyond its frame (loading terms, pipelines) (ms).
     prepare_ms: f64,
+    /// A table build's time per sampled `(w, λ)` plane, from a build this profile made or
+    /// stopped (ms); `None` until then (a table may be in the cache: it is tried).
+    table_ms_per_plane: Option<f64>,
 }
 
 impl Pace {
@@ -503,8 +514,12 @@ impl Pace {
     const PRIOR: Pace = Pace {
         ms_per_fetch: 3e-6,
         frame_overhead_ms: 20.0,
-        prepare_ms: 2000.0,
+        prepare_ms: 300.0,
+        table_ms_per_plane: None,
     };
+
+    /// A plane's build time assumed only to order the rows before any table was built.
+    const PRIOR_TABLE_MS_PER_PLANE: f64 = 5.0;
 
     /// Estimated map frame time of `fetches` a pixel on a `size`² map (ms).
     fn frame_ms(&self, fetches: usize, size: u32) -> f64 {
@@ -603,6 +618,11 @@ struct Run<'a> {
     progress: Progress,
     /// Per row of `setup.variants`: its report (and its per-vertex twin), or why not.
     done: Vec<Option<std::result::Result<Vec<VariantReport>, Skipped>>>,
+    /// The height field, loaded once for every row.
+    heightfield: crate::heightfield::HeightField,
+    /// Whether a row was measured (until then the pace is the prior's, and the first row
+    /// is measured whatever its estimate).
+    measured: bool,
 }
 
 /// Renders and scores every row. The reference (1 nm, direct sum) is computed once at the
@@ -617,9 +637,15 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<ProfileR
             "at least one scored pixel and one frame are needed",
         ));
     }
+    let start = Instant::now();
+    let b = &setup.base;
+    let heightfield =
+        crate::heightfield::HeightField::load_source(&b.heightfield, b.dh_um, b.h_max_um)?;
     let mut run = Run {
         setup,
-        start: Instant::now(),
+        start,
+        heightfield,
+        measured: false,
         pace: Pace::PRIOR,
         samples: None,
         table_1nm: ColourTable::new(1)?,
@@ -648,6 +674,16 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<ProfileR
 impl Run<'_> {
     /// The mesh reference, then every row, cheapest first when budgeted.
     fn rows(&mut self, renderer: &mut Renderer) -> Result<()> {
+        if self.progress.bar.is_none() {
+            let how = match self.setup.frames {
+                Frames::Fixed(n) => format!("{n} frames a row"),
+                Frames::Budget(b) => format!("a budget of {:.0} s", b.total_s),
+            };
+            eprintln!(
+                "profile: {} rows, {how}; a line as each row finishes",
+                self.setup.variants.len()
+            );
+        }
         if let (Some(scene), true) = (&self.setup.mesh, self.setup.per_vertex) {
             self.progress
                 .started("mesh reference (per pixel, 1 nm)");
@@ -685,41 +721,53 @@ impl Run<'_> {
     fn order(&self) -> Vec<usize> {
         let mut order: Vec<usize> = (0..self.setup.variants.len()).collect();
         if self.budget().is_some() {
+            // Tables by their planes at an assumed pace: fewer planes are tried first.
             let cost: Vec<f64> = self
                 .setup
                 .variants
                 .iter()
-                .map(|v| self.estimate_ms(v))
+                .map(|v| {
+                    let (ms, planes) = self.estimate(v);
+                    ms + planes as f64 * Pace::PRIOR_TABLE_MS_PER_PLANE
+                })
                 .collect();
             order.sort_by(|&a, &b| cost[a].total_cmp(&cost[b]));
         }
         order
     }
 
-    /// Estimated cost of a row's warm-up and one timed frame (ms), table builds left out.
-    fn estimate_ms(&self, row: &Variant) -> f64 {
-        let fetches = row
-            .kind
-            .fetches(row.terms, &row.material(&self.setup.base), &row.table);
-        self.pace.prepare_ms + 2.0 * self.pace.frame_ms(fetches, self.setup.size)
+    /// Estimated cost of a row's warm-up and one timed frame (ms), with its table's build
+    /// once a build's pace is known; and the `(w, λ)` planes its table samples.
+    fn estimate(&self, row: &Variant) -> (f64, usize) {
+        let material = row.material(&self.setup.base);
+        let (lo, hi) = self.heightfield.range();
+        let wi = direction(self.setup.theta_i_deg, self.setup.phi_i_deg);
+        let inputs = crate::render::variant::FetchInputs {
+            terms: row.terms,
+            material: &material,
+            table: &row.table,
+            region: crate::render::variant::map_region(wi),
+            h_range_um: hi - lo,
+            leave_out: row.leave_out,
+            heightfield: None,
+        };
+        let fetches = row.kind.fetches(&inputs);
+        let step = row.table.step_nm.unwrap_or(TableOptions::DEFAULT_STEP_NM).max(1);
+        let planes = match row.kind.footprint(&inputs) {
+            Some(Ok(f)) => f.planes * (400 / step as usize + 1),
+            _ => 0,
+        };
+        let build = planes as f64 * self.pace.table_ms_per_plane.unwrap_or(0.0);
+        (
+            self.pace.prepare_ms + 2.0 * self.pace.frame_ms(fetches, self.setup.size) + build,
+            planes,
+        )
     }
 
-    /// The time row `row` may take with a budget: the budget left, less what the rows not
-    /// yet measured need at least (as long as that leaves each its even share).
-    fn allowance_s(&self, budget: &Budget, row: usize) -> f64 {
-        let left = self.left_s(budget);
-        let pending: Vec<&Variant> = self
-            .setup
-            .variants
-            .iter()
-            .zip(&self.done)
-            .enumerate()
-            .filter(|(j, (_, d))| d.is_none() && *j != row)
-            .map(|(_, (v, _))| v)
-            .collect();
-        let others: f64 = pending.iter().map(|v| self.estimate_ms(v) / 1e3).sum();
-        (left - others).max(left / (pending.len() + 1) as f64)
+    fn estimate_ms(&self, row: &Variant) -> f64 {
+        self.estimate(row).0
     }
+
 }
 
 /// The line a finished row gets on stderr.
@@ -728,8 +776,9 @@ fn row_line(r: &VariantReport) -> String {
         .spread_ms
         .map_or(String::new(), |(a, b)| format!(" (p10–p90 {a:.2}–{b:.2})"));
     format!(
-        "{}: {} frames, median {} ms{spread}, rel L2 {:.2e} [{:.2e}, {:.2e}]",
+        "{}: warm-up {:.1} s, {} frames, median {} ms{spread}, rel L2 {:.2e} [{:.2e}, {:.2e}]",
         r.variant.name,
+        r.warm_up_ms / 1e3,
         r.frames,
         ms(r.gpu_ms.or(Some(r.wall_ms))),
         r.vs_reference.rel_l2,
@@ -813,10 +862,11 @@ impl Run<'_> {
         let (deadline, frames_end) = match self.budget() {
             None => (None, None),
             Some(b) => {
-                let allowance = self.allowance_s(&b, i);
+                // Greedy: cheapest first, each row while its estimate fits what is left.
+                let allowance = self.left_s(&b);
                 let est = self.estimate_ms(row) / 1e3;
-                if est > allowance {
-                    let why = format!("estimated {est:.1} s, over the {allowance:.1} s of the budget left to it");
+                if est > allowance && self.measured {
+                    let why = format!("estimated {est:.1} s, over the {allowance:.1} s left of the budget");
                     return Ok(Err(skipped(Some(est), why)));
                 }
                 let rows_left = self.done.iter().filter(|d| d.is_none()).count().max(1);
@@ -826,7 +876,19 @@ impl Run<'_> {
             }
         };
         let material = row.material(&setup.base);
-        let prepared = material.prepare(setup.cache_dir.as_deref(), &crate::report::Stderr)?;
+        // The terms are computed (or read from the cache) only if the row's variant reads
+        // them: a table variant builds from the height field.
+        let plan = material.plan_loaded(
+            &self.heightfield,
+            &crate::brdf::truncation::Reach::ALL,
+            crate::brdf::truncation::Precision::F32,
+            &crate::report::Stderr,
+        )?;
+        let prepared = material.prepare_planned_deferred(
+            self.heightfield.clone(),
+            plan,
+            setup.cache_dir.as_deref(),
+        )?;
         renderer.set_variant(row.kind);
         renderer.set_storage_format(row.storage);
         renderer.set_table_options(row.table);
@@ -834,9 +896,11 @@ impl Run<'_> {
         let warm = match self.warm_up(renderer, &prepared, deadline) {
             Ok(f) => f,
             Err(Warm::Refused(e)) => return Ok(Err(skipped(None, format!("refused: {e}")))),
-            Err(Warm::OverBudget(est)) => {
+            Err(Warm::OverBudget(over)) => {
+                let est = over.projected_s;
+                self.pace.table_ms_per_plane = Some(1e3 * est / over.steps.max(1) as f64);
                 let why = format!(
-                    "its table build would take about {est:.0} s, over the time of the budget left to it"
+                    "its table build would take about {est:.0} s, over the time left of the budget (a table built once, by a larger --budget-s or --full, is read from the cache after)"
                 );
                 return Ok(Err(skipped(Some(est), why)));
             }
@@ -848,12 +912,22 @@ impl Run<'_> {
             Some(b) if !b.contains("cache") => warm.variant.build_ms,
             _ => 0.0,
         };
+        let planes = self.estimate(row).1;
+        if built_ms > 0.0 && planes > 0 {
+            self.pace.table_ms_per_plane = Some(built_ms / planes as f64);
+        }
         let frame_ms = crate::render::median(timed.wall.clone()).unwrap_or(warm.wall_ms);
         self.pace
             .learn(warm.variant.fetches, setup.size, frame_ms, warm_ms, built_ms);
+        self.measured = true;
         let scores = self.score(renderer, &prepared, &material, &timed.last)?;
         self.reports(renderer, row, &prepared, timed, scores)
-            .map(Ok)
+            .map(|mut reports| {
+                for r in &mut reports {
+                    r.warm_up_ms = warm_ms;
+                }
+                Ok(reports)
+            })
     }
 
     /// The warm-up frame, which builds (or uploads) the row's resources; with a deadline,
@@ -875,7 +949,7 @@ impl Run<'_> {
             Ok(Err(e @ Error::Invalid { .. })) => Err(Warm::Refused(e)),
             Ok(Err(e)) => Err(Warm::Failed(e)),
             Err(payload) => match payload.downcast::<OverBudget>() {
-                Ok(over) => Err(Warm::OverBudget(over.0)),
+                Ok(over) => Err(Warm::OverBudget(*over)),
                 Err(payload) => std::panic::resume_unwind(payload),
             },
         }
@@ -923,7 +997,7 @@ impl Run<'_> {
 /// How a warm-up ended without a frame.
 enum Warm {
     Refused(Error),
-    OverBudget(f64),
+    OverBudget(OverBudget),
     Failed(Error),
 }
 
@@ -949,22 +1023,45 @@ impl Run<'_> {
             return s.clone();
         }
         let setup = self.setup;
-        let pixels = pick_pixels(&frame.rgb, setup.size, setup.brightest, setup.pixels);
-        let wrs: Vec<[f64; 3]> = pixels.iter().map(|p| wr_of(setup, p)).collect();
-        let bar = crate::progress::bar(wrs.len() as u64, "f64 reference at 1 nm");
-        if self.progress.bar.is_none() {
-            eprintln!("profile: f64 reference at 1 nm at {} pixels", wrs.len());
+        let mut pixels = pick_pixels(&frame.rgb, setup.size, setup.brightest, setup.pixels);
+        // With a budget the reference takes at most its share of it: pixels in the order
+        // picked (any prefix holds bright and spread ones, spread over the disk), at least
+        // REFERENCE_MIN_PIXELS.
+        let limit = self.budget().map(|b| {
+            self.start + std::time::Duration::from_secs_f64(REFERENCE_SHARE * b.total_s)
+        });
+        let bar = crate::progress::bar(pixels.len() as u64, "f64 reference at 1 nm");
+        let started = Instant::now();
+        let mut refs: Vec<[f64; 3]> = Vec::with_capacity(pixels.len());
+        for chunk in pixels.chunks(4) {
+            if let Some(limit) = limit {
+                let per_pixel = started.elapsed().as_secs_f64() / refs.len().max(1) as f64;
+                let next = std::time::Duration::from_secs_f64(per_pixel * chunk.len() as f64);
+                if refs.len() >= REFERENCE_MIN_PIXELS && Instant::now() + next > limit {
+                    break;
+                }
+            }
+            let wrs: Vec<[f64; 3]> = chunk.iter().map(|p| wr_of(setup, p)).collect();
+            refs.extend(reference::xyz_many(
+                &prepared.heightfield,
+                prepared.material.coherence_um,
+                &prepared.shading,
+                &self.table_1nm,
+                direction(setup.theta_i_deg, setup.phi_i_deg),
+                &wrs,
+                &|| bar.inc(1),
+            ));
         }
-        let refs = reference::xyz_many(
-            &prepared.heightfield,
-            prepared.material.coherence_um,
-            &prepared.shading,
-            &self.table_1nm,
-            direction(setup.theta_i_deg, setup.phi_i_deg),
-            &wrs,
-            &|| bar.inc(1),
-        );
         bar.finish_and_clear();
+        let asked = pixels.len();
+        pixels.truncate(refs.len());
+        if self.progress.bar.is_none() || pixels.len() < asked {
+            eprintln!(
+                "profile: f64 reference at 1 nm at {} of {asked} pixels: {:.1} s",
+                pixels.len(),
+                started.elapsed().as_secs_f64()
+            );
+        }
         self.samples = Some((pixels, refs));
         self.samples.clone().unwrap_or_default()
     }
@@ -1108,6 +1205,7 @@ impl Run<'_> {
             gpu_ms: timed.last.gpu_ms.and_then(|_| timed.times.median()),
             spread_ms: timed.times.quantile(0.1).zip(timed.times.quantile(0.9)),
             frames,
+            warm_up_ms: 0.0,
             wall_ms: crate::render::median(timed.wall).unwrap_or(timed.last.wall_ms),
             build_ms: v.build_ms,
             gpu_bytes: v.gpu_bytes,
@@ -1152,8 +1250,13 @@ impl Run<'_> {
     }
 }
 
+/// Share of the budget the reference may take, and the fewest pixels it scores.
+const REFERENCE_SHARE: f64 = 0.4;
+const REFERENCE_MIN_PIXELS: usize = 8;
+
 /// Pixels to score: the `bright` brightest of `map` and `spread` more spread evenly over the
-/// rest of the disk, each at most once.
+/// rest of the disk, each at most once; in an order whose every prefix holds bright and
+/// spread pixels in proportion, the spread ones spread over the disk.
 fn pick_pixels(map: &[[f32; 3]], size: u32, bright: usize, spread: usize) -> Vec<(u32, u32)> {
     let mut inside: Vec<(u32, u32, f32)> = (0..size * size)
         .filter_map(|k| {
@@ -1163,15 +1266,59 @@ fn pick_pixels(map: &[[f32; 3]], size: u32, bright: usize, spread: usize) -> Vec
         .collect();
     inside.sort_by(|a, b| b.2.total_cmp(&a.2));
     let bright = bright.min(inside.len());
-    let mut picked: Vec<(u32, u32)> = inside[..bright].iter().map(|p| (p.0, p.1)).collect();
+    let brightest: Vec<(u32, u32)> = inside[..bright].iter().map(|p| (p.0, p.1)).collect();
     let rest = &inside[bright..];
     let spread = spread.min(rest.len());
     let mut order: Vec<(u32, u32)> = rest.iter().map(|p| (p.0, p.1)).collect();
     order.sort_unstable_by_key(|&(i, j)| (j, i));
-    for s in 0..spread {
-        picked.push(order[s * order.len() / spread]);
+    // Strided picks, visited in bit-reversed order: a prefix samples the whole disk.
+    let bits = usize::BITS - spread.max(1).leading_zeros();
+    let spread: Vec<(u32, u32)> = (0..1usize << bits)
+        .map(|s| s.reverse_bits() >> (usize::BITS - bits))
+        .filter(|&s| s < spread)
+        .map(|s| order[s * order.len() / spread])
+        .collect();
+    let (nb, n) = (brightest.len(), brightest.len() + spread.len());
+    let (mut b, mut s) = (brightest.into_iter().peekable(), spread.into_iter().peekable());
+    let mut picked = Vec::with_capacity(n);
+    let mut taken_bright = 0;
+    for k in 0..n {
+        let from_bright = match (b.peek().is_some(), s.peek().is_some()) {
+            (true, true) => taken_bright * n < (k + 1) * nb,
+            (bright_left, _) => bright_left,
+        };
+        if from_bright {
+            picked.extend(b.next());
+            taken_bright += 1;
+        } else {
+            picked.extend(s.next());
+        }
     }
     picked
+}
+
+#[cfg(test)]
+mod pick_tests {
+    use super::*;
+
+    #[test]
+    fn every_prefix_of_the_picked_pixels_mixes_bright_and_spread_ones() {
+        let size = 33;
+        let map: Vec<[f32; 3]> = (0..size * size).map(|k| [0.0, k as f32, 0.0]).collect();
+        let picked = pick_pixels(&map, size as u32, 8, 16);
+        assert_eq!(picked.len(), 24);
+        let mut unique = picked.clone();
+        unique.sort_unstable();
+        unique.dedup();
+        assert_eq!(unique.len(), 24, "each pixel once");
+        // The brightest are the last rows of this map (its Y grows with the index).
+        let bright = |p: &(u32, u32)| p.1 >= 28;
+        let first: Vec<_> = picked[..6].to_vec();
+        assert!(first.iter().any(bright) && first.iter().any(|p| !bright(p)));
+        // The spread ones among the first six lie in both halves of the disk.
+        let spread: Vec<_> = first.iter().filter(|p| !bright(p)).collect();
+        assert!(spread.iter().any(|p| p.1 < 16) && spread.iter().any(|p| p.1 >= 16));
+    }
 }
 
 fn ms(v: Option<f64>) -> String {
@@ -1399,10 +1546,10 @@ pub struct ProfileArgs {
     #[arg(long)]
     pub size: Option<u32>,
     /// Pixels scored against the reference, spread over the map (each costs N²·401
-    /// complex multiply-adds) [default: 48, or 1024 with --full].
+    /// complex multiply-adds) [default: 16, or 1024 with --full].
     #[arg(long)]
     pub pixels: Option<usize>,
-    /// Pixels scored among the brightest of the map [default: 16, or 64 with --full].
+    /// Pixels scored among the brightest of the map [default: 8, or 64 with --full].
     #[arg(long)]
     pub brightest: Option<usize>,
     /// Frames per row after the warm-up, instead of the budget's count (the median is
@@ -1454,8 +1601,8 @@ impl ProfileArgs {
         };
         Counts {
             size: self.size.unwrap_or(if full { 128 } else { 65 }),
-            pixels: self.pixels.unwrap_or(if full { 1024 } else { 48 }),
-            brightest: self.brightest.unwrap_or(if full { 64 } else { 16 }),
+            pixels: self.pixels.unwrap_or(if full { 1024 } else { 16 }),
+            brightest: self.brightest.unwrap_or(if full { 64 } else { 8 }),
             frames,
             mesh_size: self.mesh_size.unwrap_or(if full { 128 } else { 0 }),
         }

@@ -4,13 +4,21 @@
 
 use std::sync::Arc;
 
-use super::table::{packed_layers, prepare, Layout};
+use super::table::{prepare, Layout, TableLayout};
 use super::{DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant};
 use crate::brdf::table;
 use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct ChebyshevW;
+
+/// Its coefficient planes packed four values a texel, each a cubic B-spline in `(u, v)`
+/// with one ghost texel a side.
+const LAYOUT: TableLayout = TableLayout {
+    layout: Layout::PackedPlanes,
+    ghosts: 1,
+    fitted: false,
+};
 
 impl Variant for ChebyshevW {
     fn name(&self) -> &'static str {
@@ -38,7 +46,15 @@ impl Variant for ChebyshevW {
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
-        4 * packed_layers(f.table.w_nodes_for(Self::KIND))
+        super::table::fetches(Self::KIND, f)
+    }
+
+    fn fetch_formula(&self) -> &'static str {
+        "4⌈3K/4⌉ (K coefficients, four values a texel, four bilinear fetches a spline)"
+    }
+
+    fn table_layout(&self) -> Option<TableLayout> {
+        Some(LAYOUT)
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
@@ -68,7 +84,7 @@ impl Variant for ChebyshevW {
             Self::KIND,
             dev,
             setup,
-            Layout::PackedPlanes,
+            LAYOUT.layout,
             table::ChebyshevW::nodes,
             |r, s| Ok(table::ChebyshevW::from_nodes(r, &s)),
         )

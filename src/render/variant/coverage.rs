@@ -42,6 +42,10 @@ impl Variant for Coverage {
         0
     }
 
+    fn fetch_formula(&self) -> &'static str {
+        "0"
+    }
+
     fn stability(&self) -> Stability {
         Stability::Excluded("is a debug view and draws no BRDF")
     }

@@ -6,13 +6,20 @@
 
 use std::sync::Arc;
 
-use super::table::{prepare, Layout};
+use super::table::{prepare, Layout, TableLayout};
 use super::{DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant};
 use crate::brdf::table;
 use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct Dhillon;
+
+/// One bilinear plane per power of `ŵ` kept by the fit.
+const LAYOUT: TableLayout = TableLayout {
+    layout: Layout::Planes,
+    ghosts: 0,
+    fitted: true,
+};
 
 impl Variant for Dhillon {
     fn name(&self) -> &'static str {
@@ -36,7 +43,15 @@ impl Variant for Dhillon {
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
-        f.table.w_nodes_for(Self::KIND)
+        super::table::fetches(Self::KIND, f)
+    }
+
+    fn fetch_formula(&self) -> &'static str {
+        "P ≤ K (the powers the fit keeps)"
+    }
+
+    fn table_layout(&self) -> Option<TableLayout> {
+        Some(LAYOUT)
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
@@ -68,7 +83,7 @@ impl Variant for Dhillon {
             Self::KIND,
             dev,
             setup,
-            Layout::Planes,
+            LAYOUT.layout,
             table::ChebyshevW::nodes,
             |r, s| {
                 // A tenth of the tolerance for the dropped tail of the series in w.

@@ -55,6 +55,10 @@ impl Variant for Flss {
         f.lambdas() * (f.terms + 1) * f.taps()
     }
 
+    fn fetch_formula(&self) -> &'static str {
+        "λ·(T+1)·(2R+1)² (λ: the wavelengths kept)"
+    }
+
     /// Without leaving out, the whole band is uploaded whatever the draw reaches.
     fn reads_region(&self, leave_out: bool) -> bool {
         leave_out

@@ -17,7 +17,9 @@ mod flss;
 mod nmm;
 mod pq;
 mod spec;
-mod table;
+pub mod table;
+#[cfg(test)]
+mod throwaway;
 mod volume;
 
 use std::sync::Arc;
@@ -37,36 +39,37 @@ pub(crate) use spec::{SpecConstant, Specialisation};
 /// in listing order, each variant's implementation, and `--variant` parsing by the names the
 /// implementations declare.
 macro_rules! registry {
-    ($($kind:ident => $imp:path,)+) => {
+    ($($(#[$attr:meta])* $kind:ident => $imp:path,)+) => {
         /// A registered variant (or the `default` alias); everything about it comes from its
         /// implementation ([`VariantKind::implementation`]).
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
         pub enum VariantKind {
-            $(#[doc = concat!("See [`", stringify!($imp), "`].")] $kind,)+
+            $($(#[$attr])* #[doc = concat!("See [`", stringify!($imp), "`].")] $kind,)+
             /// The default variant (an alias; see [`VariantKind::DEFAULT`]).
             Default,
         }
 
         impl VariantKind {
             /// Every variant, the alias excluded, in listing order.
-            pub const ALL: [VariantKind; [$(VariantKind::$kind),+].len()] = [$(VariantKind::$kind),+];
+            pub const ALL: [VariantKind; [$($(#[$attr])* VariantKind::$kind),+].len()] =
+                [$($(#[$attr])* VariantKind::$kind),+];
 
             /// What `--variant` accepts: every variant and the alias.
-            const CHOICES: [VariantKind; [$(VariantKind::$kind),+].len() + 1] =
-                [$(VariantKind::$kind,)+ VariantKind::Default];
+            const CHOICES: [VariantKind; [$($(#[$attr])* VariantKind::$kind),+].len() + 1] =
+                [$($(#[$attr])* VariantKind::$kind,)+ VariantKind::Default];
 
             /// The variant's own declarations and resources.
             ///
             /// (Each implementation also knows its key, `Self::KIND`.)
             pub(crate) fn implementation(self) -> &'static dyn Variant {
                 match self.resolve() {
-                    $(VariantKind::$kind => &$imp,)+
+                    $($(#[$attr])* VariantKind::$kind => &$imp,)+
                     VariantKind::Default => Self::DEFAULT.implementation(),
                 }
             }
         }
 
-        $(impl $imp {
+        $($(#[$attr])* impl $imp {
             /// This variant's key in the registry.
             #[allow(dead_code)]
             pub(crate) const KIND: VariantKind = VariantKind::$kind;
@@ -83,6 +86,11 @@ registry! {
     ChebyshevW => chebyshev_w::ChebyshevW,
     Volume => volume::Volume,
     Coverage => coverage::Coverage,
+    // A throwaway registered only in the library's own tests, to show that a variant's
+    // file and this one line put it everywhere: listed, profiled and in the stability
+    // matrix, scored against its own model.
+    #[cfg(test)]
+    Throwaway => throwaway::Throwaway,
 }
 
 impl VariantKind {
@@ -145,14 +153,27 @@ impl VariantKind {
         self.family() == Family::Table
     }
 
-    /// Texel fetches per pixel for `material` with highest term `terms` (FLSS and NMM) and
-    /// the table options.
-    pub fn fetches(self, terms: usize, material: &Material, table: &TableOptions) -> usize {
-        self.implementation().fetches(&FetchInputs {
-            terms,
-            material,
-            table,
-        })
+    /// Texel fetches per pixel of a draw: what `render` reports for the same inputs (a
+    /// bound where the variant fits its planes to the data, [`Footprint::at_most`]).
+    pub fn fetches(self, inputs: &FetchInputs<'_>) -> usize {
+        self.implementation().fetches(inputs)
+    }
+
+    /// Table variants: the table's planes, fetches and memory for `inputs`, as `render`
+    /// uploads it (`None` for other variants).
+    pub fn footprint(self, inputs: &FetchInputs<'_>) -> Option<Result<table::Footprint>> {
+        let t = self.implementation().table_layout()?;
+        Some((|| {
+            let (spec, _) =
+                inputs
+                    .table
+                    .spec(self, inputs.material, inputs.h_range_um, inputs.region)?;
+            let nodes = spec.uv_nodes()?;
+            let dims = (nodes.0 + 2 * t.ghosts, nodes.1 + 2 * t.ghosts);
+            let mut f = table::footprint(t.layout, spec.w_nodes, nodes, dims, inputs.table.format);
+            f.at_most = t.fitted;
+            Ok(f)
+        })())
     }
 
     /// Refuses a draw of `output` this variant cannot make (one wavelength from a variant
@@ -206,12 +227,22 @@ pub(crate) fn spectral_refusal(kind: VariantKind) -> Error {
     )
 }
 
-/// What a variant's fetch formula reads.
+/// What a draw's fetches and memory depend on: the same inputs `render` prepares a
+/// variant with.
 pub struct FetchInputs<'a> {
     /// Highest term index `T` of the DFT-term variants.
     pub terms: usize,
     pub material: &'a Material,
     pub table: &'a TableOptions,
+    /// The `(u, v, w)` the draw reaches ([`map_region`] for a BRDF map).
+    pub region: Region,
+    /// The height field's peak-to-valley (µm): `chebyshev-w`'s `w` nodes follow it.
+    pub h_range_um: f64,
+    /// Leave out what the draw cannot need, as `render` does.
+    pub leave_out: bool,
+    /// The height field, where a count depends on it (`nmm`'s orders); `None`: the
+    /// variant's formula without it.
+    pub heightfield: Option<&'a crate::heightfield::HeightField>,
 }
 
 impl FetchInputs<'_> {
@@ -220,10 +251,38 @@ impl FetchInputs<'_> {
         (2 * self.material.window_radius + 1).pow(2)
     }
 
-    /// Wavelengths of the material's step over 380–780 nm.
+    /// Wavelengths the shader loops over: the material's step over 380–780 nm, less those
+    /// left out at its tolerance ([`crate::leave_out::WavelengthsLeft`], as the variants
+    /// select them).
     pub fn lambdas(&self) -> usize {
-        (400 / self.material.lambda_step_nm.max(1) + 1) as usize
+        self.kept()
+            .map_or((400 / self.material.lambda_step_nm.max(1) + 1) as usize, |k| {
+                k.kept_nm.len()
+            })
     }
+
+    /// The shortest and longest wavelength the shader loops over (nm).
+    pub fn kept_range_nm(&self) -> (f64, f64) {
+        self.kept().map_or(
+            (
+                crate::colour::LAMBDA_MIN_NM as f64,
+                crate::colour::LAMBDA_MAX_NM as f64,
+            ),
+            |k| k.kept_range_nm(),
+        )
+    }
+
+    fn kept(&self) -> Option<crate::leave_out::WavelengthsLeft> {
+        let colour = crate::colour::ColourTable::new(self.material.lambda_step_nm).ok()?;
+        let tolerance = self.leave_out.then_some(self.material.tolerance);
+        Some(crate::leave_out::WavelengthsLeft::of(&colour, tolerance, "per pixel").1)
+    }
+}
+
+/// The region of `(u, v, w)` a BRDF map under light from `wi` reaches, as `render` builds
+/// its tables for it (`wi` rounded to float32, as uploaded).
+pub fn map_region(wi: [f64; 3]) -> Region {
+    Region::brdf_map(wi.map(|c| c as f32 as f64)).widened(1e-5)
 }
 
 /// One row of `diffract profile`'s standard set: a label and the numerical choices of the
@@ -346,6 +405,18 @@ impl Default for TableOptions {
 }
 
 impl TableOptions {
+    /// What `render`, `view` and `profile` build tables with unless told otherwise: the
+    /// defaults in float16 (`TableOptions::default()` keeps float32 for tests that compare
+    /// with the f64 model at float32's rounding).
+    pub const RENDER: TableOptions = TableOptions {
+        texel_uv: None,
+        w_nodes: None,
+        step_nm: None,
+        budget_bytes: 512 << 20,
+        format: TableFormat::Rgba16f,
+        build: crate::render::table_build::TableBuild::Auto,
+    };
+
     /// The step of a table that holds no disc, unless another is asked for: a line of the
     /// 65 µm coherence window is about 1 nm wide at |u| ≈ 2, and the table pays the step
     /// only once, offline.
@@ -521,6 +592,12 @@ pub(crate) trait Variant: Sync {
     }
     /// Texel fetches per evaluation (one pixel, one direction of the light).
     fn fetches(&self, inputs: &FetchInputs<'_>) -> usize;
+    /// How its fetch count grows, for the docs' table (`λ·(T+1)·(2R+1)²`).
+    fn fetch_formula(&self) -> &'static str;
+    /// Table variants: how the planes lie on the GPU ([`table::footprint`]).
+    fn table_layout(&self) -> Option<table::TableLayout> {
+        None
+    }
     /// Whether its resources depend on the region the draw reaches (leaving out on or off).
     fn reads_region(&self, _leave_out: bool) -> bool {
         true
@@ -636,18 +713,28 @@ pub(crate) enum Stability {
     Excluded(&'static str),
 }
 
-/// `diffract variants`: the list, with fetches and memory for the default material on a
-/// BRDF map at θi = 60° (its automatic `T` planned, not computed).
-pub fn list() -> String {
+/// What `diffract variants` lists for one variant: the figures `render` reports for a BRDF
+/// map at θi = 60° of the default material with the default options.
+struct Listed {
+    kind: VariantKind,
+    fetches: usize,
+    /// `≤` where the variant fits its planes to the data.
+    bound: bool,
+    memory: String,
+}
+
+/// The listed figures of every variant, from the same code `render` prepares them with
+/// ([`VariantKind::fetches`], [`VariantKind::footprint`]), and what they were for.
+fn listed() -> (Vec<Listed>, String) {
     let material = Material::default();
     let hf = crate::heightfield::HeightField::load_source(
         &material.heightfield,
         material.dh_um,
         material.h_max_um,
-    );
+    )
+    .ok();
     let terms = hf
         .as_ref()
-        .ok()
         .and_then(|hf| {
             material
                 .plan(
@@ -658,60 +745,76 @@ pub fn list() -> String {
                 .ok()
         })
         .map_or(30, |p| p.terms);
-    let table = TableOptions::default();
-    let region = Region::brdf_map(crate::brdf::direction(60.0, 0.0));
-    let mut s = String::from(
-        "variant       fetches/pixel  memory (default material, BRDF map at θi = 60°)\n",
-    );
-    for kind in VariantKind::ALL {
-        let memory = match kind.implementation().family() {
-            Family::Terms => {
-                "term band × (T+1) layers, RG32F (≈ 120 MB for the 704² gratings)".to_string()
-            }
-            Family::Debug => "none (a uniform block)".to_string(),
-            Family::Table => match table.spec(kind, &material, 0.375, region) {
-                Ok((spec, _)) => match spec.uv_nodes() {
-                    Ok((nu, nv)) => format!(
-                        "{:.0} MB ({nu}×{nv}×{} {}, u/v texel {:.4})",
-                        (nu * nv * spec.w_nodes * table.format.texel_bytes()) as f64 / 1e6,
-                        spec.w_nodes,
-                        table.format.name(),
-                        spec.texel_uv
+    let table = TableOptions::RENDER;
+    let inputs = FetchInputs {
+        terms,
+        material: &material,
+        table: &table,
+        region: map_region(crate::brdf::direction(60.0, 0.0)),
+        h_range_um: hf.as_ref().map_or(0.375, |h| h.range().1 - h.range().0),
+        leave_out: true,
+        heightfield: hf.as_ref(),
+    };
+    let rows = VariantKind::ALL
+        .into_iter()
+        .map(|kind| {
+            let (bound, memory) = match (kind.family(), kind.footprint(&inputs)) {
+                (_, Some(Ok(f))) => (
+                    f.at_most,
+                    format!(
+                        "{}{:.1} MB ({}×{}×{} {}, u/v texel {:.4})",
+                        if f.at_most { "≤ " } else { "" },
+                        f.bytes as f64 / 1e6,
+                        f.dims.0,
+                        f.dims.1,
+                        f.layers,
+                        f.format.name(),
+                        inputs.table.texel_uv.unwrap_or_else(|| {
+                            TableSpec::default_texel(material.coherence_um)
+                        })
                     ),
-                    Err(e) => e.to_string(),
-                },
-                Err(e) => e.to_string(),
-            },
-        };
-        let mark = if kind == VariantKind::DEFAULT {
+                ),
+                (_, Some(Err(e))) => (false, e.to_string()),
+                (Family::Terms, None) => (
+                    false,
+                    format!("the term band × {} layers, RG32F", terms + 1),
+                ),
+                (_, None) => (false, "none (a uniform block)".to_string()),
+            };
+            Listed {
+                kind,
+                fetches: kind.fetches(&inputs),
+                bound,
+                memory,
+            }
+        })
+        .collect();
+    let what = format!(
+        "default material ({}, T = {terms}), BRDF map at θi = 60°, leaving out as render does, {} tables",
+        material.heightfield,
+        table.format.name()
+    );
+    (rows, what)
+}
+
+/// `diffract variants`: the list, with fetches and memory for the default material on a
+/// BRDF map at θi = 60° (its automatic `T` planned, not computed), as `render` reports them.
+pub fn list() -> String {
+    let (rows, what) = listed();
+    let mut s = format!("variant       fetches/pixel  memory ({what})\n");
+    for r in &rows {
+        let mark = if r.kind == VariantKind::DEFAULT {
             " (default)"
         } else {
             ""
         };
-        let mut fetches = kind.fetches(terms, &material, &table);
-        // nmm: per order and axis; the orders the map reaches (at its largest |u|, |v|).
-        if let (VariantKind::Nmm, Ok(hf)) = (kind, &hf) {
-            if let (Ok(g), Ok(w)) = (
-                crate::brdf::nmm::estimate_grating(hf),
-                crate::spectrum::Window::new(
-                    hf.nx(),
-                    hf.ny(),
-                    hf.dh_um(),
-                    material.coherence_um,
-                    material.window_radius,
-                ),
-            ) {
-                let (lx, ly) = hf.extent_um();
-                let t = [0, 1].map(|a| region.lo[a].abs().max(region.hi[a].abs()));
-                let n = crate::brdf::nmm::max_samples(&g, &w, [lx, ly], t, (380.0, 780.0));
-                fetches = fetches / (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * n;
-            }
-        }
+        let fetches = format!("{}{}", if r.bound { "≤ " } else { "" }, r.fetches);
         s.push_str(&format!(
-            "{:<13} {:>13}  {memory}\n    {}{mark}\n",
-            kind.name(),
+            "{:<13} {:>13}  {}\n    {}{mark}\n",
+            r.kind.name(),
             fetches,
-            kind.summary()
+            r.memory,
+            r.kind.summary()
         ));
     }
     let scene = crate::scene::Scene::default_scene();
@@ -727,6 +830,32 @@ pub fn list() -> String {
         "per-vertex (--per-vertex on render, view, profile; thesis §1.5.1): {} evaluated once per mesh vertex, the colour interpolated; cost per vertex, not per pixel\n",
         per_vertex.join(", ")
     ));
+    s
+}
+
+/// docs/variants.md's block: the names `--variant` takes, and each variant's fetch formula
+/// with its count as [`list`] gives it.
+pub fn markdown_fetches() -> String {
+    let (rows, what) = listed();
+    let names: Vec<&str> = VariantKind::CHOICES.iter().map(|k| k.cli_name()).collect();
+    let mut s = format!(
+        "    diffract render --variant {} [--per-vertex] ...\n\n| variant | fetches / pixel | {what} |\n|---|---|---|\n",
+        names.join("|")
+    );
+    for r in &rows {
+        let mark = if r.kind == VariantKind::DEFAULT {
+            " (**default**)"
+        } else {
+            ""
+        };
+        s.push_str(&format!(
+            "| `{}`{mark} | {} | {}{} |\n",
+            r.kind.name(),
+            r.kind.implementation().fetch_formula(),
+            if r.bound { "≤ " } else { "" },
+            r.fetches
+        ));
+    }
     s
 }
 
@@ -763,12 +892,12 @@ pub fn markdown_table() -> String {
 pub(super) mod testing {
     use crate::brdf::table::{Region, Slices, TableSpec};
 
-    /// A 2×1-node region over `w ∈ [−1.6, −1.1]`.
+    /// A 2×2-node region over `w ∈ [−1.6, −1.1]`.
     pub fn spec(w_nodes: usize) -> TableSpec {
         TableSpec {
             region: Region {
-                lo: [-0.1, 0.0, -1.6],
-                hi: [0.1, 0.0, -1.1],
+                lo: [-0.1, -0.1, -1.6],
+                hi: [0.1, 0.1, -1.1],
             },
             texel_uv: 0.2,
             w_nodes,
@@ -784,16 +913,16 @@ pub(super) mod testing {
         })
     }
 
-    /// `g` sampled at `w_nodes` on the two texels.
+    /// `g` sampled at `w_nodes` on the four texels.
     pub fn slices(spec: &TableSpec, w_nodes: &[f64]) -> Slices {
         let (lo, hi) = (spec.region.lo[2], spec.region.hi[2]);
         Slices {
             nu: 2,
-            nv: 1,
+            nv: 2,
             w: w_nodes.to_vec(),
             data: w_nodes
                 .iter()
-                .map(|w| (0..2).map(|t| g(t, (2.0 * w - lo - hi) / (hi - lo))).collect())
+                .map(|w| (0..4).map(|t| g(t, (2.0 * w - lo - hi) / (hi - lo))).collect())
                 .collect(),
         }
     }

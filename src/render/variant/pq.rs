@@ -59,6 +59,10 @@ impl Variant for Pq {
         f.lambdas() * (f.terms + 1) * TAPS.pow(2)
     }
 
+    fn fetch_formula(&self) -> &'static str {
+        "λ·(T+1)·9"
+    }
+
     fn profile_presets(&self) -> &'static [Preset] {
         const ROWS: &[Preset] = &[
             Preset::named("pq taylor"),

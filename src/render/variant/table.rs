@@ -35,6 +35,70 @@ pub(crate) enum Layout {
     PackedPlanes,
 }
 
+/// How a table variant lays its planes out on the GPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct TableLayout {
+    pub layout: Layout,
+    /// Texels added on each side of a plane (a cubic B-spline's ghosts).
+    pub ghosts: usize,
+    /// The planes are fitted to the data after sampling, so there may be fewer than the
+    /// `w` nodes.
+    pub fitted: bool,
+}
+
+/// What a table takes on the GPU: the figures `render` reports and `diffract variants`
+/// lists, both from [`footprint`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Footprint {
+    /// Planes of XYZ (the `w` nodes, or coefficients).
+    pub planes: usize,
+    /// Image layers (or 3D slices) they take.
+    pub layers: usize,
+    /// Texels of a layer along `u` and `v`.
+    pub dims: (usize, usize),
+    /// Texel fetches per evaluation.
+    pub fetches: usize,
+    pub bytes: usize,
+    pub format: TableFormat,
+    /// Planes, layers, fetches and bytes are bounds: the planes are fitted to the data.
+    pub at_most: bool,
+}
+
+/// The footprint of `planes` planes of `dims` texels (for `nodes` nodes) in `layout` and
+/// `format`: per layer a bilinear plane takes one fetch, a spline plane (with ghosts,
+/// `dims ≠ nodes`) four; a volume takes one trilinear fetch.
+pub(crate) fn footprint(
+    layout: Layout,
+    planes: usize,
+    nodes: (usize, usize),
+    dims: (usize, usize),
+    format: TableFormat,
+) -> Footprint {
+    let layers = layer_count(planes, layout);
+    let per_layer = if dims == nodes { 1 } else { 4 };
+    Footprint {
+        planes,
+        layers,
+        dims,
+        fetches: match layout {
+            Layout::Volume => 1,
+            Layout::Planes | Layout::PackedPlanes => per_layer * layers,
+        },
+        bytes: dims.0 * dims.1 * layers * format.texel_bytes(),
+        format,
+        at_most: false,
+    }
+}
+
+/// The fetches of table variant `kind` for `inputs` (0 where its table cannot be built
+/// for them: the draw refuses it too).
+pub(crate) fn fetches(kind: VariantKind, inputs: &super::FetchInputs<'_>) -> usize {
+    match kind.footprint(inputs) {
+        Some(Ok(f)) => f.fetches,
+        _ => 0,
+    }
+}
+
 /// Image layers that `planes` planes of XYZ take when packed four values a texel.
 pub(crate) fn packed_layers(planes: usize) -> usize {
     (3 * planes).div_ceil(4)
@@ -207,10 +271,12 @@ impl TableGpu {
             }
             _ => TableFormat::Rgba16f,
         };
-        let (vk_format, texel_bytes) = match format {
-            TableFormat::Rgba32f => (vk::Format::R32G32B32A32_SFLOAT, 16),
-            TableFormat::Rgba16f => (vk::Format::R16G16B16A16_SFLOAT, 8),
+        let vk_format = match format {
+            TableFormat::Rgba32f => vk::Format::R32G32B32A32_SFLOAT,
+            TableFormat::Rgba16f => vk::Format::R16G16B16A16_SFLOAT,
         };
+        let texel_bytes = format.texel_bytes();
+        let fp = footprint(layout, planes.len(), (nu, nv), (pu, pv), format);
         if !dev.supports_format(vk_format, linear) {
             return Err(Error::invalid(
                 "table format",
@@ -229,7 +295,7 @@ impl TableGpu {
             Layout::Volume => info.max_image_dimension_3d,
             Layout::Planes | Layout::PackedPlanes => info.max_image_array_layers,
         };
-        let layers = layer_count(planes.len(), layout);
+        let layers = fp.layers;
         if pu as u32 > limit || pv as u32 > limit || layers as u32 > depth_limit {
             return Err(Error::invalid(
                 "table size",
@@ -286,12 +352,7 @@ impl TableGpu {
             vk::BufferUsageFlags::UNIFORM_BUFFER,
             std::slice::from_ref(&ubo),
         )?;
-        // Per layer: bilinear planes one fetch, spline planes (with ghosts) four.
-        let per_layer = if (pu, pv) == (nu, nv) { 1 } else { 4 };
-        let fetches = match layout {
-            Layout::Volume => 1,
-            Layout::Planes | Layout::PackedPlanes => per_layer * layers,
-        };
+        debug_assert_eq!(bytes.len(), fp.bytes);
         Ok(Self {
             model: None,
             left_out: None,
@@ -304,7 +365,7 @@ impl TableGpu {
                 ),
                 build_ms: start.elapsed().as_secs_f64() * 1e3,
                 gpu_bytes: bytes.len(),
-                fetches,
+                fetches: fp.fetches,
                 table_build: None,
                 disc_prefiltered: false,
             },

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use super::table::{prepare, Layout};
+use super::table::{prepare, Layout, TableLayout};
 use super::TableFormat;
 use super::{DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant};
 use crate::brdf::table;
@@ -33,8 +33,20 @@ impl Variant for Volume {
         Some(32)
     }
 
-    fn fetches(&self, _: &FetchInputs<'_>) -> usize {
-        1
+    fn fetches(&self, f: &FetchInputs<'_>) -> usize {
+        super::table::fetches(Self::KIND, f)
+    }
+
+    fn fetch_formula(&self) -> &'static str {
+        "1 (one trilinear fetch)"
+    }
+
+    fn table_layout(&self) -> Option<TableLayout> {
+        Some(TableLayout {
+            layout: Layout::Volume,
+            ghosts: 0,
+            fitted: false,
+        })
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
