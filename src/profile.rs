@@ -1454,8 +1454,9 @@ fn notes(run: &ProfileRun) -> String {
     s
 }
 
-/// The CSV of a profile: the columns of the first profiler, then the later ones; a
-/// skipped row has its name, its settings, `skipped` and its estimated cost only.
+/// The CSV of a profile: a line per measured row with every figure of the table and the
+/// intervals; a skipped row has its name, its settings, `skipped`, the reason and its
+/// estimated cost only.
 pub fn format_csv(run: &ProfileRun) -> String {
     let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref,overshoot,reference_dark,leave_out,frames,gpu_ms_p10,gpu_ms_p90,rel_l2_ref_lo,rel_l2_ref_hi,p99_de_ref_lo,p99_de_ref_hi,skipped,estimated_s\n");
     let opt = |v: Option<f64>| v.map_or(String::new(), |g| g.to_string());

@@ -260,29 +260,9 @@ impl TableGpu {
         let (nu, nv) = table.nodes_uv();
         let (pu, pv) = table.plane_dims();
         let planes = table.planes();
-        let linear = vk::FormatFeatureFlags::SAMPLED_IMAGE
-            | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
-        // Float32 where the device filters it linearly, else float16.
-        let format = match format {
-            TableFormat::Rgba32f
-                if dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear) =>
-            {
-                TableFormat::Rgba32f
-            }
-            _ => TableFormat::Rgba16f,
-        };
-        let vk_format = match format {
-            TableFormat::Rgba32f => vk::Format::R32G32B32A32_SFLOAT,
-            TableFormat::Rgba16f => vk::Format::R16G16B16A16_SFLOAT,
-        };
+        let (format, vk_format) = filterable_format(dev, format)?;
         let texel_bytes = format.texel_bytes();
         let fp = footprint(layout, planes.len(), (nu, nv), (pu, pv), format);
-        if !dev.supports_format(vk_format, linear) {
-            return Err(Error::invalid(
-                "table format",
-                format!("{} cannot filter {vk_format:?} linearly", dev.info.name),
-            ));
-        }
         let info = &dev.info;
         let (limit, view_type) = match layout {
             Layout::Volume => (info.max_image_dimension_3d, vk::ImageViewType::TYPE_3D),
@@ -304,21 +284,7 @@ impl TableGpu {
                 ),
             ));
         }
-        let texels = planes.first().map_or(0, Vec::len);
-        let mut bytes = Vec::with_capacity(texels * layers * texel_bytes);
-        for layer in 0..layers {
-            for t in 0..texels {
-                let rgba = layer_texel(planes, layout, layer, t);
-                match format {
-                    TableFormat::Rgba32f => rgba
-                        .iter()
-                        .for_each(|c| bytes.extend_from_slice(&c.to_le_bytes())),
-                    TableFormat::Rgba16f => rgba
-                        .iter()
-                        .for_each(|c| bytes.extend_from_slice(&f32_to_f16(*c).to_le_bytes())),
-                }
-            }
-        }
+        let bytes = texel_bytes_of(planes, layout, layers, format);
         let image = Image::sampled_with_data(
             dev,
             &format!("{kind} table"),
@@ -380,6 +346,56 @@ impl TableGpu {
             image,
         })
     }
+}
+
+/// `format` where the device filters it linearly (float32 falls back to float16), and its
+/// Vulkan format; an error where it filters neither.
+fn filterable_format(dev: &Device, format: TableFormat) -> Result<(TableFormat, vk::Format)> {
+    let linear =
+        vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
+    let format = match format {
+        TableFormat::Rgba32f if dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear) => {
+            TableFormat::Rgba32f
+        }
+        _ => TableFormat::Rgba16f,
+    };
+    let vk_format = match format {
+        TableFormat::Rgba32f => vk::Format::R32G32B32A32_SFLOAT,
+        TableFormat::Rgba16f => vk::Format::R16G16B16A16_SFLOAT,
+    };
+    if !dev.supports_format(vk_format, linear) {
+        return Err(Error::invalid(
+            "table format",
+            format!("{} cannot filter {vk_format:?} linearly", dev.info.name),
+        ));
+    }
+    Ok((format, vk_format))
+}
+
+/// The bytes of `layers` image layers of `planes` in `layout` and `format`, layer by
+/// layer, texel by texel.
+fn texel_bytes_of(
+    planes: &[Vec<[f64; 3]>],
+    layout: Layout,
+    layers: usize,
+    format: TableFormat,
+) -> Vec<u8> {
+    let texels = planes.first().map_or(0, Vec::len);
+    let mut bytes = Vec::with_capacity(texels * layers * format.texel_bytes());
+    for layer in 0..layers {
+        for t in 0..texels {
+            let rgba = layer_texel(planes, layout, layer, t);
+            match format {
+                TableFormat::Rgba32f => rgba
+                    .iter()
+                    .for_each(|c| bytes.extend_from_slice(&c.to_le_bytes())),
+                TableFormat::Rgba16f => rgba
+                    .iter()
+                    .for_each(|c| bytes.extend_from_slice(&f32_to_f16(*c).to_le_bytes())),
+            }
+        }
+    }
+    bytes
 }
 
 /// Image layers that `planes` planes of XYZ take in `layout`.
