@@ -29,8 +29,8 @@ use crate::cli::material::MaterialArgs;
 use crate::colour::{delta_e2000, linear_srgb_to_xyz, xyz_to_lab, ColourTable};
 use crate::gpu::StorageFormat;
 use crate::material::{Material, PreparedMaterial};
-use crate::render::Picture;
 use crate::render::variant::{CpuModel, Family, Preset};
+use crate::render::Picture;
 use crate::render::{map_direction, Renderer, TableOptions, VariantKind};
 use crate::scene::Scene;
 use crate::spectrum::Expansion;
@@ -532,9 +532,9 @@ impl Pace {
     fn learn(&mut self, fetches: usize, size: u32, frame_ms: f64, warm_ms: f64, built_ms: f64) {
         let pixels = std::f64::consts::FRAC_PI_4 * (size * size) as f64;
         if fetches >= 100 {
-            self.ms_per_fetch =
-                ((frame_ms - self.frame_overhead_ms).max(0.0) / (fetches as f64 * pixels))
-                    .max(1e-12);
+            self.ms_per_fetch = ((frame_ms - self.frame_overhead_ms).max(0.0)
+                / (fetches as f64 * pixels))
+                .max(1e-12);
         } else {
             self.frame_overhead_ms = frame_ms;
         }
@@ -617,7 +617,7 @@ struct Run<'a> {
     mesh_reference: Option<Vec<[f64; 3]>>,
     progress: Progress,
     /// Per row of `setup.variants`: its report (and its per-vertex twin), or why not.
-    done: Vec<Option<std::result::Result<Vec<VariantReport>, Skipped>>>,
+    done: Vec<Option<RowOutcome>>,
     /// The height field, loaded once for every row.
     heightfield: crate::heightfield::HeightField,
     /// Whether a row was measured (until then the pace is the prior's, and the first row
@@ -663,8 +663,8 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<ProfileR
     let mut out = ProfileRun::default();
     for row in run.done.into_iter().flatten() {
         match row {
-            Ok(reports) => out.reports.extend(reports),
-            Err(skipped) => out.skipped.push(skipped),
+            RowOutcome::Measured(reports) => out.reports.extend(reports),
+            RowOutcome::Skipped(skipped) => out.skipped.push(skipped),
         }
     }
     out.wall_s = run.start.elapsed().as_secs_f64();
@@ -685,8 +685,7 @@ impl Run<'_> {
             );
         }
         if let (Some(scene), true) = (&self.setup.mesh, self.setup.per_vertex) {
-            self.progress
-                .started("mesh reference (per pixel, 1 nm)");
+            self.progress.started("mesh reference (per pixel, 1 nm)");
             self.mesh_reference = Some(mesh_reference(renderer, self.setup, scene)?);
         }
         for i in self.order() {
@@ -694,8 +693,8 @@ impl Run<'_> {
             self.progress.started(&row.name);
             let outcome = self.row(renderer, i)?;
             let line = match &outcome {
-                Ok(reports) => row_line(&reports[0]),
-                Err(s) => skipped_line(s),
+                RowOutcome::Measured(reports) => row_line(&reports[0]),
+                RowOutcome::Skipped(s) => skipped_line(s),
             };
             self.done[i] = Some(outcome);
             let left = self.budget().map(|b| self.left_s(&b));
@@ -752,7 +751,11 @@ impl Run<'_> {
             heightfield: None,
         };
         let fetches = row.kind.fetches(&inputs);
-        let step = row.table.step_nm.unwrap_or(TableOptions::DEFAULT_STEP_NM).max(1);
+        let step = row
+            .table
+            .step_nm
+            .unwrap_or(TableOptions::DEFAULT_STEP_NM)
+            .max(1);
         let planes = match row.kind.footprint(&inputs) {
             Some(Ok(f)) => f.planes * (400 / step as usize + 1),
             _ => 0,
@@ -767,7 +770,6 @@ impl Run<'_> {
     fn estimate_ms(&self, row: &Variant) -> f64 {
         self.estimate(row).0
     }
-
 }
 
 /// The line a finished row gets on stderr.
@@ -845,7 +847,12 @@ struct Timed {
     last: Picture,
 }
 
-type RowOutcome = std::result::Result<Vec<VariantReport>, Skipped>;
+/// How a row ended: its report (and its per-vertex twin), or why it was skipped.
+#[derive(Clone)]
+enum RowOutcome {
+    Measured(Vec<VariantReport>),
+    Skipped(Skipped),
+}
 
 impl Run<'_> {
     /// Measures row `i`: its warm-up (which prepares it), its timed frames, its scores and
@@ -866,8 +873,10 @@ impl Run<'_> {
                 let allowance = self.left_s(&b);
                 let est = self.estimate_ms(row) / 1e3;
                 if est > allowance && self.measured {
-                    let why = format!("estimated {est:.1} s, over the {allowance:.1} s left of the budget");
-                    return Ok(Err(skipped(Some(est), why)));
+                    let why = format!(
+                        "estimated {est:.1} s, over the {allowance:.1} s left of the budget"
+                    );
+                    return Ok(RowOutcome::Skipped(skipped(Some(est), why)));
                 }
                 let rows_left = self.done.iter().filter(|d| d.is_none()).count().max(1);
                 let fair = self.left_s(&b) / rows_left as f64;
@@ -895,14 +904,16 @@ impl Run<'_> {
         renderer.set_leave_out(row.leave_out);
         let warm = match self.warm_up(renderer, &prepared, deadline) {
             Ok(f) => f,
-            Err(Warm::Refused(e)) => return Ok(Err(skipped(None, format!("refused: {e}")))),
+            Err(Warm::Refused(e)) => {
+                return Ok(RowOutcome::Skipped(skipped(None, format!("refused: {e}"))))
+            }
             Err(Warm::OverBudget(over)) => {
                 let est = over.projected_s;
                 self.pace.table_ms_per_plane = Some(1e3 * est / over.steps.max(1) as f64);
                 let why = format!(
                     "its table build would take about {est:.0} s, over the time left of the budget (a table built once, by a larger --budget-s or --full, is read from the cache after)"
                 );
-                return Ok(Err(skipped(Some(est), why)));
+                return Ok(RowOutcome::Skipped(skipped(Some(est), why)));
             }
             Err(Warm::Failed(e)) => return Err(e),
         };
@@ -917,8 +928,13 @@ impl Run<'_> {
             self.pace.table_ms_per_plane = Some(built_ms / planes as f64);
         }
         let frame_ms = crate::render::median(timed.wall.clone()).unwrap_or(warm.wall_ms);
-        self.pace
-            .learn(warm.variant.fetches, setup.size, frame_ms, warm_ms, built_ms);
+        self.pace.learn(
+            warm.variant.fetches,
+            setup.size,
+            frame_ms,
+            warm_ms,
+            built_ms,
+        );
         self.measured = true;
         let scores = self.score(renderer, &prepared, &material, &timed.last)?;
         self.reports(renderer, row, &prepared, timed, scores)
@@ -926,7 +942,7 @@ impl Run<'_> {
                 for r in &mut reports {
                     r.warm_up_ms = warm_ms;
                 }
-                Ok(reports)
+                RowOutcome::Measured(reports)
             })
     }
 
@@ -1027,9 +1043,9 @@ impl Run<'_> {
         // With a budget the reference takes at most its share of it: pixels in the order
         // picked (any prefix holds bright and spread ones, spread over the disk), at least
         // REFERENCE_MIN_PIXELS.
-        let limit = self.budget().map(|b| {
-            self.start + std::time::Duration::from_secs_f64(REFERENCE_SHARE * b.total_s)
-        });
+        let limit = self
+            .budget()
+            .map(|b| self.start + std::time::Duration::from_secs_f64(REFERENCE_SHARE * b.total_s));
         let bar = crate::progress::bar(pixels.len() as u64, "f64 reference at 1 nm");
         let started = Instant::now();
         let mut refs: Vec<[f64; 3]> = Vec::with_capacity(pixels.len());
@@ -1279,7 +1295,10 @@ fn pick_pixels(map: &[[f32; 3]], size: u32, bright: usize, spread: usize) -> Vec
         .map(|s| order[s * order.len() / spread])
         .collect();
     let (nb, n) = (brightest.len(), brightest.len() + spread.len());
-    let (mut b, mut s) = (brightest.into_iter().peekable(), spread.into_iter().peekable());
+    let (mut b, mut s) = (
+        brightest.into_iter().peekable(),
+        spread.into_iter().peekable(),
+    );
     let mut picked = Vec::with_capacity(n);
     let mut taken_bright = 0;
     for k in 0..n {
@@ -1856,13 +1875,19 @@ mod tests {
         let (a, r) = sample(32);
         let e = error_stats(&a, &r);
         let i = bootstrap(&a, &r);
-        assert!(i.rel_l2.lo <= e.rel_l2 && e.rel_l2 <= i.rel_l2.hi, "{i:?} {e:?}");
+        assert!(
+            i.rel_l2.lo <= e.rel_l2 && e.rel_l2 <= i.rel_l2.hi,
+            "{i:?} {e:?}"
+        );
         assert!(i.rel_l2.lo < i.rel_l2.hi);
         assert_eq!(bootstrap(&a, &r), i, "a fixed seed");
         let (a4, r4) = sample(512);
         let wide = bootstrap(&a, &r).rel_l2;
         let narrow = bootstrap(&a4, &r4).rel_l2;
-        assert!(narrow.hi - narrow.lo < 0.5 * (wide.hi - wide.lo), "{wide:?} {narrow:?}");
+        assert!(
+            narrow.hi - narrow.lo < 0.5 * (wide.hi - wide.lo),
+            "{wide:?} {narrow:?}"
+        );
     }
 
     #[test]

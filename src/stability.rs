@@ -636,7 +636,7 @@ fn report_cell(c: &Cell, done: usize, total: usize) {
             c.f32_bound
         );
     }
-    if done % 20 == 0 || done == total {
+    if done.is_multiple_of(20) || done == total {
         eprintln!("{done}/{total} cells");
     }
 }
@@ -961,7 +961,11 @@ fn column_groups(spec: &MatrixSpec, cfg: &[Config]) -> Vec<Vec<(f64, f64, String
         (0..cfg.len() / inner)
             .map(|i| {
                 let width = inner as f64 * n_l;
-                (i as f64 * width, (i + 1) as f64 * width, name(&cfg[i * inner]))
+                (
+                    i as f64 * width,
+                    (i + 1) as f64 * width,
+                    name(&cfg[i * inner]),
+                )
             })
             .collect()
     };

@@ -82,7 +82,10 @@ fn a_small_budget_is_kept_and_every_row_is_run_or_reported_skipped() {
         "{}\nwall {wall:.1} s",
         diffract::profile::format_table(r.device_name(), &s, &run)
     );
-    assert!(wall <= 1.2 * budget, "{wall:.1} s against a budget of {budget} s");
+    assert!(
+        wall <= 1.2 * budget,
+        "{wall:.1} s against a budget of {budget} s"
+    );
     assert_eq!(run.reports.len() + run.skipped.len(), s.variants.len());
     assert!(!run.reports.is_empty());
     for k in &run.skipped {
@@ -170,7 +173,13 @@ fn redirected_stderr_gets_a_line_per_row() {
         .args(["profile", "--heightfield", &hf, "--size", "17"])
         .args(["--only", "taylor R=2,chebyshev-w", "--variant-terms", "8"])
         .args(["--pixels", "4", "--brightest", "2", "--budget-s", "30"])
-        .args(["--table-texel", "0.02", "--table-step-nm", "20", "--no-cache"])
+        .args([
+            "--table-texel",
+            "0.02",
+            "--table-step-nm",
+            "20",
+            "--no-cache",
+        ])
         .env("DIFFRACT_VALIDATION", "1")
         .stderr(std::fs::File::create(&log).unwrap())
         .output()
@@ -191,8 +200,14 @@ fn redirected_stderr_gets_a_line_per_row() {
             .iter()
             .find(|l| l.starts_with(&format!("profile: {name}: warm-up")))
             .unwrap_or_else(|| panic!("a line for {name}: {err}"));
-        assert!(line.contains(" frames, median ") && line.contains("rel L2"), "{line}");
-        assert!(line.contains("rows, about ") && line.ends_with(" s left"), "{line}");
+        assert!(
+            line.contains(" frames, median ") && line.contains("rel L2"),
+            "{line}"
+        );
+        assert!(
+            line.contains("rows, about ") && line.ends_with(" s left"),
+            "{line}"
+        );
     }
     // No escape codes of a bar in a file.
     assert!(!err.contains('\u{1b}'), "{err:?}");

@@ -191,11 +191,8 @@ fn the_readme_variant_table_is_the_registry_s() {
 
 #[test]
 fn the_docs_fetch_table_is_the_registry_s() {
-    let docs = std::fs::read_to_string(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/docs/variants.md"
-    ))
-    .expect("docs/variants.md");
+    let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/variants.md"))
+        .expect("docs/variants.md");
     let begin = "<!-- fetches:begin -->\n";
     let start = docs.find(begin).expect("docs mark the fetch table") + begin.len();
     let end = docs[start..]
@@ -244,7 +241,11 @@ fn listed_fetches_and_memory_are_what_render_draws() {
         let listed = kind.fetches(&inputs);
         // dhillon's fit and pq's taps may take fewer than the bound.
         if matches!(kind, VariantKind::Dhillon | VariantKind::Pq) {
-            assert!(drawn.fetches <= listed, "{kind}: {} > {listed}", drawn.fetches);
+            assert!(
+                drawn.fetches <= listed,
+                "{kind}: {} > {listed}",
+                drawn.fetches
+            );
         } else {
             assert_eq!(drawn.fetches, listed, "{kind}: fetches");
         }

@@ -13,8 +13,8 @@ use ash::vk;
 use super::params::{colour_weights, OutputMode, ParamsUbo};
 use super::record::mesh_vertex_layout;
 use super::record::{begin_pass, end_pass, record_draw, record_pass, Geometry, Transforms};
-use super::variant::{SpecConstant, Specialisation};
 use super::variant::{PreparedVariant, VariantStats};
+use super::variant::{SpecConstant, Specialisation};
 use super::Renderer;
 use crate::gpu::memory::{bytes_of, Buffer, Image, ImageDesc};
 use crate::gpu::pipeline::{

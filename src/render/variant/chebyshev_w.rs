@@ -5,7 +5,9 @@
 use std::sync::Arc;
 
 use super::table::{prepare, Layout, TableLayout};
-use super::{DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant};
+use super::{
+    DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant,
+};
 use crate::brdf::table;
 use crate::gpu::Device;
 use crate::Result;
@@ -123,7 +125,10 @@ mod tests {
             for t in 0..2 {
                 let (got, want) = (g_f32(&c, t, w), testing::g(t, w_hat));
                 for ch in 0..3 {
-                    assert!((got[ch] - want[ch]).abs() < 2e-6, "{t} {w_hat}: {got:?} {want:?}");
+                    assert!(
+                        (got[ch] - want[ch]).abs() < 2e-6,
+                        "{t} {w_hat}: {got:?} {want:?}"
+                    );
                 }
             }
         }

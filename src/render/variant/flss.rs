@@ -10,8 +10,8 @@ use std::time::Instant;
 use ash::vk;
 
 use super::{
-    CpuModel, DrawSetup, Family, FetchInputs, PreparedVariant, Preset, SpecConstant, Specialisation,
-    Stability, Variant, VariantStats,
+    CpuModel, DrawSetup, Family, FetchInputs, PreparedVariant, Preset, SpecConstant,
+    Specialisation, Stability, Variant, VariantStats,
 };
 use crate::colour::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 use crate::gpu::formats::{pack_layers, Layer};

@@ -255,10 +255,10 @@ impl FetchInputs<'_> {
     /// left out at its tolerance ([`crate::leave_out::WavelengthsLeft`], as the variants
     /// select them).
     pub fn lambdas(&self) -> usize {
-        self.kept()
-            .map_or((400 / self.material.lambda_step_nm.max(1) + 1) as usize, |k| {
-                k.kept_nm.len()
-            })
+        self.kept().map_or(
+            (400 / self.material.lambda_step_nm.max(1) + 1) as usize,
+            |k| k.kept_nm.len(),
+        )
     }
 
     /// The shortest and longest wavelength the shader loops over (nm).
@@ -769,9 +769,10 @@ fn listed() -> (Vec<Listed>, String) {
                         f.dims.1,
                         f.layers,
                         f.format.name(),
-                        inputs.table.texel_uv.unwrap_or_else(|| {
-                            TableSpec::default_texel(material.coherence_um)
-                        })
+                        inputs
+                            .table
+                            .texel_uv
+                            .unwrap_or_else(|| { TableSpec::default_texel(material.coherence_um) })
                     ),
                 ),
                 (_, Some(Err(e))) => (false, e.to_string()),
@@ -922,7 +923,11 @@ pub(super) mod testing {
             w: w_nodes.to_vec(),
             data: w_nodes
                 .iter()
-                .map(|w| (0..4).map(|t| g(t, (2.0 * w - lo - hi) / (hi - lo))).collect())
+                .map(|w| {
+                    (0..4)
+                        .map(|t| g(t, (2.0 * w - lo - hi) / (hi - lo)))
+                        .collect()
+                })
                 .collect(),
         }
     }

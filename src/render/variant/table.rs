@@ -10,8 +10,8 @@ use ash::vk;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{
-    CpuModel, DrawSetup, PreparedVariant, SpecConstant, Specialisation, TableFormat, TableOptions, VariantKind,
-    VariantStats,
+    CpuModel, DrawSetup, PreparedVariant, SpecConstant, Specialisation, TableFormat, TableOptions,
+    VariantKind, VariantStats,
 };
 use crate::brdf::table::{prefilter_disc, GTable, Region, Slices, TableSpec};
 use crate::colour::ColourTable;

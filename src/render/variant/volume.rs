@@ -5,7 +5,9 @@ use std::sync::Arc;
 
 use super::table::{prepare, Layout, TableLayout};
 use super::TableFormat;
-use super::{DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant};
+use super::{
+    DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant,
+};
 use crate::brdf::table;
 use crate::gpu::Device;
 use crate::Result;
@@ -108,14 +110,15 @@ mod tests {
         // At the slices: the samples; between two: their linear blend.
         for (k, &w) in nodes.iter().enumerate() {
             let got = g_f32(&v, 1, w);
-            for c in 0..3 {
-                assert!((got[c] - v.slices.data[k][1][c]).abs() < 1e-6);
+            for (g, want) in got.iter().zip(v.slices.data[k][1]) {
+                assert!((g - want).abs() < 1e-6);
             }
         }
         let w = 0.25 * nodes[1] + 0.75 * nodes[2];
         let got = g_f32(&v, 0, w);
+        let (a, b) = (v.slices.data[1][0], v.slices.data[2][0]);
         for c in 0..3 {
-            let want = 0.25 * v.slices.data[1][0][c] + 0.75 * v.slices.data[2][0][c];
+            let want = 0.25 * a[c] + 0.75 * b[c];
             assert!((got[c] - want).abs() < 1e-6, "{got:?} {want}");
         }
     }
