@@ -5,6 +5,12 @@
 //! It also writes `OUT_DIR/shaders.rs`, the table of what it compiled: one constant per
 //! stage (`flss.frag` → `FLSS_FRAG`) and `FILES`, every stage by its file name, which
 //! `gpu::shaders` includes. A new stage in glsl/ is embedded without a hand-written line.
+//!
+//! And it writes `OUT_DIR/spec_constants.rs`: the enum `SpecConstant` of the graphics
+//! stages' specialisation constants, one variant per `layout(constant_id = N) const T NAME`
+//! that a `.vert` or `.frag` stage declares or includes, its discriminant the `constant_id`.
+//! The Rust side names constants only through it, so an id cannot drift from the GLSL. Two
+//! names for one id, or ids with a gap, fail the build.
 
 use std::path::{Path, PathBuf};
 
@@ -49,6 +55,11 @@ fn main() {
     if failed {
         fail("GLSL compilation failed (messages above are file:line: error)");
     }
+    let spec = out_dir.join("spec_constants.rs");
+    let generated = spec_constants(&glsl_dir, &entries).unwrap_or_else(|e| fail(&e));
+    if let Err(e) = std::fs::write(&spec, generated) {
+        fail(&format!("{}: {e}", spec.display()));
+    }
     let table = out_dir.join("shaders.rs");
     if let Err(e) = std::fs::write(&table, shader_table(&compiled)) {
         fail(&format!("{}: {e}", table.display()));
@@ -82,6 +93,141 @@ fn shader_table(files: &[String]) -> String {
     }
     s.push_str("];\n");
     s
+}
+
+/// One `layout(constant_id = N) const TYPE NAME` declaration.
+struct SpecDecl {
+    id: usize,
+    name: String,
+    file: String,
+}
+
+/// The declarations in `source` (a line each).
+fn spec_decls(source: &str, file: &str) -> Result<Vec<SpecDecl>, String> {
+    let mut out = Vec::new();
+    for (n, line) in source.lines().enumerate() {
+        let code = line.split("//").next().unwrap_or("");
+        let Some(rest) = code.trim().strip_prefix("layout(constant_id") else {
+            continue;
+        };
+        let bad = || format!("{file}:{}: unreadable specialisation constant", n + 1);
+        let (id, decl) = rest.split_once(')').ok_or_else(bad)?;
+        let id = id.trim_start_matches([' ', '=']).trim();
+        let id: usize = id.parse().map_err(|_| bad())?;
+        // `const TYPE NAME = value;`
+        let words: Vec<&str> = decl.split_whitespace().collect();
+        let name = match words.as_slice() {
+            ["const", _ty, name, ..] => name.trim_end_matches([';', '=']).to_string(),
+            _ => return Err(bad()),
+        };
+        out.push(SpecDecl {
+            id,
+            name,
+            file: file.to_string(),
+        });
+    }
+    Ok(out)
+}
+
+/// `file` and everything it includes, each once (in `seen`).
+fn with_includes(glsl_dir: &Path, file: &str, seen: &mut Vec<String>) -> Result<(), String> {
+    if seen.iter().any(|f| f == file) {
+        return Ok(());
+    }
+    seen.push(file.to_string());
+    let path = glsl_dir.join(file);
+    let source = std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+    for line in source.lines() {
+        if let Some(rest) = line.trim().strip_prefix("#include") {
+            with_includes(glsl_dir, rest.trim().trim_matches('"'), seen)?;
+        }
+    }
+    Ok(())
+}
+
+/// GLSL `WINDOW_RADIUS` as a Rust variant name, `WindowRadius`.
+fn camel(name: &str) -> String {
+    name.split('_')
+        .map(|w| {
+            let lower = w.to_ascii_lowercase();
+            let mut c = lower.chars();
+            c.next()
+                .map(|f| f.to_ascii_uppercase().to_string() + c.as_str())
+                .unwrap_or_default()
+        })
+        .collect()
+}
+
+/// The Rust source of `SpecConstant`: the constants of every graphics stage in `entries`.
+fn spec_constants(glsl_dir: &Path, entries: &[PathBuf]) -> Result<String, String> {
+    let mut files = Vec::new();
+    for path in entries {
+        let ext = path.extension().and_then(|e| e.to_str());
+        let name = path.file_name().and_then(|n| n.to_str());
+        if let (Some("vert" | "frag"), Some(name)) = (ext, name) {
+            with_includes(glsl_dir, name, &mut files)?;
+        }
+    }
+    files.sort();
+    let mut by_id: Vec<Option<SpecDecl>> = Vec::new();
+    for file in &files {
+        let path = glsl_dir.join(file);
+        let source =
+            std::fs::read_to_string(&path).map_err(|e| format!("{}: {e}", path.display()))?;
+        for d in spec_decls(&source, file)? {
+            if by_id.len() <= d.id {
+                by_id.resize_with(d.id + 1, || None);
+            }
+            match &by_id[d.id] {
+                Some(o) if o.name != d.name => {
+                    return Err(format!(
+                        "constant_id {} is {} in glsl/{} but {} in glsl/{}",
+                        d.id, o.name, o.file, d.name, d.file
+                    ))
+                }
+                Some(_) => {}
+                None => {
+                    let id = d.id;
+                    by_id[id] = Some(d);
+                }
+            }
+        }
+    }
+    let decls: Vec<SpecDecl> = by_id
+        .into_iter()
+        .enumerate()
+        .map(|(id, d)| d.ok_or_else(|| format!("no graphics stage declares constant_id {id}")))
+        .collect::<Result<_, _>>()?;
+    let mut s = String::from("// Generated by build.rs from glsl/: do not edit.\n\n");
+    s.push_str("/// A specialisation constant of the graphics stages; the discriminant is its\n/// `constant_id`.\n#[derive(Debug, Clone, Copy, PartialEq, Eq)]\npub enum SpecConstant {\n");
+    for d in &decls {
+        s.push_str(&format!(
+            "    /// `{}` (glsl/{}).\n    {} = {},\n",
+            d.name,
+            d.file,
+            camel(&d.name),
+            d.id
+        ));
+    }
+    s.push_str("}\n\nimpl SpecConstant {\n");
+    s.push_str(&format!(
+        "    /// How many there are (ids 0 to COUNT − 1).\n    pub const COUNT: usize = {};\n",
+        decls.len()
+    ));
+    s.push_str("    /// Every constant, by id.\n    #[allow(dead_code)]\n    pub const ALL: [SpecConstant; Self::COUNT] = [\n");
+    for d in &decls {
+        s.push_str(&format!("        SpecConstant::{},\n", camel(&d.name)));
+    }
+    s.push_str("    ];\n\n    /// Its name in the GLSL.\n    #[allow(dead_code)]\n    pub fn glsl_name(self) -> &'static str {\n        match self {\n");
+    for d in &decls {
+        s.push_str(&format!(
+            "            SpecConstant::{} => \"{}\",\n",
+            camel(&d.name),
+            d.name
+        ));
+    }
+    s.push_str("        }\n    }\n}\n");
+    Ok(s)
 }
 
 /// Compiles one stage to `OUT_DIR/<file name>.spv`; returns the file name.

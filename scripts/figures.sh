@@ -123,15 +123,16 @@ viewer() {
     mv "$scratch/$name.png" "$out/$name.png"
 }
 
-# Profiler run: keeps the CSV, and the plot when asked for with "plot" first.
+# Profiler run: keeps the CSV, and the plot when asked for with "plot" first. Always the
+# exhaustive set (--full: no time budget), so the figures do not depend on the machine's pace.
 profile() {
     local name=$1 plot=$2
     shift 2
     if [ "$plot" = plot ]; then
-        d profile "$@" --csv "$scratch/$name.csv" --plot "$scratch/$name.png"
+        d profile --full "$@" --csv "$scratch/$name.csv" --plot "$scratch/$name.png"
         mv "$scratch/$name.png" "$out/$name.png"
     else
-        d profile "$@" --csv "$scratch/$name.csv"
+        d profile --full "$@" --csv "$scratch/$name.csv"
     fi
     mv "$scratch/$name.csv" "$out/$name.csv"
 }

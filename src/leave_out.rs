@@ -1,4 +1,4 @@
-//! Leaving out what a scene does not need (issue #8, item 4), CPU side: which
+//! Leaving out what a scene does not need, CPU side: which
 //! wavelengths' D65·CMF weight cannot matter at a tolerance, which `(u, v)` band of the
 //! DFT terms a scene's directions can reach, and the record of what was left out
 //! ([`LeftOut`]). The variants use them (`flss`/`nmm` loop over fewer wavelengths and

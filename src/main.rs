@@ -28,8 +28,11 @@ enum Command {
     /// List the shader variants: per-pixel fetches, memory, the default.
     Variants {
         /// Print the Markdown table of the variants (as in the README) instead.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "fetches")]
         markdown: bool,
+        /// Print docs/variants.md's names and fetch table instead.
+        #[arg(long)]
+        fetches: bool,
     },
     /// The DFT-term cache: list its files or clear it.
     Cache(diffract::cli::cache::CacheCommandArgs),
@@ -169,9 +172,11 @@ fn main() -> ExitCode {
         Command::EvalGrating(a) => diffract::eval::run(a),
         Command::Profile(a) => diffract::profile::run(a),
         Command::View(a) => diffract::view::run(a),
-        Command::Variants { markdown } => {
+        Command::Variants { markdown, fetches } => {
             if *markdown {
                 print!("{}", diffract::render::variant::markdown_table());
+            } else if *fetches {
+                print!("{}", diffract::render::variant::markdown_fetches());
             } else {
                 print!("{}", diffract::render::variant::list());
             }

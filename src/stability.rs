@@ -1,8 +1,10 @@
-//! `diffract stability`: the stability matrix of issue #8. Every cell is one height
-//! (peak-to-valley `h_max`), light angle `θi`, wavelength, preferred expansion, term mode
-//! (`auto` or a fixed `T`) and evaluator (the f64 model, the float32 GPU shader); it holds
-//! the error against the f64 direct-sum reference, the expansion and `T` actually used, and
-//! whether the cell passed, was warned about, or was refused.
+//! `diffract stability`: the stability matrix. Every cell is one variant that declares a
+//! spectral model ([`Stability::Spectral`]), height (peak-to-valley `h_max`), light angle
+//! `θi`, wavelength, preferred expansion, term mode (`auto` or a fixed `T`) and evaluator
+//! (the variant's f64 model, its float32 GPU shader); it holds the error against the f64
+//! direct-sum reference, the expansion and `T` actually used, and whether the cell passed,
+//! was warned about, or was refused. The variants that declare a float32 mirror of a table
+//! ([`Stability::Table`]) are probed on narrow regions ([`run_table_cases`]).
 //!
 //! Errors are stated on `ρ/C = |P̂|²` (see [`crate::brdf::truncation`]): the reflectance
 //! error divided by the gain factor, i.e. relative to a flat mirror's specular value, so
@@ -17,17 +19,20 @@ use std::time::Instant;
 
 use rayon::prelude::*;
 
+use crate::brdf::table::{Region, TableSpec};
 use crate::brdf::truncation::{Precision, Reach, TermPlan, Terms};
-use crate::brdf::{direction, gain, model, reference};
+use crate::brdf::{direction, gain, reference};
 use crate::heightfield::{generate, GratingKind, GratingSpec, HeightField};
 use crate::material::Material;
+use crate::render::variant::{Mirrored, SpectralModel, Stability, TableMirror};
+use crate::render::{Renderer, TableOptions, VariantKind};
 use crate::spectrum::Expansion;
 use crate::{Error, Result};
 
 /// Which evaluator a cell measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Evaluator {
-    /// The CPU model of the FLSS shader in f64.
+    /// The variant's CPU model in f64.
     Model,
     /// The GPU shader (float32), on a tiny spectral BRDF map.
     Gpu,
@@ -71,6 +76,7 @@ impl std::fmt::Display for Status {
 /// One cell of the matrix.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Cell {
+    pub variant: VariantKind,
     pub h_max_um: f64,
     pub theta_i_deg: f64,
     pub lambda_nm: f64,
@@ -118,7 +124,7 @@ pub struct MatrixSpec {
     pub validation: bool,
 }
 
-/// The issue's axes.
+/// The full matrix's axes.
 pub const H_MAX_UM: [f64; 6] = [0.05, 0.25, 0.5, 1.0, 2.0, 5.0];
 pub const THETA_I_DEG: [f64; 5] = [0.0, 45.0, 80.0, 89.0, 89.99];
 pub const LAMBDAS_NM: [f64; 3] = [380.0, 580.0, 780.0];
@@ -140,7 +146,7 @@ pub fn default_field() -> Result<(HeightField, f64)> {
 }
 
 impl MatrixSpec {
-    /// The full matrix of issue #8 on `field`.
+    /// The full matrix on `field`.
     pub fn full(field: HeightField, field_name: &str, period_um: Option<f64>) -> Self {
         MatrixSpec {
             field,
@@ -252,10 +258,10 @@ fn material(spec: &MatrixSpec, expansion: Expansion, terms: Terms) -> Material {
     }
 }
 
-/// The GPU part, isolated because the renderer's API is being reworked: a spectral BRDF
-/// map of `prepared` under light at `(theta_i, 0)`. Returns per-pixel `(ωr, ρ)`.
+/// A spectral map of `prepared` by the renderer's variant under light at `(theta_i, 0)`.
+/// Returns per-pixel `(ωr, ρ)`.
 fn gpu_spectral_map(
-    renderer: &mut crate::render::Renderer,
+    renderer: &mut Renderer,
     prepared: &crate::material::PreparedMaterial,
     theta_i: f64,
     size: u32,
@@ -273,148 +279,205 @@ fn gpu_spectral_map(
     Ok(out)
 }
 
-/// Runs the matrix. `renderer` is needed when `spec.evaluators` holds [`Evaluator::Gpu`];
-/// `progress` is called after each cell.
-pub fn run_matrix(
-    spec: &MatrixSpec,
-    mut renderer: Option<&mut crate::render::Renderer>,
-    mut progress: impl FnMut(&Cell),
-) -> Result<Vec<Cell>> {
-    let mut cells = Vec::new();
-    let shading = Material::default().shading();
-    for &h in &spec.h_max_um {
-        let hf = scaled(&spec.field, h)?;
-        for &theta_i in &spec.theta_i_deg {
-            let wi = direction(theta_i, 0.0);
-            for &lambda in &spec.lambdas_nm {
-                let reach = Reach::at(1.0 + theta_i.to_radians().cos(), lambda);
-                for &expansion in &spec.expansions {
-                    for &terms in &spec.terms_modes {
-                        for &evaluator in &spec.evaluators {
-                            let m = material(spec, expansion, terms);
-                            let precision = match evaluator {
-                                Evaluator::Model => Precision::F64,
-                                Evaluator::Gpu => Precision::F32,
-                            };
-                            let mut cell = Cell {
-                                h_max_um: h,
-                                theta_i_deg: theta_i,
-                                lambda_nm: lambda,
-                                expansion,
-                                terms_mode: terms,
-                                evaluator,
-                                used: None,
-                                status: Status::Refused,
-                                error: None,
-                                bound: None,
-                                f32_error: None,
-                                f32_bound: None,
-                                worst_probe: String::new(),
-                                message: String::new(),
-                            };
-                            let plan = match m.plan(&hf, &reach, precision) {
-                                Ok(p) => p,
-                                Err(e) => {
-                                    cell.message = e.to_string();
-                                    progress(&cell);
-                                    cells.push(cell);
-                                    continue;
-                                }
-                            };
-                            let r = match evaluator {
-                                Evaluator::Model => {
-                                    model_cell(spec, &m, &hf, &plan, wi, theta_i, lambda, &shading)
-                                }
-                                Evaluator::Gpu => {
-                                    let Some(r) = renderer.as_deref_mut() else {
-                                        return Err(Error::invalid(
-                                            "stability",
-                                            "the GPU evaluator needs a renderer",
-                                        ));
-                                    };
-                                    gpu_cell(spec, &m, &hf, &plan, r, theta_i, lambda, &shading)
-                                }
-                            }?;
-                            cell.used = Some((plan.expansion, plan.terms));
-                            cell.bound = Some(plan.error_bound());
-                            cell.error = Some(r.0);
-                            cell.worst_probe = r.1;
-                            cell.f32_error = r.2;
-                            // |P̂_model| ≤ 1 + truncation, so rounding δ moves |P̂|² by
-                            // at most 2(1 + truncation)δ + δ² (unbounded where the series
-                            // has not converged: those cells carry a warning).
-                            let ro = plan.rounding;
-                            cell.f32_bound =
-                                r.2.map(|_| 2.0 * (1.0 + plan.truncation) * ro + ro * ro);
-                            cell.message = plan.warnings.join("; ");
-                            let within = r.0 <= spec.tolerance;
-                            let f32_ok = match (cell.f32_error, cell.f32_bound) {
-                                (Some(e), Some(b)) => e <= b,
-                                _ => true,
-                            };
-                            cell.status = if !f32_ok {
-                                Status::Fail
-                            } else if !plan.warnings.is_empty() {
-                                Status::Warned
-                            } else if within {
-                                Status::Pass
-                            } else {
-                                Status::Fail
-                            };
-                            progress(&cell);
-                            cells.push(cell);
+/// The variants in the spectral matrix, with their f64 models at one wavelength, in
+/// registry order.
+pub(crate) fn spectral_variants() -> Vec<(VariantKind, SpectralModel)> {
+    VariantKind::ALL
+        .into_iter()
+        .filter_map(|k| match k.implementation().stability() {
+            Stability::Spectral(rho) => Some((k, rho)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// One point of the matrix's axes.
+#[derive(Clone, Copy)]
+struct Point {
+    variant: VariantKind,
+    rho: SpectralModel,
+    /// Index into `spec.h_max_um`.
+    h: usize,
+    theta_i: f64,
+    lambda: f64,
+    expansion: Expansion,
+    terms: Terms,
+    evaluator: Evaluator,
+}
+
+/// Every point, in run order: variant, then `h_max`, `θi`, `λ`, expansion, terms and
+/// evaluator.
+fn points(spec: &MatrixSpec) -> Vec<Point> {
+    let mut out = Vec::new();
+    for (variant, rho) in spectral_variants() {
+        for h in 0..spec.h_max_um.len() {
+            for &theta_i in &spec.theta_i_deg {
+                for &lambda in &spec.lambdas_nm {
+                    for &expansion in &spec.expansions {
+                        for &terms in &spec.terms_modes {
+                            for &evaluator in &spec.evaluators {
+                                out.push(Point {
+                                    variant,
+                                    rho,
+                                    h,
+                                    theta_i,
+                                    lambda,
+                                    expansion,
+                                    terms,
+                                    evaluator,
+                                });
+                            }
                         }
                     }
                 }
             }
         }
     }
+    out
+}
+
+/// Runs the matrix over every variant that declares a spectral model. `renderer` is
+/// needed when `spec.evaluators` holds [`Evaluator::Gpu`]; `progress` is called after each
+/// cell.
+pub fn run_matrix(
+    spec: &MatrixSpec,
+    mut renderer: Option<&mut Renderer>,
+    mut progress: impl FnMut(&Cell),
+) -> Result<Vec<Cell>> {
+    let shading = Material::default().shading();
+    let fields = spec
+        .h_max_um
+        .iter()
+        .map(|&h| scaled(&spec.field, h))
+        .collect::<Result<Vec<_>>>()?;
+    let mut cells = Vec::new();
+    for p in points(spec) {
+        let cell = run_cell(spec, &p, &fields[p.h], renderer.as_deref_mut(), &shading)?;
+        progress(&cell);
+        cells.push(cell);
+    }
     Ok(cells)
+}
+
+/// One cell: the plan (or its refusal), the evaluation, and the verdict.
+fn run_cell(
+    spec: &MatrixSpec,
+    p: &Point,
+    hf: &HeightField,
+    renderer: Option<&mut Renderer>,
+    shading: &crate::brdf::Shading,
+) -> Result<Cell> {
+    let m = material(spec, p.expansion, p.terms);
+    let precision = match p.evaluator {
+        Evaluator::Model => Precision::F64,
+        Evaluator::Gpu => Precision::F32,
+    };
+    let mut cell = Cell {
+        variant: p.variant,
+        h_max_um: spec.h_max_um[p.h],
+        theta_i_deg: p.theta_i,
+        lambda_nm: p.lambda,
+        expansion: p.expansion,
+        terms_mode: p.terms,
+        evaluator: p.evaluator,
+        used: None,
+        status: Status::Refused,
+        error: None,
+        bound: None,
+        f32_error: None,
+        f32_bound: None,
+        worst_probe: String::new(),
+        message: String::new(),
+    };
+    let reach = Reach::at(1.0 + p.theta_i.to_radians().cos(), p.lambda);
+    let plan = match m.plan(hf, &reach, precision) {
+        Ok(plan) => plan,
+        Err(e) => {
+            cell.message = e.to_string();
+            return Ok(cell);
+        }
+    };
+    let prepared = m.prepare_planned(hf.clone(), plan.clone(), None, &crate::report::Stderr)?;
+    let result = match p.evaluator {
+        Evaluator::Model => model_cell(spec, p, &prepared, hf, shading)?,
+        Evaluator::Gpu => {
+            let Some(r) = renderer else {
+                return Err(Error::invalid(
+                    "stability",
+                    "the GPU evaluator needs a renderer",
+                ));
+            };
+            gpu_cell(spec, p, &prepared, hf, r, shading)?
+        }
+    };
+    judge(spec, &mut cell, &plan, result);
+    Ok(cell)
+}
+
+/// Records an evaluated cell's numbers and decides its status.
+fn judge(spec: &MatrixSpec, cell: &mut Cell, plan: &TermPlan, r: CellResult) {
+    cell.used = Some((plan.expansion, plan.terms));
+    cell.bound = Some(plan.error_bound());
+    cell.error = Some(r.0);
+    cell.worst_probe = r.1;
+    cell.f32_error = r.2;
+    // |P̂_model| ≤ 1 + truncation, so rounding δ moves |P̂|² by at most
+    // 2(1 + truncation)δ + δ² (unbounded where the series has not converged: those cells
+    // carry a warning).
+    let ro = plan.rounding;
+    cell.f32_bound = r.2.map(|_| 2.0 * (1.0 + plan.truncation) * ro + ro * ro);
+    cell.message = plan.warnings.join("; ");
+    let f32_ok = match (cell.f32_error, cell.f32_bound) {
+        (Some(e), Some(b)) => e <= b,
+        _ => true,
+    };
+    cell.status = if !f32_ok {
+        Status::Fail
+    } else if !plan.warnings.is_empty() {
+        Status::Warned
+    } else if r.0 <= spec.tolerance {
+        Status::Pass
+    } else {
+        Status::Fail
+    };
 }
 
 type CellResult = (f64, String, Option<f64>);
 
-#[allow(clippy::too_many_arguments)]
+/// The variant's f64 model at the probes against the direct sum.
 fn model_cell(
     spec: &MatrixSpec,
-    m: &Material,
+    p: &Point,
+    prepared: &crate::material::PreparedMaterial,
     hf: &HeightField,
-    plan: &TermPlan,
-    wi: [f64; 3],
-    theta_i: f64,
-    lambda: f64,
     shading: &crate::brdf::Shading,
 ) -> Result<CellResult> {
-    let p = m.prepare_planned(hf.clone(), plan.clone(), None, &crate::report::Stderr)?;
-    let dirs = probes(theta_i, lambda, spec.period_um);
-    let t = p.terms();
+    let wi = direction(p.theta_i, 0.0);
+    let dirs = probes(p.theta_i, p.lambda, spec.period_um);
     let (e, worst) = max_error(
         &dirs,
         wi,
         shading,
-        |wr| model::rho(&p.stack, t, &p.window, shading, wi, wr, lambda),
-        |wr| reference::rho(hf, spec.coherence_um, shading, wi, wr, lambda),
+        |wr| (p.rho)(prepared, shading, wi, wr, p.lambda),
+        |wr| reference::rho(hf, spec.coherence_um, shading, wi, wr, p.lambda),
     )?;
     Ok((e, worst, None))
 }
 
-#[allow(clippy::too_many_arguments)]
+/// The variant's GPU spectral map against the direct sum and against its f64 model.
 fn gpu_cell(
     spec: &MatrixSpec,
-    m: &Material,
+    p: &Point,
+    prepared: &crate::material::PreparedMaterial,
     hf: &HeightField,
-    plan: &TermPlan,
-    renderer: &mut crate::render::Renderer,
-    theta_i: f64,
-    lambda: f64,
+    renderer: &mut Renderer,
     shading: &crate::brdf::Shading,
 ) -> Result<CellResult> {
-    let p = m.prepare_planned(hf.clone(), plan.clone(), None, &crate::report::Stderr)?;
-    let pixels = gpu_spectral_map(renderer, &p, theta_i, spec.map_size, lambda)?;
+    renderer.set_variant(p.variant);
+    let pixels = gpu_spectral_map(renderer, prepared, p.theta_i, spec.map_size, p.lambda)?;
     // What the shader saw: ωi and λ rounded to float32.
-    let wi32 = direction(theta_i, 0.0).map(|c| c as f32 as f64);
-    let l32 = (lambda * 1e-3) as f32 as f64 * 1e3;
-    let t = p.terms();
+    let wi32 = direction(p.theta_i, 0.0).map(|c| c as f32 as f64);
+    let l32 = (p.lambda * 1e-3) as f32 as f64 * 1e3;
     let dirs: Vec<(String, [f64; 3])> = pixels
         .iter()
         .map(|(wr, _)| (format!("pixel ({:.3}, {:.3})", wr[0], wr[1]), *wr))
@@ -429,7 +492,7 @@ fn gpu_cell(
         reference::rho(hf, spec.coherence_um, shading, wi32, wr, l32)
     })?;
     let (e_model, _) = max_error(&dirs, wi32, shading, lookup, |wr| {
-        model::rho(&p.stack, t, &p.window, shading, wi32, wr, l32)
+        (p.rho)(prepared, shading, wi32, wr, l32)
     })?;
     Ok((e_ref, worst, Some(e_model)))
 }
@@ -460,7 +523,7 @@ pub struct StabilityArgs {
     /// Wavelengths (nm).
     #[arg(long, num_args = 1.., default_values_t = LAMBDAS_NM)]
     pub lambda_nm: Vec<f64>,
-    /// Fixed term counts to show beside auto (the old default was 30).
+    /// Fixed term counts to show beside auto.
     #[arg(long, num_args = 0.., default_values_t = [30usize])]
     pub fixed_terms: Vec<usize>,
     /// Tolerance on ρ/C = |P̂|².
@@ -480,6 +543,62 @@ pub struct StabilityArgs {
 /// Runs `diffract stability`.
 pub fn run(args: &StabilityArgs) -> Result<()> {
     stability_args(args)?;
+    let mut spec = matrix_spec(args)?;
+    let mut renderer = if args.no_gpu {
+        spec.evaluators = vec![Evaluator::Model];
+        None
+    } else {
+        Some(Renderer::new(spec.validation)?)
+    };
+    let device = renderer
+        .as_ref()
+        .map_or("none".to_string(), |r| r.device_name().to_string());
+    let start = Instant::now();
+    let total = points(&spec).len();
+    let mut done = 0;
+    let cells = run_matrix(&spec, renderer.as_mut(), |c| {
+        done += 1;
+        report_cell(c, done, total);
+    })?;
+    if let Some(r) = &renderer {
+        if r.validation_messages() > 0 {
+            return Err(Error::Validation(r.validation_messages()));
+        }
+    }
+    let table_cells = run_table_cases(&spec)?;
+    let secs = start.elapsed().as_secs_f64();
+    let header = format!(
+        "Field: {}; tolerance {:.0e} on ρ/C; window R = {}, coherence {} µm; GPU: {device}, \
+         {}² spectral maps; {total} cells in {secs:.0} s.",
+        spec.field_name, spec.tolerance, spec.window_radius, spec.coherence_um, spec.map_size
+    );
+    write_reports(&args.out, &spec, &cells, &table_cells, &header)?;
+    for c in table_cells.iter().filter(|c| c.status == Status::Fail) {
+        eprintln!(
+            "FAIL: {} on {}, h_max {} µm: error {:?}",
+            c.variant, c.case, c.h_max_um, c.error
+        );
+    }
+    println!("{header}");
+    println!("{}", summary(&spec, &cells).join("\n"));
+    println!("→ {}/stability.{{md,csv,png}}", args.out.display());
+    let fails = cells.iter().filter(|c| c.status == Status::Fail).count()
+        + table_cells
+            .iter()
+            .filter(|c| c.status == Status::Fail)
+            .count();
+    if fails > 0 {
+        return Err(Error::invalid(
+            "stability",
+            format!("{fails} cell(s) silently wrong (FAIL); see the report"),
+        ));
+    }
+    Ok(())
+}
+
+/// The matrix the arguments ask for: the field (the default sinusoid unless
+/// `--heightfield`) and the axes.
+fn matrix_spec(args: &StabilityArgs) -> Result<MatrixSpec> {
     let (field, name, period) = match &args.heightfield {
         Some(src) => (
             crate::heightfield::Source {
@@ -510,102 +629,46 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
     spec.terms_modes = std::iter::once(Terms::Auto)
         .chain(args.fixed_terms.iter().map(|&t| Terms::Fixed(t)))
         .collect();
-    for &t in &spec.theta_i_deg {
-        if !(0.0..90.0).contains(&t) {
-            return Err(Error::invalid("theta-i", format!("{t}°; expected [0, 90)")));
-        }
-    }
-    for &l in &spec.lambdas_nm {
-        if !(380.0..=780.0).contains(&l) {
-            return Err(Error::invalid(
-                "wavelength",
-                format!("{l} nm; expected 380..=780"),
-            ));
-        }
-    }
-    for &h in &spec.h_max_um {
-        if !(h.is_finite() && h >= 0.0) {
-            return Err(Error::invalid("h_max", format!("{h} µm")));
-        }
-    }
-    let mut renderer = if args.no_gpu {
-        spec.evaluators = vec![Evaluator::Model];
-        None
-    } else {
-        Some(crate::render::Renderer::new(spec.validation)?)
-    };
-    let device = renderer
-        .as_ref()
-        .map_or("none".to_string(), |r| r.device_name().to_string());
-    let start = Instant::now();
-    let total = spec.h_max_um.len()
-        * spec.theta_i_deg.len()
-        * spec.lambdas_nm.len()
-        * spec.expansions.len()
-        * spec.terms_modes.len()
-        * spec.evaluators.len();
-    let mut done = 0;
-    let cells = run_matrix(&spec, renderer.as_mut(), |c| {
-        done += 1;
-        if c.status == Status::Fail {
-            eprintln!(
-                "FAIL: h_max {} µm, θi {}°, λ {} nm, {} {} {}: error {:?}, f32 {:?} (bound {:?})",
-                c.h_max_um,
-                c.theta_i_deg,
-                c.lambda_nm,
-                c.expansion,
-                c.terms_mode,
-                c.evaluator,
-                c.error,
-                c.f32_error,
-                c.f32_bound
-            );
-        }
-        if done % 20 == 0 || done == total {
-            eprintln!("{done}/{total} cells");
-        }
-    })?;
-    if let Some(r) = &renderer {
-        if r.validation_messages() > 0 {
-            return Err(Error::Validation(r.validation_messages()));
-        }
-    }
-    let table_cells = run_table_cases(&spec)?;
-    let secs = start.elapsed().as_secs_f64();
-    std::fs::create_dir_all(&args.out).map_err(|e| Error::io(&args.out, e))?;
-    let header = format!(
-        "Field: {name}; tolerance {:.0e} on ρ/C; window R = {}, coherence {} µm; GPU: {device}, \
-         {}² spectral maps; {total} cells in {secs:.0} s.",
-        spec.tolerance, spec.window_radius, spec.coherence_um, spec.map_size
-    );
-    crate::fsutil::write_atomic(&args.out.join("stability.csv"), to_csv(&cells).as_bytes())?;
-    crate::fsutil::write_atomic(
-        &args.out.join("stability.md"),
-        (to_markdown(&spec, &cells, &header) + &table_cases_markdown(&spec, &table_cells))
-            .as_bytes(),
-    )?;
-    write_png(&spec, &cells, &args.out.join("stability.png"))?;
-    let fails = cells.iter().filter(|c| c.status == Status::Fail).count()
-        + table_cells
-            .iter()
-            .filter(|c| c.status == Status::Fail)
-            .count();
-    for c in table_cells.iter().filter(|c| c.status == Status::Fail) {
+    Ok(spec)
+}
+
+/// Progress on stderr: a failing cell at once, and a count every 20 cells.
+fn report_cell(c: &Cell, done: usize, total: usize) {
+    if c.status == Status::Fail {
         eprintln!(
-            "FAIL: {} on {}, h_max {} µm: error {:?}",
-            c.variant, c.case, c.h_max_um, c.error
+            "FAIL: {}, h_max {} µm, θi {}°, λ {} nm, {} {} {}: error {:?}, f32 {:?} (bound {:?})",
+            c.variant,
+            c.h_max_um,
+            c.theta_i_deg,
+            c.lambda_nm,
+            c.expansion,
+            c.terms_mode,
+            c.evaluator,
+            c.error,
+            c.f32_error,
+            c.f32_bound
         );
     }
-    println!("{header}");
-    println!("{}", summary(&spec, &cells).join("\n"));
-    println!("→ {}/stability.{{md,csv,png}}", args.out.display());
-    if fails > 0 {
-        return Err(Error::invalid(
-            "stability",
-            format!("{fails} cell(s) silently wrong (FAIL); see the report"),
-        ));
+    if done.is_multiple_of(20) || done == total {
+        eprintln!("{done}/{total} cells");
     }
-    Ok(())
+}
+
+/// Writes [`STABILITY_FILES`] into `dir` (created with its parents).
+fn write_reports(
+    dir: &Path,
+    spec: &MatrixSpec,
+    cells: &[Cell],
+    table_cells: &[TableCell],
+    header: &str,
+) -> Result<()> {
+    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    crate::fsutil::write_atomic(&dir.join("stability.csv"), to_csv(cells).as_bytes())?;
+    crate::fsutil::write_atomic(
+        &dir.join("stability.md"),
+        (to_markdown(spec, cells, header) + &table_cases_markdown(spec, table_cells)).as_bytes(),
+    )?;
+    write_png(spec, cells, &dir.join("stability.png"))
 }
 
 fn opt(x: Option<f64>) -> String {
@@ -615,14 +678,14 @@ fn opt(x: Option<f64>) -> String {
 /// One CSV row per cell.
 pub fn to_csv(cells: &[Cell]) -> String {
     let mut s = String::from(
-        "h_max_um,theta_i_deg,lambda_nm,expansion,terms_mode,evaluator,expansion_used,terms_used,status,error,bound,f32_error,f32_bound,worst_probe,message\n",
+        "h_max_um,theta_i_deg,lambda_nm,expansion,terms_mode,evaluator,expansion_used,terms_used,status,error,bound,f32_error,f32_bound,worst_probe,message,variant\n",
     );
     for c in cells {
         let (eu, tu) = c.used.map_or((String::new(), String::new()), |(e, t)| {
             (e.to_string(), t.to_string())
         });
         s += &format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",\"{}\"\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},\"{}\",\"{}\",{}\n",
             c.h_max_um,
             c.theta_i_deg,
             c.lambda_nm,
@@ -637,19 +700,45 @@ pub fn to_csv(cells: &[Cell]) -> String {
             opt(c.f32_error),
             opt(c.f32_bound),
             c.worst_probe.replace('"', "'"),
-            c.message.replace('"', "'")
+            c.message.replace('"', "'"),
+            c.variant
         );
     }
     s
 }
 
-/// The configurations (columns of the PNG, tables of the markdown) in run order.
-fn configs(spec: &MatrixSpec) -> Vec<(Expansion, Terms, Evaluator)> {
+/// One configuration of the matrix: a table of the markdown, a group of the PNG's columns.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct Config {
+    variant: VariantKind,
+    expansion: Expansion,
+    terms: Terms,
+    evaluator: Evaluator,
+}
+
+impl Config {
+    fn holds(&self, c: &Cell) -> bool {
+        c.variant == self.variant
+            && c.expansion == self.expansion
+            && c.terms_mode == self.terms
+            && c.evaluator == self.evaluator
+    }
+}
+
+/// The configurations in run order.
+fn configs(spec: &MatrixSpec) -> Vec<Config> {
     let mut v = Vec::new();
-    for &e in &spec.expansions {
-        for &t in &spec.terms_modes {
-            for &ev in &spec.evaluators {
-                v.push((e, t, ev));
+    for (variant, _) in spectral_variants() {
+        for &expansion in &spec.expansions {
+            for &terms in &spec.terms_modes {
+                for &evaluator in &spec.evaluators {
+                    v.push(Config {
+                        variant,
+                        expansion,
+                        terms,
+                        evaluator,
+                    });
+                }
             }
         }
     }
@@ -660,17 +749,15 @@ fn configs(spec: &MatrixSpec) -> Vec<(Expansion, Terms, Evaluator)> {
 /// refusals/warnings; the lines the README quotes.
 pub fn summary(spec: &MatrixSpec, cells: &[Cell]) -> Vec<String> {
     let mut out = Vec::new();
-    for (e, t, ev) in configs(spec) {
-        let mine: Vec<&Cell> = cells
-            .iter()
-            .filter(|c| c.expansion == e && c.terms_mode == t && c.evaluator == ev)
-            .collect();
+    for cfg in configs(spec) {
+        let mine: Vec<&Cell> = cells.iter().filter(|c| cfg.holds(c)).collect();
         let count = |s: Status| mine.iter().filter(|c| c.status == s).count();
-        let worst_pass = mine
-            .iter()
-            .filter(|c| c.status == Status::Pass)
-            .filter_map(|c| c.error)
-            .fold(0.0, f64::max);
+        let worst = |s: Status| {
+            mine.iter()
+                .filter(|c| c.status == s)
+                .filter_map(|c| c.error)
+                .fold(0.0, f64::max)
+        };
         let trusted_up_to = spec
             .h_max_um
             .iter()
@@ -680,21 +767,22 @@ pub fn summary(spec: &MatrixSpec, cells: &[Cell]) -> Vec<String> {
                     .all(|c| c.status == Status::Pass)
             })
             .last();
-        let worst_warned = mine
-            .iter()
-            .filter(|c| c.status == Status::Warned)
-            .filter_map(|c| c.error)
-            .fold(0.0, f64::max);
+        let Config {
+            variant,
+            expansion: e,
+            terms: t,
+            evaluator: ev,
+        } = cfg;
         out.push(format!(
-            "{e} T={t} {ev}: pass {}, warned {} (worst error {:.1e}), refused {}, FAIL {}; \
+            "{variant} {e} T={t} {ev}: pass {}, warned {} (worst error {:.1e}), refused {}, FAIL {}; \
              every cell passes up to h_max = {} µm; worst passing error {:.1e}",
             count(Status::Pass),
             count(Status::Warned),
-            worst_warned,
+            worst(Status::Warned),
             count(Status::Refused),
             count(Status::Fail),
             trusted_up_to.map_or("none".to_string(), |h| h.to_string()),
-            worst_pass
+            worst(Status::Pass)
         ));
     }
     out
@@ -713,8 +801,16 @@ pub fn to_markdown(spec: &MatrixSpec, cells: &[Cell], header: &str) -> String {
     for line in summary(spec, cells) {
         s += &format!("- {line}\n");
     }
-    for (e, t, ev) in configs(spec) {
-        s += &format!("\n### {ev}, preferred {e}, T = {t}\n\n| h_max (µm) |");
+    for kind in VariantKind::ALL {
+        if let Stability::Excluded(why) = kind.implementation().stability() {
+            s += &format!("- not in the spectral matrix: {kind}, {why}\n");
+        }
+    }
+    for cfg in configs(spec) {
+        s += &format!(
+            "\n### {}: {}, preferred {}, T = {}\n\n| h_max (µm) |",
+            cfg.variant, cfg.evaluator, cfg.expansion, cfg.terms
+        );
         for th in &spec.theta_i_deg {
             s += &format!(" θi = {th}° |");
         }
@@ -726,13 +822,7 @@ pub fn to_markdown(spec: &MatrixSpec, cells: &[Cell], header: &str) -> String {
             for &th in &spec.theta_i_deg {
                 let group: Vec<&Cell> = cells
                     .iter()
-                    .filter(|c| {
-                        c.h_max_um == h
-                            && c.theta_i_deg == th
-                            && c.expansion == e
-                            && c.terms_mode == t
-                            && c.evaluator == ev
-                    })
+                    .filter(|c| c.h_max_um == h && c.theta_i_deg == th && cfg.holds(c))
                     .collect();
                 s += &format!(" {} |", entry(&group));
             }
@@ -785,64 +875,13 @@ fn entry(group: &[&Cell]) -> String {
 
 /// The heat map: one row per (h_max, θi) — h_max rising upwards, θi rising within each —
 /// one column per (configuration, λ) in the markdown's order, labelled in groups
-/// (expansion, terms, evaluator, λ); colour = log10 error, grey = refused.
+/// (variant and evaluator, terms, expansion, λ); colour = log10 error, grey = refused.
 pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
     let cfg = configs(spec);
     let cols = cfg.len() * spec.lambdas_nm.len();
     let rows = spec.h_max_um.len() * spec.theta_i_deg.len();
-    let mut values = vec![vec![f64::NAN; cols]; rows];
-    for c in cells {
-        let (Some(hi), Some(ti), Some(li), Some(ci)) = (
-            spec.h_max_um.iter().position(|&h| h == c.h_max_um),
-            spec.theta_i_deg.iter().position(|&t| t == c.theta_i_deg),
-            spec.lambdas_nm.iter().position(|&l| l == c.lambda_nm),
-            cfg.iter()
-                .position(|&(e, t, ev)| e == c.expansion && t == c.terms_mode && ev == c.evaluator),
-        ) else {
-            continue;
-        };
-        let row = hi * spec.theta_i_deg.len() + ti;
-        let col = ci * spec.lambdas_nm.len() + li;
-        values[row][col] = c.error.map_or(f64::NAN, |e| e.max(1e-16));
-    }
-    // Column groups, innermost first: evaluator, terms, expansion; each spans the
-    // configurations that share it (configs() nests expansion > terms > evaluator).
+    let values = heat_values(spec, &cfg, cells);
     let n_l = spec.lambdas_nm.len() as f64;
-    let span = |inner: usize, index: usize| {
-        let width = inner as f64 * n_l;
-        (index as f64 * width, (index + 1) as f64 * width)
-    };
-    let (n_ev, n_t) = (spec.evaluators.len(), spec.terms_modes.len());
-    let evaluators = (0..cfg.len())
-        .map(|i| {
-            let (a, b) = span(1, i);
-            let name = match cfg[i].2 {
-                Evaluator::Model => "f64 model",
-                Evaluator::Gpu => "GPU f32",
-            };
-            (a, b, name.to_string())
-        })
-        .collect();
-    let terms = (0..cfg.len() / n_ev)
-        .map(|i| {
-            let (a, b) = span(n_ev, i);
-            let name = match cfg[i * n_ev].1 {
-                Terms::Auto => "auto terms".to_string(),
-                Terms::Fixed(t) => format!("T = {t}"),
-            };
-            (a, b, name)
-        })
-        .collect();
-    let expansions = (0..cfg.len() / (n_ev * n_t))
-        .map(|i| {
-            let (a, b) = span(n_ev * n_t, i);
-            let name = match cfg[i * n_ev * n_t].0 {
-                Expansion::Taylor => "Taylor",
-                Expansion::Chebyshev => "Chebyshev",
-            };
-            (a, b, name.to_string())
-        })
-        .collect();
     let x_ticks = (0..cols)
         .map(|c| {
             let l = spec.lambdas_nm[c % spec.lambdas_nm.len()];
@@ -879,7 +918,7 @@ pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
             x_axis: crate::plot::Axis {
                 label: "λ (nm), by evaluator, terms and expansion".into(),
                 ticks: x_ticks,
-                groups: vec![evaluators, terms, expansions],
+                groups: column_groups(spec, &cfg),
                 rules: between(n_l, cfg.len()),
             },
             y_axis: crate::plot::Axis {
@@ -903,6 +942,73 @@ pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
     )
 }
 
+/// The heat map's cells: row (h_max, θi), column (configuration, λ); NaN where refused.
+fn heat_values(spec: &MatrixSpec, cfg: &[Config], cells: &[Cell]) -> Vec<Vec<f64>> {
+    let cols = cfg.len() * spec.lambdas_nm.len();
+    let rows = spec.h_max_um.len() * spec.theta_i_deg.len();
+    let mut values = vec![vec![f64::NAN; cols]; rows];
+    for c in cells {
+        let (Some(hi), Some(ti), Some(li), Some(ci)) = (
+            spec.h_max_um.iter().position(|&h| h == c.h_max_um),
+            spec.theta_i_deg.iter().position(|&t| t == c.theta_i_deg),
+            spec.lambdas_nm.iter().position(|&l| l == c.lambda_nm),
+            cfg.iter().position(|k| k.holds(c)),
+        ) else {
+            continue;
+        };
+        let row = hi * spec.theta_i_deg.len() + ti;
+        let col = ci * spec.lambdas_nm.len() + li;
+        values[row][col] = c.error.map_or(f64::NAN, |e| e.max(1e-16));
+    }
+    values
+}
+
+/// Column groups, innermost first: variant and evaluator, terms, expansion; each spans the
+/// configurations that share it ([`configs`] nests variant > expansion > terms >
+/// evaluator).
+fn column_groups(spec: &MatrixSpec, cfg: &[Config]) -> Vec<Vec<(f64, f64, String)>> {
+    let n_l = spec.lambdas_nm.len() as f64;
+    let (n_ev, n_t) = (spec.evaluators.len(), spec.terms_modes.len());
+    // Groups of `inner` consecutive configurations, named by their first.
+    let groups = |inner: usize, name: &dyn Fn(&Config) -> String| {
+        (0..cfg.len() / inner)
+            .map(|i| {
+                let width = inner as f64 * n_l;
+                (
+                    i as f64 * width,
+                    (i + 1) as f64 * width,
+                    name(&cfg[i * inner]),
+                )
+            })
+            .collect()
+    };
+    let many = spectral_variants().len() > 1;
+    vec![
+        groups(1, &|c| {
+            let ev = match c.evaluator {
+                Evaluator::Model => "f64 model",
+                Evaluator::Gpu => "GPU f32",
+            };
+            if many {
+                format!("{} {ev}", c.variant)
+            } else {
+                ev.to_string()
+            }
+        }),
+        groups(n_ev, &|c| match c.terms {
+            Terms::Auto => "auto terms".to_string(),
+            Terms::Fixed(t) => format!("T = {t}"),
+        }),
+        groups(n_ev * n_t, &|c| {
+            match c.expansion {
+                Expansion::Taylor => "Taylor",
+                Expansion::Chebyshev => "Chebyshev",
+            }
+            .to_string()
+        }),
+    ]
+}
+
 /// The narrow regions of the table cases: what a distant camera on a plane reaches (`w`
 /// within ±0.0025), and one narrow in `u` or `v` with a wide `w` (a thin strip of view).
 /// Centred on the first order of the default field at 520 nm under light at 30° viewed at
@@ -916,173 +1022,178 @@ pub const TABLE_CASES: [(&str, [f64; 3]); 3] = [
 /// One table variant on one narrow region at one height.
 #[derive(Debug, Clone, PartialEq)]
 pub struct TableCell {
-    pub variant: crate::render::VariantKind,
+    pub variant: VariantKind,
     pub case: &'static str,
     pub h_max_um: f64,
     pub status: Status,
     /// Max `|G_f32 − G|` over the probes (absolute; a mirror's specular `G_Y` is 1), with
-    /// `G_f32` the representation evaluated in float32 as its shader does (stored planes
-    /// rounded, the sum in float32, clamped to `G ≥ 0`) and `G` sampled exactly there.
+    /// `G_f32` the representation evaluated in float32 as its shader does (the variant's
+    /// own mirror of it) and `G` sampled exactly there.
     pub error: Option<f64>,
-    /// `dhillon`: its stated expected error.
+    /// A refusal's expected error.
     pub expected: Option<f64>,
     /// The largest exact `G` (any channel) over the probes: the signal the error is of.
     pub peak: f64,
     pub message: String,
 }
 
-/// The table variants on [`TABLE_CASES`] for every `h_max` of `spec`: each representation
-/// built as `render` builds it (default `w` nodes; `chebyshev-w` raised for the height),
-/// probed at its `(u, v)` nodes (the `(u, v)` interpolation is the profile's business) and
-/// at `w` between its nodes, in float32 on the CPU, against `G` sampled exactly at those
-/// `w`. A cell passes within the tolerance, is refused where the variant refuses, and
-/// fails otherwise.
+/// The variants in the table cases, with their float32 mirrors, in registry order.
+pub(crate) fn table_variants() -> Vec<(VariantKind, TableMirror)> {
+    VariantKind::ALL
+        .into_iter()
+        .filter_map(|k| match k.implementation().stability() {
+            Stability::Table(mirror) => Some((k, mirror)),
+            _ => None,
+        })
+        .collect()
+}
+
+/// `G` sampled exactly on one narrow region at the probes' `w`.
+struct ExactCase {
+    spec: TableSpec,
+    /// `w` strictly between the nodes of every representation.
+    probes: Vec<f64>,
+    exact: crate::brdf::table::Slices,
+    peak: f64,
+}
+
+impl ExactCase {
+    /// The region of half-widths `half` around the first order of [`TABLE_CASES`].
+    fn sample(hf: &HeightField, coherence_um: f64, half: [f64; 3]) -> Result<Self> {
+        let centre = crate::brdf::uvw(direction(30.0, 0.0), direction(10.0, 180.0));
+        let region = Region {
+            lo: [0, 1, 2].map(|a| centre[a] - half[a]),
+            hi: [0, 1, 2].map(|a| centre[a] + half[a]),
+        };
+        let probes: Vec<f64> = [0.137, 0.391, 0.503, 0.777, 0.951]
+            .iter()
+            .map(|f| region.lo[2] + f * (region.hi[2] - region.lo[2]))
+            .collect();
+        let spec = TableSpec {
+            region,
+            texel_uv: 0.005,
+            w_nodes: probes.len(),
+            step_nm: 10,
+        };
+        let exact = crate::brdf::table::sample_g(hf, coherence_um, &spec, &probes, &|| ())?;
+        let peak = exact
+            .data
+            .iter()
+            .flatten()
+            .flatten()
+            .fold(0.0f64, |m, x| m.max(*x));
+        Ok(Self {
+            spec,
+            probes,
+            exact,
+            peak,
+        })
+    }
+
+    /// Max `|G_f32 − G|` of `eval` over the probes and the `(u, v)` nodes.
+    fn worst(&self, eval: &dyn Fn(usize, f64) -> [f64; 3]) -> f64 {
+        let mut worst = 0.0f64;
+        for (k, &w) in self.probes.iter().enumerate() {
+            for (t, want) in self.exact.data[k].iter().enumerate() {
+                let got = eval(t, w);
+                for c in 0..3 {
+                    let e = (got[c] - want[c]).abs();
+                    worst = worst.max(if e.is_finite() { e } else { f64::INFINITY });
+                }
+            }
+        }
+        worst
+    }
+}
+
+/// Every table variant on [`TABLE_CASES`] for every `h_max` of `spec`: each representation
+/// built as `render` builds it (its default `w` nodes, raised for the height where the
+/// variant's nodes follow the field), probed at its `(u, v)` nodes (the `(u, v)`
+/// interpolation is the profile's business) and at `w` between its nodes, in float32 on
+/// the CPU by the variant's own mirror, against `G` sampled exactly at those `w`. A cell
+/// passes within the tolerance, is refused where the variant refuses, and fails otherwise.
 pub fn run_table_cases(spec: &MatrixSpec) -> Result<Vec<TableCell>> {
-    use crate::brdf::table::{sample_g, ChebyshevW, Dhillon, Region, TableSpec, Volume};
-    use crate::render::{TableOptions, VariantKind};
-    let centre = crate::brdf::uvw(direction(30.0, 0.0), direction(10.0, 180.0));
-    let options = TableOptions::default();
+    let variants = table_variants();
     let mut cells = Vec::new();
     for &h in &spec.h_max_um {
         let hf = scaled(&spec.field, h)?;
-        let (lo, hi) = hf.range();
         for (case, half) in TABLE_CASES {
-            let region = Region {
-                lo: [0, 1, 2].map(|a| centre[a] - half[a]),
-                hi: [0, 1, 2].map(|a| centre[a] + half[a]),
-            };
-            let texel = 0.005;
-            // w probes strictly between nodes of every representation.
-            let probes: Vec<f64> = [0.137, 0.391, 0.503, 0.777, 0.951]
-                .iter()
-                .map(|f| region.lo[2] + f * (region.hi[2] - region.lo[2]))
-                .collect();
-            let exact_spec = TableSpec {
-                region,
-                texel_uv: texel,
-                w_nodes: probes.len(),
-                step_nm: 10,
-            };
-            let exact = sample_g(&hf, spec.coherence_um, &exact_spec, &probes, &|| ())?;
-            let peak = exact
-                .data
-                .iter()
-                .flatten()
-                .flatten()
-                .fold(0.0f64, |m, x| m.max(*x));
-            for kind in [
-                VariantKind::Volume,
-                VariantKind::ChebyshevW,
-                VariantKind::Dhillon,
-            ] {
-                let w_nodes =
-                    options.w_nodes_for_field(kind, hi - lo, [region.lo[2], region.hi[2]]);
-                let tspec = TableSpec {
-                    w_nodes,
-                    ..exact_spec
-                };
-                let mut cell = TableCell {
-                    variant: kind,
-                    case,
-                    h_max_um: h,
-                    status: Status::Pass,
-                    error: None,
-                    expected: None,
-                    peak,
-                    message: String::new(),
-                };
-                // f32 evaluation at node `t` and probe `w`.
-                let eval: Box<dyn Fn(usize, f64) -> [f64; 3]> = match kind {
-                    VariantKind::Volume => {
-                        let v = Volume::build(&hf, spec.coherence_um, &tspec, &|| ())?;
-                        Box::new(move |t, w| {
-                            let n = v.slices.data.len();
-                            let f = ((w - region.lo[2]) / (region.hi[2] - region.lo[2])) as f32
-                                * (n - 1) as f32;
-                            let k = (f.floor() as usize).min(n - 2);
-                            let x = f - k as f32;
-                            let (a, b) = (v.slices.data[k][t], v.slices.data[k + 1][t]);
-                            [0, 1, 2].map(|c| {
-                                (a[c] as f32 * (1.0 - x) + b[c] as f32 * x).max(0.0) as f64
-                            })
-                        })
-                    }
-                    VariantKind::ChebyshevW => {
-                        let c = ChebyshevW::build(&hf, spec.coherence_um, &tspec, &|| ())?;
-                        Box::new(move |t, w| {
-                            let x = c.w_hat(w) as f32;
-                            let (mut b1, mut b2) = ([0.0f32; 3], [0.0f32; 3]);
-                            for cj in c.coeffs.iter().skip(1).rev() {
-                                let b0 = [0, 1, 2]
-                                    .map(|ch| cj[t][ch] as f32 + 2.0 * x * b1[ch] - b2[ch]);
-                                b2 = b1;
-                                b1 = b0;
-                            }
-                            [0, 1, 2].map(|ch| {
-                                (c.coeffs[0][t][ch] as f32 + x * b1[ch] - b2[ch]).max(0.0) as f64
-                            })
-                        })
-                    }
-                    _ => {
-                        let cheb = ChebyshevW::build(&hf, spec.coherence_um, &tspec, &|| ())?;
-                        let d = Dhillon::from_chebyshev(&cheb, 0.1 * spec.tolerance);
-                        cell.expected = Some(d.expected_error());
-                        if let Err(e) = d.check(spec.tolerance) {
-                            cell.status = Status::Refused;
-                            cell.message = e.to_string();
-                            cells.push(cell);
-                            continue;
-                        }
-                        Box::new(move |t, w| {
-                            let x = d.w_hat(w) as f32;
-                            let mut g = [0.0f32; 3];
-                            for p in d.powers.iter().rev() {
-                                g = [0, 1, 2].map(|c| g[c] * x + p[t][c] as f32);
-                            }
-                            g.map(|v| v.max(0.0) as f64)
-                        })
-                    }
-                };
-                let mut worst = 0.0f64;
-                for (k, &w) in probes.iter().enumerate() {
-                    for (t, want) in exact.data[k].iter().enumerate() {
-                        let got = eval(t, w);
-                        for c in 0..3 {
-                            let e = (got[c] - want[c]).abs();
-                            worst = worst.max(if e.is_finite() { e } else { f64::INFINITY });
-                        }
-                    }
-                }
-                cell.error = Some(worst);
-                cell.status = if worst <= spec.tolerance {
-                    Status::Pass
-                } else {
-                    Status::Fail
-                };
-                cells.push(cell);
+            let exact = ExactCase::sample(&hf, spec.coherence_um, half)?;
+            for &(kind, mirror) in &variants {
+                cells.push(table_cell(spec, &hf, &exact, kind, mirror, case, h)?);
             }
         }
     }
     Ok(cells)
 }
 
+/// One variant on one exact case.
+fn table_cell(
+    spec: &MatrixSpec,
+    hf: &HeightField,
+    exact: &ExactCase,
+    kind: VariantKind,
+    mirror: TableMirror,
+    case: &'static str,
+    h_max_um: f64,
+) -> Result<TableCell> {
+    let (lo, hi) = hf.range();
+    let region = exact.spec.region;
+    let w_nodes =
+        TableOptions::default().w_nodes_for_field(kind, hi - lo, [region.lo[2], region.hi[2]]);
+    let tspec = TableSpec {
+        w_nodes,
+        ..exact.spec
+    };
+    let mut cell = TableCell {
+        variant: kind,
+        case,
+        h_max_um,
+        status: Status::Refused,
+        error: None,
+        expected: None,
+        peak: exact.peak,
+        message: String::new(),
+    };
+    match mirror(hf, spec.coherence_um, &tspec, spec.tolerance)? {
+        Mirrored::Refused { expected, message } => {
+            cell.expected = Some(expected);
+            cell.message = message;
+        }
+        Mirrored::Eval(eval) => {
+            let worst = exact.worst(&*eval);
+            cell.error = Some(worst);
+            cell.status = if worst <= spec.tolerance {
+                Status::Pass
+            } else {
+                Status::Fail
+            };
+        }
+    }
+    Ok(cell)
+}
+
 /// Markdown of the table cases: one row per case and height, one column per variant.
 pub fn table_cases_markdown(spec: &MatrixSpec, cells: &[TableCell]) -> String {
+    let variants: Vec<VariantKind> = table_variants().into_iter().map(|v| v.0).collect();
     let mut s = format!(
-        "\n## Table variants on narrow regions\n\nEach entry: max |G_f32 − G| (a mirror's specular G_Y is 1; tolerance {:.0e}) of the representation evaluated in float32 as its shader does, at its (u, v) nodes and at w between its nodes, against G sampled exactly there (10 nm); `refused` with the expected error where the variant refuses. Regions centred on (u, v, w) = (−0.326, 0, −1.851), half-widths: narrow w (a distant camera on a plane) ±(0.02, 0.02, 0.0025); narrow u ±(0.0025, 0.02, 0.3); narrow v ±(0.02, 0.0025, 0.3).\n\n| case | h_max (µm) | max G | volume | chebyshev-w | dhillon |\n|---|---|---|---|---|---|\n",
+        "\n## Table variants on narrow regions\n\nEach entry: max |G_f32 − G| (a mirror's specular G_Y is 1; tolerance {:.0e}) of the representation evaluated in float32 as its shader does, at its (u, v) nodes and at w between its nodes, against G sampled exactly there (10 nm); `refused` with the expected error where the variant refuses. Regions centred on (u, v, w) = (−0.326, 0, −1.851), half-widths: narrow w (a distant camera on a plane) ±(0.02, 0.02, 0.0025); narrow u ±(0.0025, 0.02, 0.3); narrow v ±(0.02, 0.0025, 0.3).\n\n| case | h_max (µm) | max G |",
         spec.tolerance
     );
+    for k in &variants {
+        s += &format!(" {k} |");
+    }
+    s += &format!("\n|---|---|---|{}\n", "---|".repeat(variants.len()));
     for (case, _) in TABLE_CASES {
         for &h in &spec.h_max_um {
-            let peak = cells
-                .iter()
-                .find(|c| c.case == case && c.h_max_um == h)
-                .map_or(0.0, |c| c.peak);
+            let mine = |c: &&TableCell| c.case == case && c.h_max_um == h;
+            let peak = cells.iter().find(mine).map_or(0.0, |c| c.peak);
             s += &format!("| {case} | {h} | {peak:.1e} |");
-            for kind in ["volume", "chebyshev-w", "dhillon"] {
+            for &kind in &variants {
                 let e = cells
                     .iter()
-                    .find(|c| c.case == case && c.h_max_um == h && c.variant.name() == kind)
+                    .filter(mine)
+                    .find(|c| c.variant == kind)
                     .map_or(String::new(), |c| match c.status {
                         Status::Refused => {
                             format!("refused (expected {:.1e})", c.expected.unwrap_or(f64::NAN))
@@ -1107,6 +1218,35 @@ pub const STABILITY_FILES: [&str; 3] = ["stability.csv", "stability.md", "stabil
 pub fn stability_args(args: &StabilityArgs) -> Result<()> {
     use crate::brdf::truncation::MAX_TERMS;
     use crate::render::MAX_MAP_SIZE;
+    check_axes(args)?;
+    for &n in &args.fixed_terms {
+        if n > MAX_TERMS {
+            return Err(Error::invalid(
+                "fixed-terms",
+                format!("{n}; at most {MAX_TERMS} terms are supported"),
+            ));
+        }
+    }
+    if let Some(dh) = args.dh_um {
+        crate::guard::positive("dh-um", dh, " µm")?;
+        if args.heightfield.is_none() {
+            return Err(Error::invalid(
+                "arguments",
+                "--dh-um only applies with --heightfield",
+            ));
+        }
+    }
+    if !(1..=MAX_MAP_SIZE).contains(&args.map_size) {
+        return Err(Error::invalid(
+            "map-size",
+            format!("{}; expected 1..={MAX_MAP_SIZE} pixels", args.map_size),
+        ));
+    }
+    check_output_dir(args)
+}
+
+/// The tolerance, heights, angles and wavelengths.
+fn check_axes(args: &StabilityArgs) -> Result<()> {
     let t = args.tolerance;
     if !(t.is_finite() && t > 0.0 && t < 1.0) {
         return Err(Error::invalid(
@@ -1137,29 +1277,13 @@ pub fn stability_args(args: &StabilityArgs) -> Result<()> {
     for &l in &args.lambda_nm {
         crate::guard::in_range("wavelength", l, lo..=hi, " nm")?;
     }
-    for &n in &args.fixed_terms {
-        if n > MAX_TERMS {
-            return Err(Error::invalid(
-                "fixed-terms",
-                format!("{n}; at most {MAX_TERMS} terms are supported"),
-            ));
-        }
-    }
-    if let Some(dh) = args.dh_um {
-        crate::guard::positive("dh-um", dh, " µm")?;
-        if args.heightfield.is_none() {
-            return Err(Error::invalid(
-                "arguments",
-                "--dh-um only applies with --heightfield",
-            ));
-        }
-    }
-    if !(1..=MAX_MAP_SIZE).contains(&args.map_size) {
-        return Err(Error::invalid(
-            "map-size",
-            format!("{}; expected 1..={MAX_MAP_SIZE} pixels", args.map_size),
-        ));
-    }
+    Ok(())
+}
+
+/// The output directory: an existing one must not hold the height field under one of
+/// [`STABILITY_FILES`]; a new one is created after the run, so its nearest existing
+/// ancestor must be a directory.
+fn check_output_dir(args: &StabilityArgs) -> Result<()> {
     let dir = &args.out;
     if dir.as_os_str().is_empty() {
         return Err(Error::invalid("output", "empty directory path"));

@@ -578,7 +578,7 @@ pub fn expected_error_line(
 }
 
 fn summary(material: &Material, thetas_deg: &[f64], cache_dir: Option<&Path>) -> Result<String> {
-    let hf = HeightField::load_source(&material.heightfield, material.dh_um, material.h_max_um)?;
+    let hf = material.load_heightfield(&crate::report::Collect::default())?;
     let profile = extract_profile(&hf)?;
     let model = ScalarModel::of(material);
     let mut thetas: Vec<f64> = thetas_deg

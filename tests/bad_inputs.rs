@@ -1012,7 +1012,7 @@ fn corpus() -> Vec<Case> {
                 "1000000",
                 "--no-cache",
             ],
-            Fail("invalid pixels: 1000000 spread + 64 brightest; a 2² map has 4 pixels"),
+            Fail("invalid pixels: 1000000 spread + 8 brightest; a 2² map has 4 pixels"),
         ),
         // Output paths.
         case(

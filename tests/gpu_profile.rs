@@ -6,7 +6,7 @@ mod gpu_util;
 
 use diffract::heightfield::HeightField;
 use diffract::material::Material;
-use diffract::profile::{flss_variants, profile, table_variants, ProfileSetup};
+use diffract::profile::{flss_variants, profile, table_variants, Frames, ProfileSetup};
 use diffract::render::TableOptions;
 
 #[test]
@@ -49,17 +49,19 @@ fn variants_report_error_and_time() {
         size: 32,
         pixels: 4,
         brightest: 4,
-        frames: 1,
+        frames: Frames::Fixed(1),
         mesh: None,
         per_vertex: false,
         cache_dir: None,
     };
-    let reports = profile(&mut r, &setup).unwrap();
+    let run = profile(&mut r, &setup).unwrap();
     gpu_util::assert_no_validation(&r);
     println!(
         "{}",
-        diffract::profile::format_table(r.device_name(), &setup, &reports)
+        diffract::profile::format_table(r.device_name(), &setup, &run)
     );
+    assert!(run.skipped.is_empty(), "{:?}", run.skipped);
+    let reports = &run.reports;
     assert_eq!(reports.len(), setup.variants.len());
     // This map holds the grating's orders: the reference is not dark, and the table
     // variants' overshoot below zero (before the clamp) is reported.
@@ -76,8 +78,11 @@ fn variants_report_error_and_time() {
     assert!(reports
         .iter()
         .any(|r| r.variant.name == "taylor R=2 keep-all" && !r.variant.leave_out));
-    for rep in &reports {
+    for rep in reports {
         assert!(rep.wall_ms > 0.0 && rep.gpu_ms.is_none_or(|g| g > 0.0));
+        assert_eq!(rep.frames, 1);
+        let i = rep.intervals.rel_l2;
+        assert!(i.lo <= rep.vs_reference.rel_l2 && rep.vs_reference.rel_l2 <= i.hi);
         for e in [rep.vs_reference, rep.vs_model] {
             assert!(e.rel_l2.is_finite() && e.max_de.is_finite() && e.mean_de <= e.max_de);
             assert!(e.p50_de <= e.p99_de && e.p99_de <= e.max_de);
@@ -86,18 +91,18 @@ fn variants_report_error_and_time() {
     }
     // The stable table representations reproduce their f64 tables in float32.
     for name in ["chebyshev-w", "chebyshev-w 5nm", "volume"] {
-        assert!(by_name(&reports, name).vs_model.rel_l2 < 1e-4, "{name}");
+        assert!(by_name(reports, name).vs_model.rel_l2 < 1e-4, "{name}");
     }
     assert!(
-        by_name(&reports, "volume rgba16f").vs_model.rel_l2
-            > by_name(&reports, "volume").vs_model.rel_l2
+        by_name(reports, "volume rgba16f").vs_model.rel_l2
+            > by_name(reports, "volume").vs_model.rel_l2
     );
-    let csv = diffract::profile::format_csv(&reports);
+    let csv = diffract::profile::format_csv(&run);
     assert_eq!(csv.lines().count(), reports.len() + 1);
     assert!(csv.starts_with(
         "variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref"
     ));
-    let by = |name: &str| by_name(&reports, name);
+    let by = |name: &str| by_name(reports, name);
     // float32 RG32F tracks its own f64 model closely; the compact formats less so.
     assert!(
         by("taylor R=2").vs_model.rel_l2 < 1e-3,

@@ -188,3 +188,76 @@ fn the_readme_variant_table_is_the_registry_s() {
         "README's variant table is stale: paste `diffract variants --markdown`"
     );
 }
+
+#[test]
+fn the_docs_fetch_table_is_the_registry_s() {
+    let docs = std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/docs/variants.md"))
+        .expect("docs/variants.md");
+    let begin = "<!-- fetches:begin -->\n";
+    let start = docs.find(begin).expect("docs mark the fetch table") + begin.len();
+    let end = docs[start..]
+        .find("<!-- fetches:end -->")
+        .expect("docs end the fetch table")
+        + start;
+    assert_eq!(
+        &docs[start..end],
+        diffract::render::variant::markdown_fetches(),
+        "docs/variants.md's fetch table is stale: paste `diffract variants --fetches`"
+    );
+}
+
+/// `diffract variants` reads its fetches and memory from the code that prepares the
+/// variants: for the same material, options and map, what it lists is what `render` draws.
+#[test]
+fn listed_fetches_and_memory_are_what_render_draws() {
+    use diffract::render::variant::{map_region, FetchInputs, TableFormat};
+    let Some(mut r) = renderer() else { return };
+    let dir = scratch("figures");
+    let prepared = prepare(&periodic_material(&dir, 8, 20));
+    let table = TableOptions {
+        texel_uv: Some(0.02),
+        step_nm: Some(20),
+        format: TableFormat::Rgba16f,
+        ..TableOptions::default()
+    };
+    r.set_table_options(table);
+    r.set_leave_out(true);
+    let (lo, hi) = prepared.heightfield.range();
+    let inputs = FetchInputs {
+        terms: prepared.terms(),
+        material: &prepared.material,
+        table: &table,
+        region: map_region(diffract::brdf::direction(THETA, 0.0)),
+        h_range_um: hi - lo,
+        leave_out: true,
+        heightfield: Some(&prepared.heightfield),
+    };
+    for kind in VariantKind::ALL {
+        r.set_variant(kind);
+        let frame = r
+            .render_brdf_map(&prepared, THETA, 0.0, SIZE, None)
+            .unwrap_or_else(|e| panic!("{kind}: {e}"));
+        let drawn = &frame.variant;
+        let listed = kind.fetches(&inputs);
+        // dhillon's fit and pq's taps may take fewer than the bound.
+        if matches!(kind, VariantKind::Dhillon | VariantKind::Pq) {
+            assert!(
+                drawn.fetches <= listed,
+                "{kind}: {} > {listed}",
+                drawn.fetches
+            );
+        } else {
+            assert_eq!(drawn.fetches, listed, "{kind}: fetches");
+        }
+        if let Some(fp) = kind.footprint(&inputs) {
+            let fp = fp.unwrap();
+            if fp.at_most {
+                assert!(drawn.gpu_bytes <= fp.bytes, "{kind}: memory");
+            } else {
+                assert_eq!(drawn.gpu_bytes, fp.bytes, "{kind}: memory");
+            }
+        }
+    }
+    assert_no_validation(&r);
+    let _ = std::fs::remove_dir_all(dir);
+}

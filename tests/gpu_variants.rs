@@ -73,35 +73,17 @@ fn every_variant_matches_its_own_f64_model() {
             .render_brdf_map(&prepared, THETA, 0.0, SIZE, None)
             .unwrap_or_else(|e| panic!("{kind}: {e}"));
         assert_eq!(frame.variant.name.split(' ').next(), Some(kind.name()));
-        let density = diffract::brdf::nmm::Density::new();
         if kind == VariantKind::Nmm {
             // 5 µm ridges along x: 13 periods in the 65 µm patch.
-            let d = r.nmm_grating().unwrap().period_um[0].unwrap();
+            let g = diffract::brdf::nmm::estimate_grating(&prepared.heightfield).unwrap();
+            let d = g.period_um[0].unwrap();
             assert!((d - 5.0).abs() < 0.025, "estimated period {d}");
         }
-        let model = |wr: [f64; 3]| match (r.table_model(), r.nmm_grating()) {
-            (Some(t), _) => t.xyz(&prepared.shading, wi, wr),
-            (None, Some(g)) => diffract::brdf::nmm::xyz(
-                &prepared.stack,
-                prepared.terms(),
-                &prepared.window,
-                &prepared.shading,
-                &prepared.colour,
-                &g,
-                &density,
-                wi,
-                wr,
-                true,
-            ),
-            (None, None) => diffract::brdf::model::xyz(
-                &prepared.stack,
-                prepared.terms(),
-                &prepared.window,
-                &prepared.shading,
-                &prepared.colour,
-                wi,
-                wr,
-            ),
+        // Every variant is scored against its own CPU model.
+        let model = |wr: [f64; 3]| {
+            r.model()
+                .unwrap_or_else(|| panic!("{kind} has a model"))
+                .xyz(&prepared, &prepared.colour, wi, wr)
         };
         let mut peak = 0.0f64;
         let mut worst = 0.0f64;

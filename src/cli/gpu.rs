@@ -24,7 +24,7 @@ pub struct TableArgs {
     pub table_budget_mb: usize,
     /// Table variants: texel format (float16 halves the memory; on the default scene the
     /// picture moves by a ΔE2000 of 0.001).
-    #[arg(long, value_enum, default_value_t = TableFormat::Rgba16f)]
+    #[arg(long, value_enum, default_value_t = TableOptions::RENDER.format)]
     pub table_format: TableFormat,
     /// Table variants: where to build the table (auto: the device when it is a GPU, the
     /// CPU when Vulkan itself runs on the CPU, e.g. lavapipe).

@@ -77,11 +77,7 @@ pub fn run(args: &ValidityArgs) -> Result<()> {
     }
     crate::guard::check_outputs(&inputs, &outputs)?;
 
-    let hf = crate::heightfield::HeightField::load_source(
-        &material.heightfield,
-        material.dh_um,
-        material.h_max_um,
-    )?;
+    let hf = material.load_heightfield(&crate::report::Stderr)?;
     let profile = validity::extract_profile(&hf)?;
     let model = ScalarModel::of(&material);
     println!(

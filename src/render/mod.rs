@@ -185,8 +185,8 @@ pub struct Renderer {
     variant: VariantKind,
     table: TableOptions,
     keep_models: bool,
-    /// Leave out what a draw cannot need (issue #8; off by default, `render` and `view`
-    /// switch it on).
+    /// Leave out what a draw cannot need (off by default; `render` and `view` switch it
+    /// on).
     leave_out: bool,
     /// Mesh frames evaluate the BRDF per vertex (thesis §1.5.1; `flss`, `nmm`, `pq`).
     per_vertex: bool,
@@ -386,20 +386,15 @@ impl Renderer {
         self.per_vertex
     }
 
-    /// The periodic structure `pq` found for the last frame (when it drew).
-    pub fn pq_periodicity(&self) -> Option<crate::brdf::pq::Periodicity> {
-        self.prepared.as_ref().and_then(|(_, v)| v.periodicity())
+    /// The f64 CPU model of the variant the last frame used (for a table variant, only if
+    /// [`Renderer::set_keep_models`] was on when its table was built; none for a debug view).
+    pub fn model(&self) -> Option<&dyn variant::CpuModel> {
+        self.prepared.as_ref().and_then(|(_, v)| v.model())
     }
 
-    /// The grating period `nmm` estimated for the last frame (when it drew).
-    pub fn nmm_grating(&self) -> Option<crate::brdf::nmm::Grating> {
-        self.prepared.as_ref().and_then(|(_, v)| v.grating())
-    }
-
-    /// The f64 CPU model of the table the last frame used, if the variant has one and
-    /// [`Renderer::set_keep_models`] was on when it was built.
+    /// The f64 table of the last frame's table variant (see [`Renderer::model`]).
     pub fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
-        self.prepared.as_ref().and_then(|(_, v)| v.table_model())
+        self.model().and_then(|m| m.table())
     }
 
     /// The objects of `scene`'s frames (mesh, uniforms, pipeline), built for `render_pass`

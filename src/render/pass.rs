@@ -13,8 +13,8 @@ use ash::vk;
 use super::params::{colour_weights, OutputMode, ParamsUbo};
 use super::record::mesh_vertex_layout;
 use super::record::{begin_pass, end_pass, record_draw, record_pass, Geometry, Transforms};
-use super::variant::SPEC_COUNT;
 use super::variant::{PreparedVariant, VariantStats};
+use super::variant::{SpecConstant, Specialisation};
 use super::Renderer;
 use crate::gpu::memory::{bytes_of, Buffer, Image, ImageDesc};
 use crate::gpu::pipeline::{
@@ -366,11 +366,11 @@ impl Renderer {
             (None, false) => &self.vert_map,
             (None, true) => &self.vert_mesh,
         };
-        let mut spec = [0u32; SPEC_COUNT];
-        spec[4] = options.shadowing as u32;
-        spec[5] = options.fresnel as u32;
-        spec[6] = shape.texture_blending as u32;
-        spec[8] = output as u32;
+        let mut spec = Specialisation::default();
+        spec[SpecConstant::Shadowing] = options.shadowing as u32;
+        spec[SpecConstant::Fresnel] = options.fresnel as u32;
+        spec[SpecConstant::TextureBlending] = shape.texture_blending as u32;
+        spec[SpecConstant::OutputMode] = output as u32;
         variant.specialise(&mut spec);
         let fragment = if shape.per_vertex {
             self.shader("per_vertex.frag", shaders::PER_VERTEX_FRAG)?
@@ -395,7 +395,7 @@ impl Renderer {
                 name: &name,
                 vertex,
                 fragment: &fragment,
-                spec: &spec,
+                spec: spec.values(),
                 vertex_layout: vertex_layout.as_ref(),
                 layout,
                 render_pass,

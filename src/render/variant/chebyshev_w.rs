@@ -4,13 +4,23 @@
 
 use std::sync::Arc;
 
-use super::table::{packed_layers, prepare, Layout};
-use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant};
+use super::table::{prepare, Layout, TableLayout};
+use super::{
+    DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant,
+};
 use crate::brdf::table;
 use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct ChebyshevW;
+
+/// Its coefficient planes packed four values a texel, each a cubic B-spline in `(u, v)`
+/// with one ghost texel a side.
+const LAYOUT: TableLayout = TableLayout {
+    layout: Layout::PackedPlanes,
+    ghosts: 1,
+    fitted: false,
+};
 
 impl Variant for ChebyshevW {
     fn name(&self) -> &'static str {
@@ -38,7 +48,15 @@ impl Variant for ChebyshevW {
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
-        4 * packed_layers(f.table.w_nodes_for(Self::KIND))
+        super::table::fetches(Self::KIND, f)
+    }
+
+    fn fetch_formula(&self) -> &'static str {
+        "4⌈3K/4⌉ (K coefficients, four values a texel, four bilinear fetches a spline)"
+    }
+
+    fn table_layout(&self) -> Option<TableLayout> {
+        Some(LAYOUT)
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
@@ -52,6 +70,13 @@ impl Variant for ChebyshevW {
         ROWS
     }
 
+    fn stability(&self) -> Stability {
+        Stability::Table(|hf, coherence_um, spec, _| {
+            let c = table::ChebyshevW::build(hf, coherence_um, spec, &|| ())?;
+            Ok(Mirrored::Eval(Box::new(move |t, w| g_f32(&c, t, w))))
+        })
+    }
+
     fn prepare(
         &self,
         dev: &Arc<Device>,
@@ -61,9 +86,51 @@ impl Variant for ChebyshevW {
             Self::KIND,
             dev,
             setup,
-            Layout::PackedPlanes,
+            LAYOUT.layout,
             table::ChebyshevW::nodes,
             |r, s| Ok(table::ChebyshevW::from_nodes(r, &s)),
         )
+    }
+}
+
+/// `G` at `(u, v)` node `t` and `w` as glsl/chebyshev_w.frag evaluates it: Clenshaw's
+/// recurrence over the coefficients in float32, clamped to `G ≥ 0`.
+pub(crate) fn g_f32(c: &table::ChebyshevW, t: usize, w: f64) -> [f64; 3] {
+    let x = c.w_hat(w) as f32;
+    let (mut b1, mut b2) = ([0.0f32; 3], [0.0f32; 3]);
+    for cj in c.coeffs.iter().skip(1).rev() {
+        let b0: [f32; 3] = std::array::from_fn(|ch| cj[t][ch] as f32 + 2.0 * x * b1[ch] - b2[ch]);
+        b2 = b1;
+        b1 = b0;
+    }
+    std::array::from_fn(|ch| (c.coeffs[0][t][ch] as f32 + x * b1[ch] - b2[ch]).max(0.0) as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing;
+    use super::*;
+
+    #[test]
+    fn float32_clenshaw_reproduces_the_series() {
+        let spec = testing::spec(8);
+        let c = table::ChebyshevW::from_nodes(
+            spec.region,
+            &testing::slices(&spec, &table::ChebyshevW::nodes(&spec)),
+        );
+        // Eight coefficients hold a cubic exactly: the series is the function itself, and
+        // Clenshaw in float32 adds only float32's rounding.
+        for w_hat in [-1.0, -0.73, -0.1, 0.0, 0.42, 0.999] {
+            let w = -1.35 + 0.25 * w_hat;
+            for t in 0..2 {
+                let (got, want) = (g_f32(&c, t, w), testing::g(t, w_hat));
+                for ch in 0..3 {
+                    assert!(
+                        (got[ch] - want[ch]).abs() < 2e-6,
+                        "{t} {w_hat}: {got:?} {want:?}"
+                    );
+                }
+            }
+        }
     }
 }

@@ -9,7 +9,9 @@ use std::sync::Arc;
 
 use ash::vk;
 
-use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Variant, VariantStats};
+use super::{
+    CpuModel, DrawSetup, Family, FetchInputs, PreparedVariant, Stability, Variant, VariantStats,
+};
 use crate::brdf::table::Region;
 use crate::gpu::memory::{Buffer, Pod};
 use crate::gpu::pipeline::{Binding, Resource};
@@ -38,6 +40,14 @@ impl Variant for Coverage {
 
     fn fetches(&self, _: &FetchInputs<'_>) -> usize {
         0
+    }
+
+    fn fetch_formula(&self) -> &'static str {
+        "0"
+    }
+
+    fn stability(&self) -> Stability {
+        Stability::Excluded("is a debug view and draws no BRDF")
     }
 
     fn prepare(
@@ -110,6 +120,11 @@ impl PreparedVariant for CoverageGpu {
             let n = params.light_info[0].max(1) as u32;
             self.lookups.store(n, Ordering::Relaxed);
         }
+    }
+
+    /// A debug view draws no BRDF: nothing to model.
+    fn model(&self) -> Option<&dyn CpuModel> {
+        None
     }
 
     fn stats(&self) -> VariantStats {

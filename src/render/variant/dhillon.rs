@@ -6,13 +6,22 @@
 
 use std::sync::Arc;
 
-use super::table::{prepare, Layout};
-use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant};
+use super::table::{prepare, Layout, TableLayout};
+use super::{
+    DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant,
+};
 use crate::brdf::table;
 use crate::gpu::Device;
 use crate::Result;
 
 pub(crate) struct Dhillon;
+
+/// One bilinear plane per power of `ŵ` kept by the fit.
+const LAYOUT: TableLayout = TableLayout {
+    layout: Layout::Planes,
+    ghosts: 0,
+    fitted: true,
+};
 
 impl Variant for Dhillon {
     fn name(&self) -> &'static str {
@@ -36,12 +45,34 @@ impl Variant for Dhillon {
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
-        f.table.w_nodes_for(Self::KIND)
+        super::table::fetches(Self::KIND, f)
+    }
+
+    fn fetch_formula(&self) -> &'static str {
+        "P ≤ K (the powers the fit keeps)"
+    }
+
+    fn table_layout(&self) -> Option<TableLayout> {
+        Some(LAYOUT)
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
         const ROWS: &[Preset] = &[Preset::named("dhillon")];
         ROWS
+    }
+
+    fn stability(&self) -> Stability {
+        Stability::Table(|hf, coherence_um, spec, tolerance| {
+            let cheb = table::ChebyshevW::build(hf, coherence_um, spec, &|| ())?;
+            let d = table::Dhillon::from_chebyshev(&cheb, 0.1 * tolerance);
+            Ok(match d.check(tolerance) {
+                Err(e) => Mirrored::Refused {
+                    expected: d.expected_error(),
+                    message: e.to_string(),
+                },
+                Ok(()) => Mirrored::Eval(Box::new(move |t, w| g_f32(&d, t, w))),
+            })
+        })
     }
 
     fn prepare(
@@ -54,7 +85,7 @@ impl Variant for Dhillon {
             Self::KIND,
             dev,
             setup,
-            Layout::Planes,
+            LAYOUT.layout,
             table::ChebyshevW::nodes,
             |r, s| {
                 // A tenth of the tolerance for the dropped tail of the series in w.
@@ -66,5 +97,46 @@ impl Variant for Dhillon {
                 Ok(d)
             },
         )
+    }
+}
+
+/// `G` at `(u, v)` node `t` and `w` as glsl/dhillon.frag evaluates it: Horner over the
+/// powers of `ŵ` in float32, clamped to `G ≥ 0`.
+pub(crate) fn g_f32(d: &table::Dhillon, t: usize, w: f64) -> [f64; 3] {
+    let x = d.w_hat(w) as f32;
+    let mut g = [0.0f32; 3];
+    for p in d.powers.iter().rev() {
+        g = std::array::from_fn(|c| g[c] * x + p[t][c] as f32);
+    }
+    g.map(|v| v.max(0.0) as f64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::super::testing;
+    use super::*;
+
+    #[test]
+    fn float32_horner_reproduces_the_polynomial() {
+        let spec = testing::spec(8);
+        let cheb = table::ChebyshevW::from_nodes(
+            spec.region,
+            &testing::slices(&spec, &table::ChebyshevW::nodes(&spec)),
+        );
+        // A cubic: the tail beyond ŵ³ is f64 noise and is dropped.
+        let d = table::Dhillon::from_chebyshev(&cheb, 1e-9);
+        assert_eq!(d.powers.len(), 4);
+        for w_hat in [-1.0, -0.5, 0.0, 0.3, 1.0] {
+            let w = -1.35 + 0.25 * w_hat;
+            for t in 0..2 {
+                let (got, want) = (g_f32(&d, t, w), testing::g(t, w_hat));
+                for ch in 0..3 {
+                    assert!(
+                        (got[ch] - want[ch]).abs() < 2e-6,
+                        "{t} {w_hat}: {got:?} {want:?}"
+                    );
+                }
+            }
+        }
     }
 }

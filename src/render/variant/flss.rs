@@ -10,7 +10,8 @@ use std::time::Instant;
 use ash::vk;
 
 use super::{
-    DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant, VariantStats, SPEC_COUNT,
+    CpuModel, DrawSetup, Family, FetchInputs, PreparedVariant, Preset, SpecConstant,
+    Specialisation, Stability, Variant, VariantStats,
 };
 use crate::colour::{LAMBDA_MAX_NM, LAMBDA_MIN_NM};
 use crate::gpu::formats::{pack_layers, Layer};
@@ -52,6 +53,10 @@ impl Variant for Flss {
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
         f.lambdas() * (f.terms + 1) * f.taps()
+    }
+
+    fn fetch_formula(&self) -> &'static str {
+        "λ·(T+1)·(2R+1)² (λ: the wavelengths kept)"
     }
 
     /// Without leaving out, the whole band is uploaded whatever the draw reaches.
@@ -102,12 +107,33 @@ impl Variant for Flss {
         ROWS
     }
 
+    fn stability(&self) -> Stability {
+        Stability::Spectral(|p, shading, wi, wr, lambda_nm| {
+            crate::brdf::model::rho(&p.stack, p.terms(), &p.window, shading, wi, wr, lambda_nm)
+        })
+    }
+
     fn prepare(
         &self,
         dev: &Arc<Device>,
         setup: &DrawSetup<'_>,
     ) -> Result<Box<dyn PreparedVariant>> {
         Ok(Box::new(prepare_terms(dev, setup)?))
+    }
+}
+
+/// FLSS in f64 (MODEL §4): the same series, window and wavelengths as the shader.
+struct FlssModel;
+
+impl CpuModel for FlssModel {
+    fn xyz(
+        &self,
+        p: &PreparedMaterial,
+        colour: &crate::colour::ColourTable,
+        wi: [f64; 3],
+        wr: [f64; 3],
+    ) -> [f64; 3] {
+        crate::brdf::model::xyz(&p.stack, p.terms(), &p.window, &p.shading, colour, wi, wr)
     }
 }
 
@@ -170,14 +196,17 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
             disc_prefiltered: false,
         },
         spec: [
-            t as u32,
-            prepared.window.radius as u32,
-            prepared.colour.step_nm,
-            match stack.expansion {
-                Expansion::Taylor => 0,
-                Expansion::Chebyshev => 1,
-            },
-            setup.storage.spec_value(),
+            (SpecConstant::Terms, t as u32),
+            (SpecConstant::WindowRadius, prepared.window.radius as u32),
+            (SpecConstant::LambdaStepNm, prepared.colour.step_nm),
+            (
+                SpecConstant::Expansion,
+                match stack.expansion {
+                    Expansion::Taylor => 0,
+                    Expansion::Chebyshev => 1,
+                },
+            ),
+            (SpecConstant::Storage, setup.storage.spec_value()),
         ],
         params: lookup_params(prepared, &band, &decode),
         sampler: Sampler::new(
@@ -194,8 +223,8 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
 
 pub(super) struct FlssGpu {
     pub(super) stats: VariantStats,
-    /// Constants 0, 1, 2, 3, 7: T, R, Δλ, expansion, storage.
-    spec: [u32; 5],
+    /// T, R, Δλ, expansion and storage.
+    spec: [(SpecConstant, u32); 5],
     /// spectrumSize, band, lookup and decode of the uniform block.
     params: ([i32; 4], [i32; 4], [f32; 4], Vec<[f32; 4]>),
     sampler: Sampler,
@@ -218,12 +247,10 @@ impl PreparedVariant for FlssGpu {
         vec![(1, Resource::Sampled(&self.terms, &self.sampler))]
     }
 
-    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
-        spec[0] = self.spec[0];
-        spec[1] = self.spec[1];
-        spec[2] = self.spec[2];
-        spec[3] = self.spec[3];
-        spec[7] = self.spec[4];
+    fn specialise(&self, spec: &mut Specialisation) {
+        for (c, v) in self.spec {
+            spec[c] = v;
+        }
     }
 
     fn fill_params(&self, params: &mut ParamsUbo) {
@@ -238,6 +265,10 @@ impl PreparedVariant for FlssGpu {
 
     fn stats(&self) -> VariantStats {
         self.stats.clone()
+    }
+
+    fn model(&self) -> Option<&dyn CpuModel> {
+        Some(&FlssModel)
     }
 
     fn kept_wavelengths(&self) -> Option<&[usize]> {

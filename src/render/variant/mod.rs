@@ -16,7 +16,10 @@ mod dhillon;
 mod flss;
 mod nmm;
 mod pq;
-mod table;
+mod spec;
+pub mod table;
+#[cfg(test)]
+mod throwaway;
 mod volume;
 
 use std::sync::Arc;
@@ -31,44 +34,43 @@ use crate::{Error, Result};
 
 use super::{OutputMode, ParamsUbo};
 
-/// Number of specialisation constants (`constant_id` 0..=9 of glsl/interface.glsl, 10 of
-/// glsl/shade.glsl).
-pub(crate) const SPEC_COUNT: usize = 11;
+pub(crate) use spec::{SpecConstant, Specialisation};
 
 /// Declares the registry: the enum of variants (plus the `default` alias), [`VariantKind::ALL`]
 /// in listing order, each variant's implementation, and `--variant` parsing by the names the
 /// implementations declare.
 macro_rules! registry {
-    ($($kind:ident => $imp:path,)+) => {
+    ($($(#[$attr:meta])* $kind:ident => $imp:path,)+) => {
         /// A registered variant (or the `default` alias); everything about it comes from its
         /// implementation ([`VariantKind::implementation`]).
         #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
         pub enum VariantKind {
-            $(#[doc = concat!("See [`", stringify!($imp), "`].")] $kind,)+
+            $($(#[$attr])* #[doc = concat!("See [`", stringify!($imp), "`].")] $kind,)+
             /// The default variant (an alias; see [`VariantKind::DEFAULT`]).
             Default,
         }
 
         impl VariantKind {
             /// Every variant, the alias excluded, in listing order.
-            pub const ALL: [VariantKind; [$(VariantKind::$kind),+].len()] = [$(VariantKind::$kind),+];
+            pub const ALL: [VariantKind; [$($(#[$attr])* VariantKind::$kind),+].len()] =
+                [$($(#[$attr])* VariantKind::$kind),+];
 
             /// What `--variant` accepts: every variant and the alias.
-            const CHOICES: [VariantKind; [$(VariantKind::$kind),+].len() + 1] =
-                [$(VariantKind::$kind,)+ VariantKind::Default];
+            const CHOICES: [VariantKind; [$($(#[$attr])* VariantKind::$kind),+].len() + 1] =
+                [$($(#[$attr])* VariantKind::$kind,)+ VariantKind::Default];
 
             /// The variant's own declarations and resources.
             ///
             /// (Each implementation also knows its key, `Self::KIND`.)
             pub(crate) fn implementation(self) -> &'static dyn Variant {
                 match self.resolve() {
-                    $(VariantKind::$kind => &$imp,)+
+                    $($(#[$attr])* VariantKind::$kind => &$imp,)+
                     VariantKind::Default => Self::DEFAULT.implementation(),
                 }
             }
         }
 
-        $(impl $imp {
+        $($(#[$attr])* impl $imp {
             /// This variant's key in the registry.
             #[allow(dead_code)]
             pub(crate) const KIND: VariantKind = VariantKind::$kind;
@@ -85,12 +87,21 @@ registry! {
     ChebyshevW => chebyshev_w::ChebyshevW,
     Volume => volume::Volume,
     Coverage => coverage::Coverage,
+    // A throwaway registered only in the library's own tests, to show that a variant's
+    // file and this one line put it everywhere: listed, profiled and in the stability
+    // matrix, scored against its own model.
+    #[cfg(test)]
+    Throwaway => throwaway::Throwaway,
 }
 
 impl VariantKind {
     /// What `default` stands for: the fastest variant whose error against the 1 nm
     /// reference stays within ΔE2000 p99 ≤ 1 on the shipped gratings (README, profile).
     pub const DEFAULT: VariantKind = VariantKind::ChebyshevW;
+
+    /// The variant exact to its own `T`, `R` and `Δλ`: the reference of the mesh view
+    /// (`profile --per-vertex`), where no direct sum is affordable.
+    pub const REFERENCE: VariantKind = VariantKind::Flss;
 
     /// The variant an alias stands for.
     pub fn resolve(self) -> VariantKind {
@@ -143,14 +154,27 @@ impl VariantKind {
         self.family() == Family::Table
     }
 
-    /// Texel fetches per pixel for `material` with highest term `terms` (FLSS and NMM) and
-    /// the table options.
-    pub fn fetches(self, terms: usize, material: &Material, table: &TableOptions) -> usize {
-        self.implementation().fetches(&FetchInputs {
-            terms,
-            material,
-            table,
-        })
+    /// Texel fetches per pixel of a draw: what `render` reports for the same inputs (a
+    /// bound where the variant fits its planes to the data, [`Footprint::at_most`]).
+    pub fn fetches(self, inputs: &FetchInputs<'_>) -> usize {
+        self.implementation().fetches(inputs)
+    }
+
+    /// Table variants: the table's planes, fetches and memory for `inputs`, as `render`
+    /// uploads it (`None` for other variants).
+    pub fn footprint(self, inputs: &FetchInputs<'_>) -> Option<Result<table::Footprint>> {
+        let t = self.implementation().table_layout()?;
+        Some((|| {
+            let (spec, _) =
+                inputs
+                    .table
+                    .spec(self, inputs.material, inputs.h_range_um, inputs.region)?;
+            let nodes = spec.uv_nodes()?;
+            let dims = (nodes.0 + 2 * t.ghosts, nodes.1 + 2 * t.ghosts);
+            let mut f = table::footprint(t.layout, spec.w_nodes, nodes, dims, inputs.table.format);
+            f.at_most = t.fitted;
+            Ok(f)
+        })())
     }
 
     /// Refuses a draw of `output` this variant cannot make (one wavelength from a variant
@@ -204,12 +228,22 @@ pub(crate) fn spectral_refusal(kind: VariantKind) -> Error {
     )
 }
 
-/// What a variant's fetch formula reads.
+/// What a draw's fetches and memory depend on: the same inputs `render` prepares a
+/// variant with.
 pub struct FetchInputs<'a> {
     /// Highest term index `T` of the DFT-term variants.
     pub terms: usize,
     pub material: &'a Material,
     pub table: &'a TableOptions,
+    /// The `(u, v, w)` the draw reaches ([`map_region`] for a BRDF map).
+    pub region: Region,
+    /// The height field's peak-to-valley (µm): `chebyshev-w`'s `w` nodes follow it.
+    pub h_range_um: f64,
+    /// Leave out what the draw cannot need, as `render` does.
+    pub leave_out: bool,
+    /// The height field, where a count depends on it (`nmm`'s orders); `None`: the
+    /// variant's formula without it.
+    pub heightfield: Option<&'a crate::heightfield::HeightField>,
 }
 
 impl FetchInputs<'_> {
@@ -218,10 +252,38 @@ impl FetchInputs<'_> {
         (2 * self.material.window_radius + 1).pow(2)
     }
 
-    /// Wavelengths of the material's step over 380–780 nm.
+    /// Wavelengths the shader loops over: the material's step over 380–780 nm, less those
+    /// left out at its tolerance ([`crate::leave_out::WavelengthsLeft`], as the variants
+    /// select them).
     pub fn lambdas(&self) -> usize {
-        (400 / self.material.lambda_step_nm.max(1) + 1) as usize
+        self.kept().map_or(
+            (400 / self.material.lambda_step_nm.max(1) + 1) as usize,
+            |k| k.kept_nm.len(),
+        )
     }
+
+    /// The shortest and longest wavelength the shader loops over (nm).
+    pub fn kept_range_nm(&self) -> (f64, f64) {
+        self.kept().map_or(
+            (
+                crate::colour::LAMBDA_MIN_NM as f64,
+                crate::colour::LAMBDA_MAX_NM as f64,
+            ),
+            |k| k.kept_range_nm(),
+        )
+    }
+
+    fn kept(&self) -> Option<crate::leave_out::WavelengthsLeft> {
+        let colour = crate::colour::ColourTable::new(self.material.lambda_step_nm).ok()?;
+        let tolerance = self.leave_out.then_some(self.material.tolerance);
+        Some(crate::leave_out::WavelengthsLeft::of(&colour, tolerance, "per pixel").1)
+    }
+}
+
+/// The region of `(u, v, w)` a BRDF map under light from `wi` reaches, as `render` builds
+/// its tables for it (`wi` rounded to float32, as uploaded).
+pub fn map_region(wi: [f64; 3]) -> Region {
+    Region::brdf_map(wi.map(|c| c as f32 as f64)).widened(1e-5)
 }
 
 /// One row of `diffract profile`'s standard set: a label and the numerical choices of the
@@ -344,6 +406,18 @@ impl Default for TableOptions {
 }
 
 impl TableOptions {
+    /// What `render`, `view` and `profile` build tables with unless told otherwise: the
+    /// defaults in float16 (`TableOptions::default()` keeps float32 for tests that compare
+    /// with the f64 model at float32's rounding).
+    pub const RENDER: TableOptions = TableOptions {
+        texel_uv: None,
+        w_nodes: None,
+        step_nm: None,
+        budget_bytes: 512 << 20,
+        format: TableFormat::Rgba16f,
+        build: crate::render::table_build::TableBuild::Auto,
+    };
+
     /// The step of a table that holds no disc, unless another is asked for: a line of the
     /// 65 µm coherence window is about 1 nm wide at |u| ≈ 2, and the table pays the step
     /// only once, offline.
@@ -448,7 +522,7 @@ pub(crate) struct DrawSetup<'a> {
     pub output: OutputMode,
     pub storage: StorageFormat,
     pub table: &'a TableOptions,
-    /// Keep the f64 table on the CPU after upload ([`PreparedVariant::table_model`]).
+    /// Keep the f64 table on the CPU after upload ([`PreparedVariant::model`]).
     pub keep_model: bool,
     /// Where sampled tables are cached (none: always build).
     pub cache_dir: Option<&'a std::path::Path>,
@@ -501,6 +575,12 @@ pub(crate) trait Variant: Sync {
     }
     /// Texel fetches per evaluation (one pixel, one direction of the light).
     fn fetches(&self, inputs: &FetchInputs<'_>) -> usize;
+    /// How its fetch count grows, for the docs' table (`λ·(T+1)·(2R+1)²`).
+    fn fetch_formula(&self) -> &'static str;
+    /// Table variants: how the planes lie on the GPU ([`table::footprint`]).
+    fn table_layout(&self) -> Option<table::TableLayout> {
+        None
+    }
     /// Whether its resources depend on the region the draw reaches (leaving out on or off).
     fn reads_region(&self, _leave_out: bool) -> bool {
         true
@@ -509,6 +589,8 @@ pub(crate) trait Variant: Sync {
     fn profile_presets(&self) -> &'static [Preset] {
         &[]
     }
+    /// Its cases in `diffract stability`.
+    fn stability(&self) -> Stability;
     /// Builds and uploads what the shader reads for `setup`.
     fn prepare(&self, dev: &Arc<Device>, setup: &DrawSetup<'_>)
         -> Result<Box<dyn PreparedVariant>>;
@@ -531,7 +613,7 @@ pub(crate) trait PreparedVariant: Send + Sync {
         self.base().map_or_else(Vec::new, |b| b.resources())
     }
     /// Sets its specialisation constants.
-    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
+    fn specialise(&self, spec: &mut Specialisation) {
         if let Some(b) = self.base() {
             b.specialise(spec);
         }
@@ -543,18 +625,10 @@ pub(crate) trait PreparedVariant: Send + Sync {
         }
     }
     fn stats(&self) -> VariantStats;
-    /// The grating NMM estimated from the height field.
-    fn grating(&self) -> Option<crate::brdf::nmm::Grating> {
-        self.base().and_then(|b| b.grating())
-    }
-    /// The periodic structure `pq` found in the height field.
-    fn periodicity(&self) -> Option<crate::brdf::pq::Periodicity> {
-        self.base().and_then(|b| b.periodicity())
-    }
-    /// The f64 CPU model of a table variant, when it was kept.
-    fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
-        self.base().and_then(|b| b.table_model())
-    }
+    /// What its shader computes, on the CPU in f64 (`None`: a debug view, which draws no
+    /// BRDF, or a table built without [`DrawSetup::keep_model`]). Required of every
+    /// variant, so a new one cannot be scored against another's model by default.
+    fn model(&self) -> Option<&dyn CpuModel>;
     /// The pipeline's name (validation messages and captures show it).
     fn pipeline_name(&self) -> String {
         self.stats().name
@@ -570,14 +644,77 @@ pub(crate) trait PreparedVariant: Send + Sync {
     }
 }
 
-/// `diffract variants`: the list, with fetches and memory for the default material on a
-/// BRDF map at θi = 60° (its automatic `T` planned, not computed).
-pub fn list() -> String {
+/// The CPU model of a prepared variant: what its shader computes, in f64, with the
+/// inputs the shader saw (ωi and ωr as uploaded, the wavelengths the draw kept). The
+/// profiler scores the GPU against it, which separates float32 and driver error from the
+/// variant's approximation.
+pub trait CpuModel: Send + Sync {
+    /// XYZ at `wr` under light from `wi` for `prepared`, summing `colour`'s weights (the
+    /// material's colour table with the wavelengths the draw left out at weight 0).
+    fn xyz(
+        &self,
+        prepared: &PreparedMaterial,
+        colour: &crate::colour::ColourTable,
+        wi: [f64; 3],
+        wr: [f64; 3],
+    ) -> [f64; 3];
+    /// Table variants: the f64 table itself (its conditioning, its overshoot below zero).
+    fn table(&self) -> Option<&dyn crate::brdf::table::GTable> {
+        None
+    }
+}
+
+/// A table variant's representation, built on the CPU for a [`TableSpec`] and evaluated
+/// in float32 as its shader does: the stability matrix's table cases.
+pub(crate) type TableMirror =
+    fn(&crate::heightfield::HeightField, f64, &TableSpec, f64) -> Result<Mirrored>;
+
+/// A spectral variant's f64 model at one wavelength, `ρ(ωi, ωr, λ)`: the stability
+/// matrix's model cells and the reference of its GPU cells.
+pub(crate) type SpectralModel =
+    fn(&PreparedMaterial, &crate::brdf::Shading, [f64; 3], [f64; 3], f64) -> f64;
+
+/// A representation built for the stability matrix, or the variant's refusal of it.
+pub(crate) enum Mirrored {
+    /// `G` at `(u, v)` node `t` (row-major over the spec's nodes) and `w`, in float32 as
+    /// the shader evaluates it (stored planes rounded, the sum in float32, clamped to
+    /// `G ≥ 0`).
+    Eval(Box<dyn Fn(usize, f64) -> [f64; 3]>),
+    /// Refused, with the error the variant expected and its message.
+    Refused { expected: f64, message: String },
+}
+
+/// What a variant contributes to `diffract stability`.
+pub(crate) enum Stability {
+    /// The spectral matrix (heights × angles × wavelengths × expansions × term counts): its
+    /// f64 model and its GPU spectral map against the direct sum.
+    Spectral(SpectralModel),
+    /// The narrow-region table cases, its float32 mirror against `G` sampled exactly.
+    Table(TableMirror),
+    /// Not in the matrix, and why (a phrase that follows the variant's name: "is a debug
+    /// view and draws no BRDF").
+    Excluded(&'static str),
+}
+
+/// What `diffract variants` lists for one variant: the figures `render` reports for a BRDF
+/// map at θi = 60° of the default material with the default options.
+struct Listed {
+    kind: VariantKind,
+    fetches: usize,
+    /// `≤` where the variant fits its planes to the data.
+    bound: bool,
+    memory: String,
+}
+
+/// The listed figures of every variant, from the same code `render` prepares them with
+/// ([`VariantKind::fetches`], [`VariantKind::footprint`]), and what they were for.
+fn listed() -> (Vec<Listed>, String) {
     let material = Material::default();
-    let hf = material.load_heightfield(&crate::report::Collect::default());
+    let hf = material
+        .load_heightfield(&crate::report::Collect::default())
+        .ok();
     let terms = hf
         .as_ref()
-        .ok()
         .and_then(|hf| {
             material
                 .plan(
@@ -588,60 +725,77 @@ pub fn list() -> String {
                 .ok()
         })
         .map_or(30, |p| p.terms);
-    let table = TableOptions::default();
-    let region = Region::brdf_map(crate::brdf::direction(60.0, 0.0));
-    let mut s = String::from(
-        "variant       fetches/pixel  memory (default material, BRDF map at θi = 60°)\n",
-    );
-    for kind in VariantKind::ALL {
-        let memory = match kind.implementation().family() {
-            Family::Terms => {
-                "term band × (T+1) layers, RG32F (≈ 120 MB for the 704² gratings)".to_string()
-            }
-            Family::Debug => "none (a uniform block)".to_string(),
-            Family::Table => match table.spec(kind, &material, 0.375, region) {
-                Ok((spec, _)) => match spec.uv_nodes() {
-                    Ok((nu, nv)) => format!(
-                        "{:.0} MB ({nu}×{nv}×{} {}, u/v texel {:.4})",
-                        (nu * nv * spec.w_nodes * table.format.texel_bytes()) as f64 / 1e6,
-                        spec.w_nodes,
-                        table.format.name(),
-                        spec.texel_uv
+    let table = TableOptions::RENDER;
+    let inputs = FetchInputs {
+        terms,
+        material: &material,
+        table: &table,
+        region: map_region(crate::brdf::direction(60.0, 0.0)),
+        h_range_um: hf.as_ref().map_or(0.375, |h| h.range().1 - h.range().0),
+        leave_out: true,
+        heightfield: hf.as_ref(),
+    };
+    let rows = VariantKind::ALL
+        .into_iter()
+        .map(|kind| {
+            let (bound, memory) = match (kind.family(), kind.footprint(&inputs)) {
+                (_, Some(Ok(f))) => (
+                    f.at_most,
+                    format!(
+                        "{}{:.1} MB ({}×{}×{} {}, u/v texel {:.4})",
+                        if f.at_most { "≤ " } else { "" },
+                        f.bytes as f64 / 1e6,
+                        f.dims.0,
+                        f.dims.1,
+                        f.layers,
+                        f.format.name(),
+                        inputs
+                            .table
+                            .texel_uv
+                            .unwrap_or_else(|| { TableSpec::default_texel(material.coherence_um) })
                     ),
-                    Err(e) => e.to_string(),
-                },
-                Err(e) => e.to_string(),
-            },
-        };
-        let mark = if kind == VariantKind::DEFAULT {
+                ),
+                (_, Some(Err(e))) => (false, e.to_string()),
+                (Family::Terms, None) => (
+                    false,
+                    format!("the term band × {} layers, RG32F", terms + 1),
+                ),
+                (_, None) => (false, "none (a uniform block)".to_string()),
+            };
+            Listed {
+                kind,
+                fetches: kind.fetches(&inputs),
+                bound,
+                memory,
+            }
+        })
+        .collect();
+    let what = format!(
+        "default material ({}, T = {terms}), BRDF map at θi = 60°, leaving out as render does, {} tables",
+        material.heightfield,
+        table.format.name()
+    );
+    (rows, what)
+}
+
+/// `diffract variants`: the list, with fetches and memory for the default material on a
+/// BRDF map at θi = 60° (its automatic `T` planned, not computed), as `render` reports them.
+pub fn list() -> String {
+    let (rows, what) = listed();
+    let mut s = format!("variant       fetches/pixel  memory ({what})\n");
+    for r in &rows {
+        let mark = if r.kind == VariantKind::DEFAULT {
             " (default)"
         } else {
             ""
         };
-        let mut fetches = kind.fetches(terms, &material, &table);
-        // nmm: per order and axis; the orders the map reaches (at its largest |u|, |v|).
-        if let (VariantKind::Nmm, Ok(hf)) = (kind, &hf) {
-            if let (Ok(g), Ok(w)) = (
-                crate::brdf::nmm::estimate_grating(hf),
-                crate::spectrum::Window::new(
-                    hf.nx(),
-                    hf.ny(),
-                    hf.dh_um(),
-                    material.coherence_um,
-                    material.window_radius,
-                ),
-            ) {
-                let (lx, ly) = hf.extent_um();
-                let t = [0, 1].map(|a| region.lo[a].abs().max(region.hi[a].abs()));
-                let n = crate::brdf::nmm::max_samples(&g, &w, [lx, ly], t, (380.0, 780.0));
-                fetches = fetches / (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * n;
-            }
-        }
+        let fetches = format!("{}{}", if r.bound { "≤ " } else { "" }, r.fetches);
         s.push_str(&format!(
-            "{:<13} {:>13}  {memory}\n    {}{mark}\n",
-            kind.name(),
+            "{:<13} {:>13}  {}\n    {}{mark}\n",
+            r.kind.name(),
             fetches,
-            kind.summary()
+            r.memory,
+            r.kind.summary()
         ));
     }
     let scene = crate::scene::Scene::default_scene();
@@ -657,6 +811,32 @@ pub fn list() -> String {
         "per-vertex (--per-vertex on render, view, profile; thesis §1.5.1): {} evaluated once per mesh vertex, the colour interpolated; cost per vertex, not per pixel\n",
         per_vertex.join(", ")
     ));
+    s
+}
+
+/// docs/variants.md's block: the names `--variant` takes, and each variant's fetch formula
+/// with its count as [`list`] gives it.
+pub fn markdown_fetches() -> String {
+    let (rows, what) = listed();
+    let names: Vec<&str> = VariantKind::CHOICES.iter().map(|k| k.cli_name()).collect();
+    let mut s = format!(
+        "    diffract render --variant {} [--per-vertex] ...\n\n| variant | fetches / pixel | {what} |\n|---|---|---|\n",
+        names.join("|")
+    );
+    for r in &rows {
+        let mark = if r.kind == VariantKind::DEFAULT {
+            " (**default**)"
+        } else {
+            ""
+        };
+        s.push_str(&format!(
+            "| `{}`{mark} | {} | {}{} |\n",
+            r.kind.name(),
+            r.kind.implementation().fetch_formula(),
+            if r.bound { "≤ " } else { "" },
+            r.fetches
+        ));
+    }
     s
 }
 
@@ -687,6 +867,50 @@ pub fn markdown_table() -> String {
         ));
     }
     s
+}
+
+#[cfg(test)]
+pub(super) mod testing {
+    use crate::brdf::table::{Region, Slices, TableSpec};
+
+    /// A 2×2-node region over `w ∈ [−1.6, −1.1]`.
+    pub fn spec(w_nodes: usize) -> TableSpec {
+        TableSpec {
+            region: Region {
+                lo: [-0.1, -0.1, -1.6],
+                hi: [0.1, 0.1, -1.1],
+            },
+            texel_uv: 0.2,
+            w_nodes,
+            step_nm: 10,
+        }
+    }
+
+    /// A cubic in `ŵ` per texel and channel, positive over `[−1, 1]`.
+    pub fn g(t: usize, w_hat: f64) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            let a = 0.1 * (1 + t + c) as f64;
+            0.5 + a * w_hat - 0.2 * w_hat.powi(3) + 0.05 * w_hat * w_hat
+        })
+    }
+
+    /// `g` sampled at `w_nodes` on the four texels.
+    pub fn slices(spec: &TableSpec, w_nodes: &[f64]) -> Slices {
+        let (lo, hi) = (spec.region.lo[2], spec.region.hi[2]);
+        Slices {
+            nu: 2,
+            nv: 2,
+            w: w_nodes.to_vec(),
+            data: w_nodes
+                .iter()
+                .map(|w| {
+                    (0..4)
+                        .map(|t| g(t, (2.0 * w - lo - hi) / (hi - lo)))
+                        .collect()
+                })
+                .collect(),
+        }
+    }
 }
 
 #[cfg(test)]

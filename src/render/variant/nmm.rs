@@ -8,11 +8,15 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::flss::{prepare_terms, FlssGpu};
-use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant, VariantStats};
+use super::{
+    CpuModel, DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Stability, Variant,
+    VariantStats,
+};
 use crate::brdf::nmm::{estimate_grating, Density, Grating};
 use crate::gpu::memory::{Buffer, Pod};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::Device;
+use crate::material::PreparedMaterial;
 use crate::Result;
 
 pub(crate) struct Nmm;
@@ -53,12 +57,38 @@ impl Variant for Nmm {
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
-        (2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1) * (f.terms + 1) * f.taps()
+        let per_lambda = (f.terms + 1) * f.taps();
+        let line = 2 * crate::brdf::nmm::HALF_SAMPLES as usize + 1;
+        let Some(hf) = f.heightfield else {
+            return line * per_lambda;
+        };
+        let window = crate::spectrum::Window::new(
+            hf.nx(),
+            hf.ny(),
+            hf.dh_um(),
+            f.material.coherence_um,
+            f.material.window_radius,
+        );
+        match (estimate_grating(hf), window) {
+            (Ok(g), Ok(w)) => {
+                let n = lambdas_sampled(&g, &w, hf, &f.region, f.kept_range_nm(), f.lambdas());
+                per_lambda * n
+            }
+            _ => 0,
+        }
+    }
+
+    fn fetch_formula(&self) -> &'static str {
+        "13·orders·(T+1)·(2R+1)² (every kept λ where the region holds specular)"
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
         const ROWS: &[Preset] = &[Preset::named("nmm taylor R=2")];
         ROWS
+    }
+
+    fn stability(&self) -> Stability {
+        Stability::Excluded("sums the orders' wavelengths and draws no single one")
     }
 
     fn prepare(
@@ -121,36 +151,84 @@ impl Variant for Nmm {
             period(grating.period_um[1]),
             flss.stats.name.trim_start_matches("flss ")
         );
-        // Per order and axis: 2·HALF_SAMPLES + 1 wavelengths instead of the whole table;
-        // the count is the most any pixel of the region takes (the orders reaching the
-        // kept wavelengths at the region's largest |u| and |v|).
         let per_lambda = flss.stats.fetches / flss.keep.len().max(1);
-        let r = &setup.region;
-        let t_max = [0, 1].map(|a| r.lo[a].abs().max(r.hi[a].abs()));
         let range = (ubo.lambda_range[0] as f64, ubo.lambda_range[1] as f64);
-        let samples = crate::brdf::nmm::max_samples(&grating, &p.window, [lx, ly], t_max, range);
-        // Near specular (if the region holds it) every kept wavelength is summed instead.
-        let specular = (0..2).all(|a| r.lo[a] <= 0.0 && r.hi[a] >= 0.0);
-        let lambdas = if specular {
-            samples.max(flss.keep.len())
-        } else {
-            samples
-        };
-        flss.stats.fetches = per_lambda * lambdas.max(1);
+        let lambdas = lambdas_sampled(
+            &grating,
+            &p.window,
+            &p.heightfield,
+            &setup.region,
+            range,
+            flss.keep.len(),
+        );
+        flss.stats.fetches = per_lambda * lambdas;
         Ok(Box::new(NmmGpu {
             flss,
             info,
             density,
-            grating,
+            model: NmmModel {
+                grating,
+                density: Density::new(),
+            },
         }))
     }
+}
+
+/// Wavelengths a pixel sums at most over `region`: per order and axis 2·HALF_SAMPLES + 1
+/// instead of the whole table, for the orders reaching the wavelengths in `range` at the
+/// region's largest |u| and |v|; near specular (where the region holds it) every one of
+/// the `kept` wavelengths instead.
+fn lambdas_sampled(
+    grating: &Grating,
+    window: &crate::spectrum::Window,
+    hf: &crate::heightfield::HeightField,
+    region: &crate::brdf::table::Region,
+    range: (f64, f64),
+    kept: usize,
+) -> usize {
+    let (lx, ly) = hf.extent_um();
+    let t_max = [0, 1].map(|a| region.lo[a].abs().max(region.hi[a].abs()));
+    let samples = crate::brdf::nmm::max_samples(grating, window, [lx, ly], t_max, range);
+    let specular = (0..2).all(|a| region.lo[a] <= 0.0 && region.hi[a] >= 0.0);
+    let n = if specular { samples.max(kept) } else { samples };
+    n.max(1)
 }
 
 struct NmmGpu {
     flss: FlssGpu,
     info: Buffer,
     density: Buffer,
+    model: NmmModel,
+}
+
+/// NMM in f64: FLSS's series at the orders' wavelengths, Jacobian-weighted, for the
+/// grating the shader was given.
+struct NmmModel {
     grating: Grating,
+    density: Density,
+}
+
+impl CpuModel for NmmModel {
+    fn xyz(
+        &self,
+        p: &PreparedMaterial,
+        colour: &crate::colour::ColourTable,
+        wi: [f64; 3],
+        wr: [f64; 3],
+    ) -> [f64; 3] {
+        crate::brdf::nmm::xyz(
+            &p.stack,
+            p.terms(),
+            &p.window,
+            &p.shading,
+            colour,
+            &self.grating,
+            &self.density,
+            wi,
+            wr,
+            true,
+        )
+    }
 }
 
 impl PreparedVariant for NmmGpu {
@@ -184,7 +262,7 @@ impl PreparedVariant for NmmGpu {
         self.flss.stats()
     }
 
-    fn grating(&self) -> Option<Grating> {
-        Some(self.grating)
+    fn model(&self) -> Option<&dyn CpuModel> {
+        Some(&self.model)
     }
 }

@@ -9,11 +9,15 @@ use std::sync::Arc;
 use ash::vk;
 
 use super::flss::{prepare_terms, FlssGpu};
-use super::{DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Variant, VariantStats};
+use super::{
+    CpuModel, DrawSetup, Family, FetchInputs, PreparedVariant, Preset, Stability, Variant,
+    VariantStats,
+};
 use crate::brdf::pq::{estimate_periodicity, Periodicity, TAPS};
 use crate::gpu::memory::{Buffer, Pod};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::Device;
+use crate::material::PreparedMaterial;
 use crate::Result;
 
 pub(crate) struct Pq;
@@ -55,6 +59,10 @@ impl Variant for Pq {
         f.lambdas() * (f.terms + 1) * TAPS.pow(2)
     }
 
+    fn fetch_formula(&self) -> &'static str {
+        "λ·(T+1)·9"
+    }
+
     fn profile_presets(&self) -> &'static [Preset] {
         const ROWS: &[Preset] = &[
             Preset::named("pq taylor"),
@@ -64,6 +72,10 @@ impl Variant for Pq {
             },
         ];
         ROWS
+    }
+
+    fn stability(&self) -> Stability {
+        Stability::Excluded("integrates one period's spectrum and draws no single wavelength")
     }
 
     fn prepare(
@@ -147,14 +159,43 @@ impl Variant for Pq {
         flss.stats.fetches = per_tap * ax.taps * ay.taps;
         flss.stats.gpu_bytes += std::mem::size_of::<PqInfoUbo>();
         debug_assert!(ax.taps <= TAPS && ay.taps <= TAPS);
-        Ok(Box::new(PqGpu { flss, info, pq }))
+        Ok(Box::new(PqGpu {
+            flss,
+            info,
+            pq: PqModel(pq),
+        }))
     }
 }
 
 struct PqGpu {
     flss: FlssGpu,
     info: Buffer,
-    pq: Periodicity,
+    pq: PqModel,
+}
+
+/// PQ in f64: one period's spectrum times the periodic factor, for the periodicity the
+/// shader was given.
+struct PqModel(Periodicity);
+
+impl CpuModel for PqModel {
+    fn xyz(
+        &self,
+        p: &PreparedMaterial,
+        colour: &crate::colour::ColourTable,
+        wi: [f64; 3],
+        wr: [f64; 3],
+    ) -> [f64; 3] {
+        crate::brdf::pq::xyz(
+            &p.stack,
+            p.terms(),
+            &self.0,
+            &p.shading,
+            colour,
+            wi,
+            wr,
+            crate::brdf::pq::Form::Intensity,
+        )
+    }
 }
 
 impl PreparedVariant for PqGpu {
@@ -182,8 +223,8 @@ impl PreparedVariant for PqGpu {
         self.flss.stats()
     }
 
-    fn periodicity(&self) -> Option<Periodicity> {
-        Some(self.pq)
+    fn model(&self) -> Option<&dyn CpuModel> {
+        Some(&self.pq)
     }
 
     /// FLSS's record, with the memory of pq's own uniform block (as its stats count it).

@@ -10,7 +10,8 @@ use ash::vk;
 use indicatif::{ProgressBar, ProgressStyle};
 
 use super::{
-    DrawSetup, PreparedVariant, TableFormat, TableOptions, VariantKind, VariantStats, SPEC_COUNT,
+    CpuModel, DrawSetup, PreparedVariant, SpecConstant, Specialisation, TableFormat, TableOptions,
+    VariantKind, VariantStats,
 };
 use crate::brdf::table::{prefilter_disc, GTable, Region, Slices, TableSpec};
 use crate::colour::ColourTable;
@@ -32,6 +33,70 @@ pub(crate) enum Layout {
     /// `3j + 1`, `3j + 2` of each texel's flat sequence over the layers, so `K` planes take
     /// `⌈3K/4⌉` layers (no unused alpha channel to store and fetch).
     PackedPlanes,
+}
+
+/// How a table variant lays its planes out on the GPU.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct TableLayout {
+    pub layout: Layout,
+    /// Texels added on each side of a plane (a cubic B-spline's ghosts).
+    pub ghosts: usize,
+    /// The planes are fitted to the data after sampling, so there may be fewer than the
+    /// `w` nodes.
+    pub fitted: bool,
+}
+
+/// What a table takes on the GPU: the figures `render` reports and `diffract variants`
+/// lists, both from [`footprint`].
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Footprint {
+    /// Planes of XYZ (the `w` nodes, or coefficients).
+    pub planes: usize,
+    /// Image layers (or 3D slices) they take.
+    pub layers: usize,
+    /// Texels of a layer along `u` and `v`.
+    pub dims: (usize, usize),
+    /// Texel fetches per evaluation.
+    pub fetches: usize,
+    pub bytes: usize,
+    pub format: TableFormat,
+    /// Planes, layers, fetches and bytes are bounds: the planes are fitted to the data.
+    pub at_most: bool,
+}
+
+/// The footprint of `planes` planes of `dims` texels (for `nodes` nodes) in `layout` and
+/// `format`: per layer a bilinear plane takes one fetch, a spline plane (with ghosts,
+/// `dims ≠ nodes`) four; a volume takes one trilinear fetch.
+pub(crate) fn footprint(
+    layout: Layout,
+    planes: usize,
+    nodes: (usize, usize),
+    dims: (usize, usize),
+    format: TableFormat,
+) -> Footprint {
+    let layers = layer_count(planes, layout);
+    let per_layer = if dims == nodes { 1 } else { 4 };
+    Footprint {
+        planes,
+        layers,
+        dims,
+        fetches: match layout {
+            Layout::Volume => 1,
+            Layout::Planes | Layout::PackedPlanes => per_layer * layers,
+        },
+        bytes: dims.0 * dims.1 * layers * format.texel_bytes(),
+        format,
+        at_most: false,
+    }
+}
+
+/// The fetches of table variant `kind` for `inputs` (0 where its table cannot be built
+/// for them: the draw refuses it too).
+pub(crate) fn fetches(kind: VariantKind, inputs: &super::FetchInputs<'_>) -> usize {
+    match kind.footprint(inputs) {
+        Some(Ok(f)) => f.fetches,
+        _ => 0,
+    }
 }
 
 /// Image layers that `planes` planes of XYZ take when packed four values a texel.
@@ -147,14 +212,34 @@ pub(crate) fn prepare<T: GTable + 'static>(
         gpu_bytes_keep_all: gpu.stats.gpu_bytes,
     });
     if setup.keep_model {
-        gpu.model = Some(Box::new(table));
+        gpu.model = Some(TableModel(Box::new(table)));
     }
     Ok(Box::new(gpu))
 }
 
+/// A table variant in f64: `C(ωi, ωr)·G` with the f64 table the shader's planes were
+/// rounded from, interpolated as the shader interpolates them.
+struct TableModel(Box<dyn GTable>);
+
+impl CpuModel for TableModel {
+    fn xyz(
+        &self,
+        p: &crate::material::PreparedMaterial,
+        _colour: &ColourTable,
+        wi: [f64; 3],
+        wr: [f64; 3],
+    ) -> [f64; 3] {
+        self.0.xyz(&p.shading, wi, wr)
+    }
+
+    fn table(&self) -> Option<&dyn GTable> {
+        Some(&*self.0)
+    }
+}
+
 struct TableGpu {
     stats: VariantStats,
-    model: Option<Box<dyn GTable>>,
+    model: Option<TableModel>,
     left_out: Option<LeftOut>,
     terms: u32,
     info: Buffer,
@@ -175,27 +260,9 @@ impl TableGpu {
         let (nu, nv) = table.nodes_uv();
         let (pu, pv) = table.plane_dims();
         let planes = table.planes();
-        let linear = vk::FormatFeatureFlags::SAMPLED_IMAGE
-            | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
-        // Float32 where the device filters it linearly, else float16.
-        let format = match format {
-            TableFormat::Rgba32f
-                if dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear) =>
-            {
-                TableFormat::Rgba32f
-            }
-            _ => TableFormat::Rgba16f,
-        };
-        let (vk_format, texel_bytes) = match format {
-            TableFormat::Rgba32f => (vk::Format::R32G32B32A32_SFLOAT, 16),
-            TableFormat::Rgba16f => (vk::Format::R16G16B16A16_SFLOAT, 8),
-        };
-        if !dev.supports_format(vk_format, linear) {
-            return Err(Error::invalid(
-                "table format",
-                format!("{} cannot filter {vk_format:?} linearly", dev.info.name),
-            ));
-        }
+        let (format, vk_format) = filterable_format(dev, format)?;
+        let texel_bytes = format.texel_bytes();
+        let fp = footprint(layout, planes.len(), (nu, nv), (pu, pv), format);
         let info = &dev.info;
         let (limit, view_type) = match layout {
             Layout::Volume => (info.max_image_dimension_3d, vk::ImageViewType::TYPE_3D),
@@ -208,7 +275,7 @@ impl TableGpu {
             Layout::Volume => info.max_image_dimension_3d,
             Layout::Planes | Layout::PackedPlanes => info.max_image_array_layers,
         };
-        let layers = layer_count(planes.len(), layout);
+        let layers = fp.layers;
         if pu as u32 > limit || pv as u32 > limit || layers as u32 > depth_limit {
             return Err(Error::invalid(
                 "table size",
@@ -217,21 +284,7 @@ impl TableGpu {
                 ),
             ));
         }
-        let texels = planes.first().map_or(0, Vec::len);
-        let mut bytes = Vec::with_capacity(texels * layers * texel_bytes);
-        for layer in 0..layers {
-            for t in 0..texels {
-                let rgba = layer_texel(planes, layout, layer, t);
-                match format {
-                    TableFormat::Rgba32f => rgba
-                        .iter()
-                        .for_each(|c| bytes.extend_from_slice(&c.to_le_bytes())),
-                    TableFormat::Rgba16f => rgba
-                        .iter()
-                        .for_each(|c| bytes.extend_from_slice(&f32_to_f16(*c).to_le_bytes())),
-                }
-            }
-        }
+        let bytes = texel_bytes_of(planes, layout, layers, format);
         let image = Image::sampled_with_data(
             dev,
             &format!("{kind} table"),
@@ -265,12 +318,7 @@ impl TableGpu {
             vk::BufferUsageFlags::UNIFORM_BUFFER,
             std::slice::from_ref(&ubo),
         )?;
-        // Per layer: bilinear planes one fetch, spline planes (with ghosts) four.
-        let per_layer = if (pu, pv) == (nu, nv) { 1 } else { 4 };
-        let fetches = match layout {
-            Layout::Volume => 1,
-            Layout::Planes | Layout::PackedPlanes => per_layer * layers,
-        };
+        debug_assert_eq!(bytes.len(), fp.bytes);
         Ok(Self {
             model: None,
             left_out: None,
@@ -283,7 +331,7 @@ impl TableGpu {
                 ),
                 build_ms: start.elapsed().as_secs_f64() * 1e3,
                 gpu_bytes: bytes.len(),
-                fetches,
+                fetches: fp.fetches,
                 table_build: None,
                 disc_prefiltered: false,
             },
@@ -298,6 +346,56 @@ impl TableGpu {
             image,
         })
     }
+}
+
+/// `format` where the device filters it linearly (float32 falls back to float16), and its
+/// Vulkan format; an error where it filters neither.
+fn filterable_format(dev: &Device, format: TableFormat) -> Result<(TableFormat, vk::Format)> {
+    let linear =
+        vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
+    let format = match format {
+        TableFormat::Rgba32f if dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear) => {
+            TableFormat::Rgba32f
+        }
+        _ => TableFormat::Rgba16f,
+    };
+    let vk_format = match format {
+        TableFormat::Rgba32f => vk::Format::R32G32B32A32_SFLOAT,
+        TableFormat::Rgba16f => vk::Format::R16G16B16A16_SFLOAT,
+    };
+    if !dev.supports_format(vk_format, linear) {
+        return Err(Error::invalid(
+            "table format",
+            format!("{} cannot filter {vk_format:?} linearly", dev.info.name),
+        ));
+    }
+    Ok((format, vk_format))
+}
+
+/// The bytes of `layers` image layers of `planes` in `layout` and `format`, layer by
+/// layer, texel by texel.
+fn texel_bytes_of(
+    planes: &[Vec<[f64; 3]>],
+    layout: Layout,
+    layers: usize,
+    format: TableFormat,
+) -> Vec<u8> {
+    let texels = planes.first().map_or(0, Vec::len);
+    let mut bytes = Vec::with_capacity(texels * layers * format.texel_bytes());
+    for layer in 0..layers {
+        for t in 0..texels {
+            let rgba = layer_texel(planes, layout, layer, t);
+            match format {
+                TableFormat::Rgba32f => rgba
+                    .iter()
+                    .for_each(|c| bytes.extend_from_slice(&c.to_le_bytes())),
+                TableFormat::Rgba16f => rgba
+                    .iter()
+                    .for_each(|c| bytes.extend_from_slice(&f32_to_f16(*c).to_le_bytes())),
+            }
+        }
+    }
+    bytes
 }
 
 /// Image layers that `planes` planes of XYZ take in `layout`.
@@ -345,17 +443,17 @@ impl PreparedVariant for TableGpu {
         ]
     }
 
-    fn specialise(&self, spec: &mut [u32; SPEC_COUNT]) {
-        spec[9] = self.terms;
-        spec[10] = self.stats.disc_prefiltered as u32;
+    fn specialise(&self, spec: &mut Specialisation) {
+        spec[SpecConstant::TableTerms] = self.terms;
+        spec[SpecConstant::DiscPrefiltered] = self.stats.disc_prefiltered as u32;
     }
 
     fn stats(&self) -> VariantStats {
         self.stats.clone()
     }
 
-    fn table_model(&self) -> Option<&dyn GTable> {
-        self.model.as_deref()
+    fn model(&self) -> Option<&dyn CpuModel> {
+        self.model.as_ref().map(|m| m as &dyn CpuModel)
     }
 
     fn left_out(&self) -> Option<LeftOut> {
