@@ -396,6 +396,9 @@ pub struct ProfileRun {
     pub skipped: Vec<Skipped>,
     /// Wall time of the whole profile (s).
     pub wall_s: f64,
+    /// Pixels scored: those asked for, or fewer where the budget's share of the reference
+    /// ran out (the first ones picked, bright and spread in proportion).
+    pub scored: usize,
 }
 
 /// What to profile.
@@ -666,6 +669,7 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<ProfileR
         }
     }
     out.wall_s = run.start.elapsed().as_secs_f64();
+    out.scored = run.samples.as_ref().map_or(0, |s| s.0.len());
     Ok(out)
 }
 
@@ -1356,14 +1360,23 @@ fn header(device: &str, setup: &ProfileSetup, run: &ProfileRun) -> String {
             100.0 * b.precision
         ),
     };
+    let asked = setup.brightest + setup.pixels;
+    let scored = if run.scored < asked {
+        format!(
+            "{} of {asked} scored pixels (the reference's share of the budget ran out; {} brightest + {} spread asked)",
+            run.scored, setup.brightest, setup.pixels
+        )
+    } else {
+        format!(
+            "{asked} scored pixels ({} brightest + {} spread)",
+            setup.brightest, setup.pixels
+        )
+    };
     format!(
-        "device: {device}; BRDF map {}² at θi = {}°, φi = {}°{mesh}; {} scored pixels ({} brightest + {} spread), errors against the reference with 95 % bootstrap intervals over them; {frames}; reference: f64 direct sum at 1 nm\n\n",
+        "device: {device}; BRDF map {}² at θi = {}°, φi = {}°{mesh}; {scored}, errors against the reference with 95 % bootstrap intervals over them; {frames}; reference: f64 direct sum at 1 nm\n\n",
         setup.size,
         setup.theta_i_deg,
         setup.phi_i_deg,
-        setup.brightest + setup.pixels,
-        setup.brightest,
-        setup.pixels,
     )
 }
 

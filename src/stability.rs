@@ -803,7 +803,7 @@ pub fn to_markdown(spec: &MatrixSpec, cells: &[Cell], header: &str) -> String {
     }
     for kind in VariantKind::ALL {
         if let Stability::Excluded(why) = kind.implementation().stability() {
-            s += &format!("- not in the spectral matrix: {kind}, {why}\n");
+            s += &format!("- not in the spectral matrix: {kind}, which {why}\n");
         }
     }
     for cfg in configs(spec) {

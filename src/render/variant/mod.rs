@@ -1,11 +1,13 @@
 //! Shader variants (MODEL §7). Each variant is one room: its file declares everything about
-//! it through [`Variant`] — name, one line, shader stages, `w`-node default, fetch formula,
-//! what it refuses, its profile rows — and builds its GPU resources behind
-//! [`PreparedVariant`]; its GLSL lives in glsl/ (build.rs embeds every stage there). The
-//! registry at the bottom of this header is the one list of variants: the enum
-//! [`VariantKind`], `--variant` parsing, `diffract variants`, the profiler's rows and the
-//! viewer's `V` cycle all come from it. Adding a variant is its file, its GLSL and one
-//! registry line.
+//! it through [`Variant`] — name, one line, shader stages, `w`-node default, fetches and
+//! table layout, what it refuses, its profile rows, its stability cases — and builds its
+//! GPU resources behind [`PreparedVariant`], which also hands out its CPU model
+//! ([`CpuModel`]); its GLSL lives in glsl/ (build.rs embeds every stage there and names
+//! the specialisation constants, [`SpecConstant`]). The registry below is the one list of
+//! variants: the enum [`VariantKind`], `--variant` parsing, `diffract variants`, the
+//! profiler's rows, the stability matrix and the viewer's `V` cycle all come from it. Adding
+//! a variant is its file, its GLSL and one registry line; the trait methods without a
+//! default (the model, the stability cases, the fetches) make the compiler ask for the rest.
 //!
 //! Shared bindings (every variant's layout has them): 0 `Params` uniform block, 2 colour
 //! weights, 3 surface texture. A variant adds binding 1 (its main table) and 4 onwards.
