@@ -170,7 +170,8 @@ impl<'a> Cursor<'a> {
             }
             b'O' => {
                 let n = self.u32("array length")? as usize;
-                // Each object takes at least 5 bytes: a bound before the vector grows.
+                // Each object takes at least 5 bytes: a count the bytes cannot hold is
+                // refused at once instead of failing item by item.
                 if n > (self.bytes.len() - self.pos) / 5 {
                     return Err(format!(
                         "object array of {n} items cannot fit the bytes left"
