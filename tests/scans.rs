@@ -144,6 +144,16 @@ mod fixture {
             comps.push((format!("/{n}/data/title"), V::S(c.title.into())));
             comps.push((format!("/{n}/data"), V::O(data_field(c))));
             comps.push((format!("/{n}/base/palette"), V::S("Gray".into())));
+            if c.title == "Height" {
+                // A mask over every fifth sample.
+                let mask = Chan {
+                    title: "mask",
+                    z: "",
+                    data: (0..c.nx * c.ny).map(|i| f64::from(i % 5 == 0)).collect(),
+                    ..*c
+                };
+                comps.push((format!("/{n}/mask"), V::O(data_field(&mask))));
+            }
         }
         let mut out = b"GWYP".to_vec();
         out.extend(object(&Obj {
@@ -229,11 +239,9 @@ fn gwy_channels_round_trip_with_their_units_odd_and_non_square() {
     let report = Collect::default();
     let hf = source(&file, "none").load(&report).unwrap();
     check(&hf, 2.0, 1e-3);
-    assert!(
-        report.notes()[0].contains("\"Height\" (nm), 37×23"),
-        "{:?}",
-        report.notes()
-    );
+    let notes = report.notes();
+    assert!(notes[0].contains("mask marks 171 samples"), "{notes:?}");
+    assert!(notes[1].contains("\"Height\" (nm), 37×23"), "{notes:?}");
     // By title and by index (channel order: /0, /1, /2, /4).
     let pick = |c: &str| Source {
         channel: Some(c.into()),

@@ -170,7 +170,8 @@ impl<'a> Cursor<'a> {
             }
             b'O' => {
                 let n = self.u32("array length")? as usize;
-                // Each object takes at least 5 bytes: a bound before the vector grows.
+                // Each object takes at least 5 bytes: a count the bytes cannot hold is
+                // refused at once instead of failing item by item.
                 if n > (self.bytes.len() - self.pos) / 5 {
                     return Err(format!(
                         "object array of {n} items cannot fit the bytes left"
@@ -206,13 +207,9 @@ impl GwyFile {
         Self { bytes }
     }
 
-    /// The channels' descriptions and, for `pick` (an index into them), the decoded channel.
+    /// The channels' descriptions, in channel-number order.
     pub fn channels(&self, path: &Path) -> Result<Vec<ChannelInfo>> {
-        Ok(self
-            .parse(path)?
-            .into_iter()
-            .map(|(info, _)| info)
-            .collect())
+        Ok(self.parse(path)?.into_iter().map(|f| f.info).collect())
     }
 
     /// Decodes channel `index` (an index into [`GwyFile::channels`]).
@@ -221,7 +218,7 @@ impl GwyFile {
         if index >= all.len() {
             return Err(Error::parse(path, format!("no channel {index}")));
         }
-        let (info, data) = all.swap_remove(index);
+        let Found { info, data, .. } = all.swap_remove(index);
         let data = data
             .chunks_exact(8)
             .map(|b| f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]))
@@ -230,7 +227,7 @@ impl GwyFile {
     }
 
     /// Parses the tree and lists the channels with their data bytes (checked sizes).
-    fn parse(&self, path: &Path) -> Result<Vec<(ChannelInfo, &[u8])>> {
+    fn parse(&self, path: &Path) -> Result<Vec<Found<'_>>> {
         let bad = |msg: String| Error::parse(path, msg);
         if !self.bytes.starts_with(MAGIC) {
             let what = if self.bytes.starts_with(b"GWYO") {
@@ -266,11 +263,44 @@ impl GwyFile {
                 Some(Value::Str(s)) => s.to_string(),
                 _ => format!("channel {n}"),
             };
-            found.push((n, channel_of(path, field, title)?));
+            let (info, data) = channel_of(path, field, title)?;
+            // A mask of the same size (Gwyddion marks points with values ≥ 0.5).
+            let mask = match root.get(&format!("/{n}/mask")) {
+                Some(Value::Object(m)) if m.type_name == "GwyDataField" => {
+                    match channel_of(path, m, "mask".into()) {
+                        Ok((mi, bytes)) if (mi.nx, mi.ny) == (info.nx, info.ny) => Some(bytes),
+                        _ => None,
+                    }
+                }
+                _ => None,
+            };
+            found.push((n, Found { info, data, mask }));
         }
         found.sort_by_key(|(n, _)| *n);
         Ok(found.into_iter().map(|(_, c)| c).collect())
     }
+
+    /// How many samples of channel `index` its mask marks (`None`: no mask). Gwyddion marks
+    /// points it filled on import, or features a user selected; the data under a mask are
+    /// finite either way.
+    pub fn masked_points(&self, path: &Path, index: usize) -> Result<Option<usize>> {
+        let all = self.parse(path)?;
+        Ok(all.get(index).and_then(|f| f.mask).map(|bytes| {
+            bytes
+                .chunks_exact(8)
+                .filter(|b| {
+                    f64::from_le_bytes([b[0], b[1], b[2], b[3], b[4], b[5], b[6], b[7]]) >= 0.5
+                })
+                .count()
+        }))
+    }
+}
+
+/// A channel found in the container: its description, its data bytes and its mask's.
+struct Found<'a> {
+    info: ChannelInfo,
+    data: &'a [u8],
+    mask: Option<&'a [u8]>,
 }
 
 /// `"/12/data"` → 12.

@@ -156,6 +156,13 @@ impl Source {
                 let file = super::gwy::GwyFile::read(path)?;
                 let infos = file.channels(path)?;
                 let i = super::scan::choose_channel(path, &infos, self.channel.as_deref())?;
+                if let Some(n) = file.masked_points(path, i)? {
+                    report.note(&format!(
+                        "scan {}: the channel's mask marks {n} samples; diffract uses every \
+                         sample as stored (Gwyddion fills invalid points under its mask)",
+                        path.display()
+                    ));
+                }
                 file.channel(path, i)?
             }
         };

@@ -9,8 +9,9 @@ use std::path::Path;
 use super::{HeightField, MAX_SIDE};
 use crate::{Error, Result};
 
-/// Largest scan file read (bytes): eight channels of a 4096² scan in f64.
-pub const MAX_SCAN_BYTES: u64 = 8 * (MAX_SIDE * MAX_SIDE * 8) as u64 + (1 << 20);
+/// Largest scan file read (bytes): four channels of a 4096² scan in f64 (512 MiB) and
+/// a megabyte of metadata. A `.gwy` is read whole; the chosen channel is decoded from it.
+pub const MAX_SCAN_BYTES: u64 = 4 * (MAX_SIDE * MAX_SIDE * 8) as u64 + (1 << 20);
 
 /// What a reader knows about one channel before its data are decoded.
 #[derive(Debug, Clone, PartialEq)]
