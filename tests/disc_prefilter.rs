@@ -1,5 +1,5 @@
 //! The sun's disc pre-filtered into a table (f64 CPU models): one evaluation at the disc's
-//! centre against the per-direction sums the shaders used to make, across a first-order
+//! centre against the per-direction sums over the disc, across a first-order
 //! lobe of a grating, where the disc matters most (the lobe, ~0.005 wide in u, is narrower
 //! than the disc, 0.0093 across).
 

@@ -114,7 +114,7 @@ fn spectral_map_matches_cpu_rho() {
 }
 
 /// Later maps of the same size and material reuse the first map's pipeline, target and
-/// command buffer (issue #10, soak) and only rewrite the uniform block: a map drawn after a
+/// command buffer and only rewrite the uniform block: a map drawn after a
 /// spectral map and a map at another angle is the map a fresh renderer draws.
 #[test]
 fn a_reused_map_pass_draws_what_a_fresh_one_draws() {

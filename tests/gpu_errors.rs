@@ -141,8 +141,8 @@ fn map_writes_exr_and_png() {
     assert!(png.exists(), "--png writes {}", png.display());
 }
 
-/// Issue #10: the completion line of `render --brdf-map -o X.exr --png` names the PNG it
-/// wrote beside the EXR (it used to name the EXR only).
+/// The completion line of `render --brdf-map -o X.exr --png` names the PNG it wrote beside
+/// the EXR as well as the EXR.
 #[test]
 fn the_completion_line_names_the_png_beside_the_exr() {
     let Some(_) = renderer() else { return };

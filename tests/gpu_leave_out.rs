@@ -1,4 +1,4 @@
-//! Leaving out what a scene does not need (issue #8, item 4), through the real render path:
+//! Leaving out what a scene does not need, through the real render path:
 //! the renderer with leaving out on draws what it draws with everything kept, within the
 //! stated bound — per pixel `|ΔXYZ| ≤ C(ωi, ωr) · (left-out weight)` (plus float32 noise),
 //! since `|P̂|² ≤ 1` at every left-out wavelength — while it loops over fewer wavelengths,

@@ -1,4 +1,4 @@
-//! The default scene as a person sees it (issue #12): the close-up of the corn snake under
+//! The default scene as a person sees it: the close-up of the corn snake under
 //! the sun's disc, with the default variant, must be free of aliasing. Supersampling is the
 //! anti-aliasing: a 512² render and a 1024² render box-filtered to 512² (16 samples a pixel
 //! against the default 4) differ, over the pixels the snake covers, by mean CIEDE2000 ≤ 2

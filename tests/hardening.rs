@@ -1,4 +1,4 @@
-//! Issue #10 beyond the bad-input table: the term cache's temporary files (removed on
+//! Beyond the bad-input table: the term cache's temporary files (removed on
 //! Ctrl-C, cleaned after a crash), its size cap and `diffract cache list|clear`, and the
 //! memory limit of the precompute, all through the binary.
 
@@ -303,9 +303,9 @@ fn peak_kb(cmd: &mut Command) -> (u64, std::process::Output) {
     (usage.ru_maxrss as u64, o)
 }
 
-/// Issue #10, "memory at the documented limit": the largest request the limit allows at
-/// 2048² (`T = 14`) runs in well under 4 GB of peak RSS (it took 15.2 GB at 4096² before the
-/// limit), and one over it is refused before it takes memory.
+/// Memory at the documented limit: the largest request the limit allows at 2048²
+/// (`T = 14`) runs in well under 4 GB of peak RSS, and one over it is refused before it
+/// takes memory.
 #[test]
 fn precompute_at_the_memory_limit_stays_under_4_gb() {
     let d = scratch("peak");

@@ -395,7 +395,7 @@ fn args(kind: GratingKind, out: PathBuf) -> HeightfieldArgs {
         kind: Some(kind),
         from_sample: None,
         samples: None,
-        hmax_um: None,
+        h_max_um: None,
         channel: None,
         level: None,
         out,

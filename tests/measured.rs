@@ -406,7 +406,7 @@ fn builtin_and_cli_growing_agree() {
         size_um: None,
         samples: Some(GROWN_SAMPLES),
         dh_um: None,
-        hmax_um: None,
+        h_max_um: None,
         channel: None,
         level: None,
         period_um: None,

@@ -1,4 +1,4 @@
-//! Issue #8, "never silently wrong": each case of the issue's *Why* gives the right number,
+//! Never silently wrong: each troublesome case gives the right number,
 //! a refusal or a warning; automatic `T` meets its tolerance against the f64 reference
 //! across a reduced stability matrix; the GPU stays within the stated float32 bound of its
 //! f64 model in every non-refused cell; the grazing limit is continuous; the
@@ -182,7 +182,7 @@ fn why_overflowing_inputs_are_rejected_with_one_line() {
 #[test]
 fn why_smallest_pixel_size_gives_zero_off_specular_in_model_and_reference() {
     // At the smallest accepted dH the patch is far below a wavelength: only the specular
-    // order propagates, so ρ off specular is 0 (dH = 1e-20 used to read the specular texel).
+    // order propagates, so ρ off specular is 0.
     let n = 16;
     let h: Vec<f64> = (0..n * n)
         .map(|i| 0.05 * ((i % n) as f64 * 0.7).sin())

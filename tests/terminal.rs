@@ -1,4 +1,4 @@
-//! Progress on a terminal (issue #10): the slow steps draw a bar or a spinner on stderr when
+//! Progress on a terminal: the slow steps draw a bar or a spinner on stderr when
 //! stderr is a terminal, and print nothing but their normal lines when it is not (scripts,
 //! CI logs). The terminal is a pseudo-terminal made by util-linux `script`; stdout goes to a
 //! file, so what the terminal shows is stderr alone. Without `script` (or, for the GPU

@@ -34,8 +34,13 @@ pub struct HeightfieldArgs {
     pub dh_um: Option<f64>,
     /// --from-sample: height of the sample's grey level 1 in µm (a scan's peak-to-valley
     /// height; overrides its sidecar).
-    #[arg(long, allow_negative_numbers = true, requires = "from_sample")]
-    pub hmax_um: Option<f64>,
+    #[arg(
+        long = "hmax-um",
+        value_name = "HMAX_UM",
+        allow_negative_numbers = true,
+        requires = "from_sample"
+    )]
+    pub h_max_um: Option<f64>,
     /// --from-sample: the scan channel, by index or title [default: the first height channel].
     #[arg(long, requires = "from_sample")]
     pub channel: Option<String>,
@@ -116,7 +121,7 @@ pub fn run_heightfield(args: &HeightfieldArgs) -> Result<()> {
 }
 
 fn run_generate(args: &HeightfieldArgs) -> Result<()> {
-    if args.samples.is_some() || args.hmax_um.is_some() {
+    if args.samples.is_some() || args.h_max_um.is_some() {
         return Err(Error::invalid(
             "heightfield",
             "--samples and --hmax-um only apply to --from-sample",
@@ -145,7 +150,7 @@ fn run_generate(args: &HeightfieldArgs) -> Result<()> {
 fn run_grow(args: &HeightfieldArgs, sample: &str) -> Result<()> {
     let source = crate::heightfield::Source {
         dh_um: args.dh_um,
-        h_max_um: args.hmax_um,
+        h_max_um: args.h_max_um,
         channel: args.channel.clone(),
         level: args.level.clone(),
         ..crate::heightfield::Source::new(sample)

@@ -27,8 +27,12 @@ pub struct MaterialArgs {
     pub dh_um: Option<f64>,
     /// Height of grey level 1 in µm; scans and builtin: the peak-to-valley height (overrides
     /// the sidecar).
-    #[arg(long, allow_negative_numbers = true)]
-    pub hmax_um: Option<f64>,
+    #[arg(
+        long = "hmax-um",
+        value_name = "HMAX_UM",
+        allow_negative_numbers = true
+    )]
+    pub h_max_um: Option<f64>,
     /// Highest expansion term T (terms 0..=T), or auto: the smallest T (and the expansion)
     /// meeting --tolerance [default: auto].
     #[arg(long)]
@@ -75,8 +79,8 @@ impl MaterialArgs {
         if self.tile.is_some() {
             base.tile = self.tile;
         }
-        if self.hmax_um.is_some() {
-            base.h_max_um = self.hmax_um;
+        if self.h_max_um.is_some() {
+            base.h_max_um = self.h_max_um;
         }
         if let Some(t) = self.terms {
             base.terms = t;

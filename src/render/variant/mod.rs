@@ -956,7 +956,7 @@ mod tests {
         let t = TableOptions::default();
         let w = [-1.5, -0.5];
         // The shipped Elaphe-like grating (0.37 µm): a = 16.5·0.37·0.5 ≈ 3.1, J_j(3.1) ≤ 1e-4
-        // from j = 9 on: 11 coefficients (16 before they were fitted to the w range) …
+        // from j = 9 on: 11 coefficients (fitted to the w range; the unfitted default is 16) …
         assert_eq!(t.w_nodes_for_field(VariantKind::ChebyshevW, 0.37, w), 11);
         // … fewer over a narrower range, never fewer than the floor.
         assert!(t.w_nodes_for_field(VariantKind::ChebyshevW, 0.37, [-1.2, -1.0]) < 11);
