@@ -106,22 +106,16 @@ fn with_path(path: &Path) -> impl FnOnce(Error) -> Error + '_ {
 }
 
 impl HeightField {
-    /// Loads a PNG (8/16-bit grey; RGB/RGBA/palette with R = G = B; alpha ignored) or raw `.f32` height field. `dh_um`
+    /// Reads a PNG (8/16-bit grey; RGB/RGBA/palette with R = G = B; alpha ignored) or raw `.f32` height field. `dh_um`
     /// and `h_max_um` override the sidecar; a value missing from both is an error naming
     /// both places. Never panics on a bad file.
     ///
-    /// A Gwyddion scan (`.gsf`, `.gwy`) is read as stored: its first height channel, in its
-    /// units, not levelled ([`super::load::Source`] levels and reports).
-    pub fn load(path: &Path, dh_um: Option<f64>, h_max_um: Option<f64>) -> Result<HeightField> {
-        if super::load::is_scan(&path.to_string_lossy()) {
-            let source = super::load::Source {
-                dh_um,
-                h_max_um,
-                level: Some("none".into()),
-                ..super::load::Source::new(path.to_string_lossy())
-            };
-            return source.load(&crate::report::Collect::default());
-        }
+    /// Scans are not read here: [`HeightField::load`] sends them to [`super::load`].
+    pub(super) fn read_image(
+        path: &Path,
+        dh_um: Option<f64>,
+        h_max_um: Option<f64>,
+    ) -> Result<HeightField> {
         let format = format_of(path)?;
         // A missing file (or a device, or a huge file) is the first thing to report, before
         // any complaint about its scale.
@@ -191,41 +185,17 @@ impl HeightField {
             }
         }
     }
-
-    /// `builtin:<kind>` (blazed, sinusoidal, elaphe, xenopeltis) is the default generated
-    /// grating of that kind, the same field as the shipped `assets/<kind>.png` before
-    /// quantisation; `dh_um` then resamples it at that pixel size and `h_max_um` rescales
-    /// its peak-to-valley height. `builtin:elaphe-measured` is the shipped AFM crop
-    /// (`assets/measured/`, embedded in the binary) and `builtin:elaphe-grown` that crop
-    /// grown to [`GROWN_SAMPLES`]² samples with seed 1 ([`super::grow()`]); for both,
-    /// `dh_um` and `h_max_um` override the crop's calibration (pixel size, height of grey
-    /// level 1) as a sidecar would. Anything else is a path for [`HeightField::load`].
-    ///
-    /// Scan files (`.gsf`, `.gwy`) are read, levelled and reported as
-    /// [`super::load::Source::load`] does with its defaults; what it reports is dropped here.
-    pub fn load_source(
-        spec: &str,
-        dh_um: Option<f64>,
-        h_max_um: Option<f64>,
-    ) -> Result<HeightField> {
-        let source = super::load::Source {
-            dh_um,
-            h_max_um,
-            ..super::load::Source::new(spec)
-        };
-        source.load(&crate::report::Collect::default())
-    }
 }
 
 /// The field a source names as stored, before any levelling: a built-in field or a PNG or
-/// `.f32` file ([`HeightField::load`]). Scans are [`super::load`]'s.
+/// `.f32` file ([`HeightField::read_image`]). Scans are [`super::load`]'s.
 pub(super) fn read_source(
     spec: &str,
     dh_um: Option<f64>,
     h_max_um: Option<f64>,
 ) -> Result<HeightField> {
     let Some(name) = spec.strip_prefix(BUILTIN_PREFIX) else {
-        return HeightField::load(Path::new(spec), dh_um, h_max_um);
+        return HeightField::read_image(Path::new(spec), dh_um, h_max_um);
     };
     match name.to_ascii_lowercase().as_str() {
         "elaphe-measured" => return measured_elaphe(dh_um, h_max_um),

@@ -41,6 +41,48 @@ pub struct Source {
     pub tile: Option<Tile>,
 }
 
+impl HeightField {
+    /// Loads a grey PNG or raw `.f32` height field ([`HeightField::read_image`]: `dh_um` and
+    /// `h_max_um` override the sidecar), or a Gwyddion scan (`.gsf`, `.gwy`) as stored: its
+    /// first height channel, in its units, not levelled ([`Source`] levels and reports).
+    pub fn load(path: &Path, dh_um: Option<f64>, h_max_um: Option<f64>) -> Result<HeightField> {
+        if !is_scan(&path.to_string_lossy()) {
+            return HeightField::read_image(path, dh_um, h_max_um);
+        }
+        let source = Source {
+            dh_um,
+            h_max_um,
+            level: Some("none".into()),
+            ..Source::new(path.to_string_lossy())
+        };
+        source.load(&crate::report::Collect::default())
+    }
+
+    /// `builtin:<kind>` (blazed, sinusoidal, elaphe, xenopeltis) is the default generated
+    /// grating of that kind, the same field as the shipped `assets/<kind>.png` before
+    /// quantisation; `dh_um` then resamples it at that pixel size and `h_max_um` rescales
+    /// its peak-to-valley height. `builtin:elaphe-measured` is the shipped AFM crop
+    /// (`assets/measured/`, embedded in the binary) and `builtin:elaphe-grown` that crop
+    /// grown to [`GROWN_SAMPLES`]² samples with seed 1 ([`super::grow()`]); for both,
+    /// `dh_um` and `h_max_um` override the crop's calibration (pixel size, height of grey
+    /// level 1) as a sidecar would. Anything else is a path for [`HeightField::load`].
+    ///
+    /// Scan files (`.gsf`, `.gwy`) are read, levelled and reported as
+    /// [`Source::load`] does with its defaults; what it reports is dropped here.
+    pub fn load_source(
+        spec: &str,
+        dh_um: Option<f64>,
+        h_max_um: Option<f64>,
+    ) -> Result<HeightField> {
+        let source = Source {
+            dh_um,
+            h_max_um,
+            ..Source::new(spec)
+        };
+        source.load(&crate::report::Collect::default())
+    }
+}
+
 /// Whether `spec` names a scan file (`.gsf`, `.gwy`).
 pub fn is_scan(spec: &str) -> bool {
     scan_kind(Path::new(spec)).is_some()
