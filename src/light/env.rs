@@ -674,4 +674,90 @@ mod tests {
         );
         assert_eq!(EnvSource::parse("builtin:sky").unwrap(), EnvSource::Sky);
     }
+
+    fn tmp(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("diffract-env-{tag}-{}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    fn write_exr_raw(path: &Path, w: u32, h: u32, px: &[[f32; 3]]) {
+        let flat: Vec<f32> = px.iter().flatten().copied().collect();
+        image::Rgb32FImage::from_raw(w, h, flat)
+            .unwrap()
+            .save(path)
+            .unwrap();
+    }
+
+    #[test]
+    fn map_files_load_and_every_bad_file_gets_one_error_line() {
+        let d = tmp("files");
+        // A 16×8 Radiance map: RGBE keeps 8 bits of mantissa under the largest channel.
+        let px: Vec<image::Rgb<f32>> = (0..128)
+            .map(|i| image::Rgb([i as f32 * 0.1, 1.0, 0.5 + (i % 3) as f32]))
+            .collect();
+        let hdr = d.join("ok.hdr");
+        let f = std::fs::File::create(&hdr).unwrap();
+        image::codecs::hdr::HdrEncoder::new(f)
+            .encode(&px, 16, 8)
+            .unwrap();
+        let m = EnvMap::load(&EnvSource::parse(hdr.to_str().unwrap()).unwrap(), 2.0, 0.0).unwrap();
+        assert_eq!((m.width, m.height), (16, 8));
+        for (a, b) in m.radiance.iter().zip(&px) {
+            let top = b.0.iter().fold(0f32, |m, x| m.max(*x));
+            for c in 0..3 {
+                assert!(
+                    (a[c] - 2.0 * b.0[c]).abs() <= 0.01 * 2.0 * top,
+                    "{a:?} {b:?}"
+                );
+            }
+        }
+        let exr = d.join("ok.exr");
+        write_exr_raw(&exr, 8, 4, &[[0.25, 0.5, 1.0]; 32]);
+        let m = EnvMap::load(&EnvSource::File(exr), 1.0, 0.0).unwrap();
+        assert_eq!(m.radiance[5], [0.25, 0.5, 1.0]);
+        // The corpus: each gets one line naming its fault.
+        let mut nan = vec![[0.5f32; 3]; 32];
+        nan[9] = [0.0, f32::NAN, 0.0];
+        let mut inf = vec![[0.5f32; 3]; 32];
+        inf[3] = [f32::INFINITY, 0.0, 0.0];
+        let mut neg = vec![[0.5f32; 3]; 32];
+        neg[31] = [0.0, 0.0, -2.0];
+        type Pixels = Option<(u32, u32, Vec<[f32; 3]>)>;
+        let cases: [(&str, Pixels, &str); 7] = [
+            ("nan.exr", Some((8, 4, nan)), "pixel (1, 1)"),
+            ("inf.exr", Some((8, 4, inf)), "finite"),
+            ("negative.exr", Some((8, 4, neg)), "≥ 0"),
+            ("square.exr", Some((8, 8, vec![[1.0; 3]; 64])), "2:1"),
+            ("wide.exr", Some((12, 4, vec![[1.0; 3]; 48])), "2:1"),
+            ("garbage.hdr", None, "header"),
+            ("garbage.exr", None, "header"),
+        ];
+        for (name, content, want) in cases {
+            let p = d.join(name);
+            match content {
+                Some((w, h, px)) => write_exr_raw(&p, w, h, &px),
+                None => std::fs::write(&p, b"#?RADIANCE\nnot a map at all").unwrap(),
+            }
+            let e = EnvMap::load(&EnvSource::File(p), 1.0, 0.0)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(want) && e.contains(name) && !e.contains('\n'),
+                "{name}: {e}"
+            );
+        }
+        // A header that claims a map beyond the budget is refused before decoding.
+        let big = d.join("big.hdr");
+        std::fs::write(
+            &big,
+            b"#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y 20000 +X 40000\n",
+        )
+        .unwrap();
+        let e = EnvMap::load(&EnvSource::File(big), 1.0, 0.0)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("budget") && !e.contains('\n'), "{e}");
+        std::fs::remove_dir_all(&d).ok();
+    }
 }

@@ -11,6 +11,7 @@
 
 use glam::DVec3;
 
+pub mod area;
 pub mod env;
 
 /// Largest accepted angular diameter (degrees): beyond it the light is no longer a sun.
