@@ -39,8 +39,8 @@ pub const MAX_DENSITY_CELLS: usize = 4 << 20;
 pub const DENSITY_NODES: usize = 8;
 /// Largest samples per pixel.
 pub const MAX_SAMPLES: u32 = 65_536;
-/// Samples per pixel one dispatch adds: lavapipe stopped adding after about 1160 samples
-/// in one invocation (a 2048-sample map came out at 1160/2048 of the 1024-sample one), so
+/// Samples per pixel one dispatch adds: lavapipe adds nothing after about 1160 samples in
+/// one invocation (a 2048-sample map comes out at 1160/2048 of the 1024-sample one), so
 /// the samples are split over dispatches that each add their sum to the picture.
 pub const CHUNK: u32 = 256;
 /// Default samples per pixel.
@@ -65,8 +65,8 @@ impl GDensity {
     /// cells [`SUB`] times finer than the table's nodes (fewer where that would pass
     /// [`MAX_DENSITY_CELLS`]). One density for every `w`: the `w` a sample reaches depends
     /// on where it lands (`w = −(cos θi + cos θr)`), and a density fitted at the pixel's
-    /// specular `w` missed orders that are strong at another `w`, whose weights `G/p`
-    /// then ran into the hundreds (relative L2 error 0.77 at 256 samples on a 0.2 µm
+    /// specular `w` misses orders that are strong at another `w`, and their weights `G/p`
+    /// reach the hundreds (measured: relative L2 error 0.77 at 256 samples on a 0.2 µm
     /// grating); the envelope over `w` keeps every weight below about 1.
     pub fn new(table: &ChebyshevW) -> Self {
         let r = table.region;
