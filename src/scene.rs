@@ -13,6 +13,7 @@ use glam::{Mat4, Vec3};
 use serde::{Deserialize, Serialize};
 
 use crate::image_io::{apply_tone, box_downsample, Tone, DEFAULT_TONE_WHITE};
+use crate::light::area::{validate_disc_lights, DiscLight, EnvironmentSpec};
 use crate::light::{MAX_ANGULAR_DIAMETER_DEG, MAX_DISK_SAMPLES};
 use crate::material::Material;
 use crate::mesh::Mesh;
@@ -369,6 +370,12 @@ pub struct Scene {
     pub output: Output,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub texture: Option<TextureSpec>,
+    /// An environment map around the scene (`[environment]`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub environment: Option<EnvironmentSpec>,
+    /// Disc lights besides the sun (`[[disc_light]]` tables).
+    #[serde(default, rename = "disc_light", skip_serializing_if = "Vec::is_empty")]
+    pub disc_lights: Vec<DiscLight>,
 }
 
 impl Default for Scene {
@@ -430,6 +437,8 @@ impl Scene {
                 material: Material::default(),
                 output: Output::default(),
                 texture: None,
+                environment: None,
+                disc_lights: Vec::new(),
             })
     }
 
@@ -468,6 +477,13 @@ impl Scene {
                 t.path = base.join(&t.path);
             }
         }
+        if let Some(e) = &mut scene.environment {
+            if !e.map.starts_with(crate::light::env::BUILTIN_PREFIX)
+                && Path::new(&e.map).is_relative()
+            {
+                e.map = base.join(&e.map).to_string_lossy().into_owned();
+            }
+        }
         let hf = &scene.material.heightfield;
         if !hf.starts_with("builtin:") && !hf.is_empty() && Path::new(hf).is_relative() {
             scene.material.heightfield = base.join(hf).to_string_lossy().into_owned();
@@ -494,6 +510,10 @@ impl Scene {
     fn validate(&self) -> std::result::Result<(), String> {
         self.validate_camera()?;
         self.validate_light()?;
+        validate_disc_lights(&self.disc_lights)?;
+        if let Some(e) = &self.environment {
+            e.validate()?;
+        }
         self.validate_mesh()?;
         self.validate_output()?;
         if let Some(t) = &self.texture {

@@ -7,6 +7,7 @@
 //! height-field columns; `ωi` points towards the light, `ωr` towards the eye.
 
 pub mod bessel;
+pub mod env_reference;
 pub mod model;
 pub mod nmm;
 pub mod pq;

@@ -20,6 +20,7 @@
 
 pub mod brdf;
 pub mod cache;
+pub mod env;
 pub mod gpu;
 pub mod heightfield;
 pub mod material;

@@ -5,6 +5,7 @@ use std::path::PathBuf;
 
 use crate::brdf::truncation::{Precision, Reach};
 use crate::cli::cache::CacheArgs;
+use crate::cli::env::EnvArgs;
 use crate::cli::gpu::{validation_requested, GpuArgs};
 use crate::cli::material::MaterialArgs;
 use crate::cli::scene::SceneArgs;
@@ -45,6 +46,8 @@ pub struct RenderArgs {
     pub material: MaterialArgs,
     #[command(flatten)]
     pub cache: CacheArgs,
+    #[command(flatten)]
+    pub env: EnvArgs,
     /// Leave nothing out: every wavelength, every DFT texel of the band (to measure what
     /// leaving out saves). By default what the scene cannot need at the tolerance is left
     /// out and reported on one line.
@@ -69,6 +72,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let scene = args.scene.load()?;
     crate::image_io::output_format(&args.out)?;
     render_args(args, &scene)?;
+    if let Some(env) = args.env.load(args.brdf_map, &scene)? {
+        return run_env_map(args, &scene, &env);
+    }
     // `default` means the best variant that can draw the request: one wavelength needs
     // flss (the table variants integrate the spectrum offline). Explicit choices stand.
     let spectral_default = args.gpu.variant == VariantKind::Default && args.lambda_nm.is_some();
@@ -179,6 +185,70 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         for line in report.details() {
             eprintln!("{line}");
         }
+    }
+    Ok(())
+}
+
+/// `render --brdf-map --env SOURCE`: the environment-lit BRDF map (linear-sRGB radiance ×
+/// the exposure; the sun at `--theta-i`/`--phi-i` unless `--no-sun`).
+fn run_env_map(args: &RenderArgs, scene: &Scene, env: &crate::light::env::EnvMap) -> Result<()> {
+    if args.lambda_nm.is_some() {
+        return Err(Error::invalid(
+            "arguments",
+            "--lambda-nm draws one wavelength; an environment-lit map integrates the spectrum",
+        ));
+    }
+    let material = args.material.apply(scene.material.clone());
+    let (hf, _) = material.load_planned(&Reach::ALL, Precision::F32, &crate::report::Stderr)?;
+    let t = &args.gpu.table;
+    let spec = crate::cli::env::map_table_spec(
+        t.table_texel,
+        t.table_w_nodes,
+        t.table_step_nm,
+        material.coherence_um,
+    )?;
+    let start = std::time::Instant::now();
+    let dev = crate::gpu::Device::new(validation_requested())?;
+    let size = args.size.unwrap_or(crate::render::DEFAULT_MAP_SIZE);
+    let sun = (
+        args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I),
+        args.phi_i.unwrap_or(0.0),
+    );
+    let out = crate::cli::env::draw_map(&dev, &hf, &material, &spec, env, &args.env, size, sun)?;
+    if out.rgb.iter().flatten().any(|c| !c.is_finite()) {
+        return Err(Error::invalid(
+            "render",
+            format!(
+                "a pixel is not a finite number; nothing written to {}",
+                args.out.display()
+            ),
+        ));
+    }
+    let exposure = args.scene.exposure.unwrap_or(1.0);
+    match crate::image_io::output_format(&args.out)? {
+        crate::image_io::OutputFormat::Exr => {
+            crate::image_io::write_exr(&args.out, size, size, &out.rgb)?;
+            if args.png {
+                let png = args.out.with_extension("png");
+                crate::image_io::write_png_srgb(&png, size, size, &out.rgb, exposure)?;
+            }
+        }
+        _ => crate::image_io::write_image(&args.out, size, size, &out.rgb, exposure)?,
+    }
+    println!("{}", out.table_line);
+    println!(
+        "device: {}; environment-lit BRDF map (linear-sRGB radiance) {size}×{size} under {}, {} samples per pixel, sun {} → {}; GPU {:.1} ms (dispatches), wall {:.2} s",
+        dev.info.name,
+        env.name,
+        out.samples,
+        if args.env.no_sun { "off" } else { "on" },
+        args.out.display(),
+        out.gpu_ms,
+        start.elapsed().as_secs_f64()
+    );
+    let n = dev.validation_messages();
+    if n > 0 {
+        return Err(Error::Validation(n));
     }
     Ok(())
 }

@@ -14,6 +14,7 @@
 //! offscreen or into a window.
 
 mod background;
+pub mod env;
 mod offscreen;
 mod params;
 mod pass;

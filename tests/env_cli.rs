@@ -1,0 +1,132 @@
+//! `render --env`: every bad environment map or flag gets one `error:` line and exit
+//! status 1 before any device work; a small environment-lit BRDF map is drawn and written.
+
+mod gpu_util;
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+fn dir(tag: &str) -> PathBuf {
+    let d = Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("target/test-output")
+        .join(format!("env-cli-{tag}"));
+    std::fs::create_dir_all(&d).unwrap();
+    d
+}
+
+fn exr(path: &Path, w: u32, h: u32, px: &[[f32; 3]]) {
+    let flat: Vec<f32> = px.iter().flatten().copied().collect();
+    image::Rgb32FImage::from_raw(w, h, flat)
+        .unwrap()
+        .save(path)
+        .unwrap();
+}
+
+fn render(args: &[&str], cwd: &Path) -> std::process::Output {
+    Command::new(env!("CARGO_BIN_EXE_diffract"))
+        .arg("render")
+        .args(args)
+        .current_dir(cwd)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn bad_maps_and_flags_get_one_error_line() {
+    let d = dir("bad");
+    let mut nan = vec![[0.2f32; 3]; 32];
+    nan[5] = [f32::NAN, 0.0, 0.0];
+    exr(&d.join("nan.exr"), 8, 4, &nan);
+    exr(&d.join("square.exr"), 4, 4, &[[1.0; 3]; 16]);
+    let mut neg = vec![[0.2f32; 3]; 32];
+    neg[0] = [-1.0, 0.0, 0.0];
+    exr(&d.join("negative.exr"), 8, 4, &neg);
+    std::fs::write(d.join("garbage.hdr"), b"not a radiance file").unwrap();
+    let cases: &[(&[&str], &str)] = &[
+        (&["--brdf-map", "--env", "missing.hdr"], "missing.hdr"),
+        (&["--brdf-map", "--env", "sky.png"], ".hdr or .exr"),
+        (&["--brdf-map", "--env", "builtin:moon"], "builtin:sky"),
+        (&["--brdf-map", "--env", "nan.exr"], "finite"),
+        (&["--brdf-map", "--env", "negative.exr"], "≥ 0"),
+        (&["--brdf-map", "--env", "square.exr"], "2:1"),
+        (&["--brdf-map", "--env", "garbage.hdr"], "header"),
+        (
+            &["--brdf-map", "--env", "builtin:sky", "--env-samples", "0"],
+            "env samples",
+        ),
+        (
+            &[
+                "--brdf-map",
+                "--env",
+                "builtin:sky",
+                "--env-intensity",
+                "-2",
+            ],
+            "intensity",
+        ),
+        (&["--brdf-map", "--no-sun"], "need an environment"),
+        (&["--env", "builtin:sky"], "not drawn yet"),
+    ];
+    for (args, want) in cases {
+        let o = render(args, &d);
+        let err = String::from_utf8_lossy(&o.stderr);
+        let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+        assert_eq!(o.status.code(), Some(1), "{args:?}: {err}");
+        assert_eq!(lines.len(), 1, "{args:?}: {err}");
+        assert!(
+            err.trim_end().lines().last().unwrap().starts_with("error:"),
+            "{args:?}: {err}"
+        );
+        assert!(lines[0].contains(want), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn a_small_environment_lit_map_is_drawn() {
+    if gpu_util::device().is_none() {
+        return;
+    }
+    let d = dir("ok");
+    let out = d.join("studio.exr");
+    let _ = std::fs::remove_file(&out);
+    let o = render(
+        &[
+            "--brdf-map",
+            "--env",
+            "builtin:studio",
+            "--heightfield",
+            "builtin:blazed",
+            "--size",
+            "8",
+            "--env-samples",
+            "4",
+            "--table-texel",
+            "0.02",
+            "--table-w-nodes",
+            "4",
+            "--table-step-nm",
+            "40",
+            "--no-cache",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &d,
+    );
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{}{}",
+        text,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        text.contains("environment table:") && text.contains("4 samples per pixel"),
+        "{text}"
+    );
+    let (w, h, px) = diffract::image_io::read_exr(&out).unwrap();
+    assert_eq!((w, h), (8, 8));
+    // Linear sRGB: a saturated diffraction colour may lie outside the gamut (a negative
+    // component); every value is finite.
+    assert!(px.iter().flatten().all(|c| c.is_finite()));
+    assert!(px.iter().any(|p| p[1] > 0.0), "a black map");
+}
