@@ -667,7 +667,8 @@ fn summary(material: &Material, thetas_deg: &[f64], cache_dir: Option<&Path>) ->
     thetas.sort_by(f64::total_cmp);
     thetas.dedup();
     let key = cache_key(&profile, &model);
-    let path = cache_dir.map(|d| d.join(format!("validity-{key:016x}.txt")));
+    let path =
+        cache_dir.map(|d| d.join(crate::cache::file_name(crate::cache::VALIDITY_FILES, key)));
     let mut cells = path.as_deref().map(read_cells).unwrap_or_default();
     let missing: Vec<(f64, f64)> = thetas
         .iter()
