@@ -26,6 +26,7 @@ registry=(
     "viewer_snake|cheap|viewer screenshot, default scene, 256² (~1 min)"
     "viewer_map|cheap|viewer screenshot with the BRDF map, 256×128 (~1 min)"
     "stability_matrix|slow|stability heat map, full matrix with the GPU (~4-30 min)"
+    "validity_map_default|cheap|validity map: scalar model vs RCWA, default scene's material (~1 min)"
     # Each map first builds the default table variant's table at 1 nm (~10 min under load),
     # unless the scratch cache already holds one for its field, light and region.
     "brdf_map_elaphe_60deg|slow|BRDF map, Elaphe-like grating, θi = 60°, 384² (~10 min)"
@@ -162,6 +163,9 @@ make_figure() {
         viewer_map)
             viewer "$name" --variant chebyshev-w --table-step-nm 20 --table-texel 0.02 \
                 --width 256 --height 128 --map --map-exposure 100 --frames 3 ;;
+        validity_map_default)
+            d validity --lambda-nm 550 --theta-i 0 --plot "$scratch/$name.png"
+            mv "$scratch/$name.png" "$out/$name.png" ;;
         stability_matrix)
             DIFFRACT_VALIDATION=1 d stability --out "$scratch/stability"
             mv "$scratch/stability/stability.png" "$out/$name.png" ;;

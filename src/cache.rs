@@ -22,8 +22,10 @@ pub const DEFAULT_CACHE_MAX: u64 = 2 << 30;
 pub const TERM_FILES: &str = "terms-";
 /// File-name prefix of the sampled `G` tables of the table variants.
 pub const TABLE_FILES: &str = "gtable-";
-/// Prefixes of the cache's files: both count towards the cap and are listed and cleared.
-pub const FILE_PREFIXES: [&str; 2] = [TERM_FILES, TABLE_FILES];
+/// File-name prefix of the cached validity cells (the scalar model against RCWA).
+pub const VALIDITY_FILES: &str = "validity-";
+/// Prefixes of the cache's files: all count towards the cap and are listed and cleared.
+pub const FILE_PREFIXES: [&str; 3] = [TERM_FILES, TABLE_FILES, VALIDITY_FILES];
 
 /// 64-bit FNV-1a, fed incrementally. Not cryptographic: it guards against corruption and
 /// accidental reuse, not against an adversary who edits cache files.

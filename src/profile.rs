@@ -1685,6 +1685,15 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     if n > 0 {
         return Err(Error::Validation(n));
     }
+    // Every error above is against the model's own reference; this one is the model's own.
+    eprintln!(
+        "{}",
+        crate::validity::expected_error_line(
+            &setup.base,
+            &[setup.theta_i_deg],
+            setup.cache_dir.as_deref()
+        )
+    );
     Ok(())
 }
 

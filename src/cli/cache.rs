@@ -73,8 +73,13 @@ pub fn run(args: &CacheCommandArgs) -> Result<()> {
                     .path
                     .file_name()
                     .is_some_and(|n| n.to_string_lossy().starts_with(cache::TABLE_FILES));
+                let validity = e
+                    .path
+                    .file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with(cache::VALIDITY_FILES));
                 let what = match crate::spectrum::cache::read_header(&e.path) {
                     _ if gtable => "sampled G table of a table variant".to_string(),
+                    _ if validity => "scalar model against RCWA (validity cells)".to_string(),
                     Ok(h) => format!(
                         "{}×{} {} T={} band {}×{} {:?}",
                         h.nx,

@@ -186,6 +186,17 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             eprintln!("{line}");
         }
     }
+    // How far the scalar model is from Maxwell's equations for this material: at the map's
+    // light angle, or over the angles a scene's surface sees the light at.
+    let thetas = if args.brdf_map {
+        vec![args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I)]
+    } else {
+        vec![0.0, 30.0, 60.0]
+    };
+    eprintln!(
+        "{}",
+        crate::validity::expected_error_line(&material, &thetas, cache_dir.as_deref())
+    );
     Ok(())
 }
 

@@ -64,6 +64,8 @@ pub fn write_map(path: &Path, map: &Map, title: &str) -> Result<()> {
             .y_desc("light θi (°)")
             .x_labels(8)
             .y_labels(10)
+            .x_label_formatter(&|v| format!("{v:.0}"))
+            .y_label_formatter(&|v| format!("{v:.0}"))
             .label_style(("sans-serif", 13))
             .draw()
             .map_err(plot_error)?;
@@ -88,8 +90,8 @@ pub fn write_map(path: &Path, map: &Map, title: &str) -> Result<()> {
             .configure_mesh()
             .disable_mesh()
             .disable_x_axis()
-            .y_label_formatter(&|v| super::percent(*v))
-            .y_labels(6)
+            .y_label_formatter(&|v| format!("{:.0} %", 100.0 * v))
+            .y_labels(4)
             .label_style(("sans-serif", 12))
             .draw()
             .map_err(plot_error)?;
