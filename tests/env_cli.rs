@@ -65,6 +65,10 @@ fn bad_maps_and_flags_get_one_error_line() {
             "intensity",
         ),
         (&["--brdf-map", "--no-sun"], "need an environment"),
+        (
+            &["--brdf-map", "--env", "square.exr", "-o", "square.exr"],
+            "refusing to overwrite an input",
+        ),
         (&["--env", "builtin:sky"], "not drawn yet"),
     ];
     for (args, want) in cases {
