@@ -249,7 +249,7 @@ fn main() -> ExitCode {
         cli.command,
         Command::Variants { .. } | Command::Heightfield(_)
     ) {
-        if let Err(e) = diffract::spectrum::cache::cache_max_bytes() {
+        if let Err(e) = diffract::cache::cache_max_bytes() {
             eprintln!("error: {e}");
             return ExitCode::FAILURE;
         }
