@@ -2,9 +2,14 @@
 //! `tests/proptest_parsers.rs` run a few thousand cases in CI; this runs mutational fuzzing
 //! for a fixed time (`FUZZ_SECS`, default 120) over seeds of each format — a valid PNG,
 //! `.f32` + sidecar, OBJ, scene TOML, query CSV and term cache file — with byte flips,
-//! insertions, deletions, splices of format tokens and truncation. Any panic is caught,
-//! its input saved under the temp directory and counted; exits non-zero if there was one.
-//! Run with `cargo bench --bench fuzz`.
+//! insertions, deletions, splices of format tokens and truncation. Meshes and scenes also
+//! come from a grammar (`obj-grammar`, `scene-grammar`): well-formed lines with awkward
+//! values (negative and out-of-range indices, coordinates of 1e30 and 3.4e38, degenerate and
+//! unlit faces, missing normals; scene keys with extreme numbers), which byte flips rarely
+//! reach; a scene whose mesh is the built-in plane is loaded with its fuzzed placement. Any
+//! panic is caught, its input saved under the temp directory and counted, and so is a hang:
+//! an input that takes more than `FUZZ_HANG_MS` (default 2000) to parse. Exits non-zero if
+//! there was either. Run with `cargo bench --bench fuzz`.
 
 use std::panic::AssertUnwindSafe;
 use std::path::{Path, PathBuf};
@@ -94,6 +99,130 @@ fn mutate(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
     b
 }
 
+/// One of a few awkward numbers or a random one, as OBJ or TOML text.
+fn number(rng: &mut Rng) -> String {
+    const AWKWARD: &[&str] = &[
+        "0", "1", "-1", "0.5", "1e30", "-1e30", "3.4e38", "1e-30", "1e-45", "2", "-0", "1e4",
+        "1e-4", "65", "0.0001",
+    ];
+    if rng.below(3) == 0 {
+        format!("{:.3}", (rng.next() % 2000) as f64 / 100.0 - 10.0)
+    } else {
+        AWKWARD[rng.below(AWKWARD.len())].to_string()
+    }
+}
+
+/// A well-formed OBJ with awkward content: vertices, normals and UVs with extreme values,
+/// faces of 3 to 6 corners with positive, negative, zero and out-of-range indices in every
+/// corner format.
+fn obj_grammar(rng: &mut Rng) -> Vec<u8> {
+    let mut s = String::new();
+    let (mut nv, mut nt, mut nn) = (0i64, 0i64, 0i64);
+    for _ in 0..1 + rng.below(40) {
+        match rng.below(6) {
+            0 | 1 => {
+                s += &format!("v {} {} {}\n", number(rng), number(rng), number(rng));
+                nv += 1;
+            }
+            2 => {
+                s += &format!("vn {} {} {}\n", number(rng), number(rng), number(rng));
+                nn += 1;
+            }
+            3 => {
+                s += &format!("vt {} {}\n", number(rng), number(rng));
+                nt += 1;
+            }
+            _ => {
+                let index = |rng: &mut Rng, n: i64| -> i64 {
+                    match rng.below(8) {
+                        0 => 0,
+                        1 => n + 1,
+                        2 => -(rng.below(n.max(1) as usize + 2) as i64) - 1,
+                        _ => rng.below(n.max(1) as usize) as i64 + 1,
+                    }
+                };
+                s += "f";
+                let form = rng.below(4);
+                for _ in 0..3 + rng.below(4) {
+                    let v = index(rng, nv);
+                    s += &match form {
+                        0 => format!(" {v}"),
+                        1 => format!(" {v}/{}", index(rng, nt)),
+                        2 => format!(" {v}//{}", index(rng, nn)),
+                        _ => format!(" {v}/{}/{}", index(rng, nt), index(rng, nn)),
+                    };
+                }
+                s += "\n";
+            }
+        }
+    }
+    s.into_bytes()
+}
+
+/// A scene file from its real sections and keys with awkward values; the mesh is the
+/// built-in plane half of the time, so its placement is fuzzed too.
+fn scene_grammar(rng: &mut Rng) -> Vec<u8> {
+    const KEYS: &[(&str, &[&str])] = &[
+        (
+            "camera",
+            &["eye", "target", "up", "fov_y_deg", "near", "far"],
+        ),
+        (
+            "light",
+            &[
+                "direction",
+                "intensity",
+                "angular_diameter_deg",
+                "disk_samples",
+            ],
+        ),
+        (
+            "mesh",
+            &[
+                "translate",
+                "rotate_deg",
+                "scale",
+                "scale_roll_deg",
+                "scale_pitch_deg",
+            ],
+        ),
+        (
+            "material",
+            &["tolerance", "coherence_um", "window_radius", "terms"],
+        ),
+        (
+            "output",
+            &["width", "height", "exposure", "supersample", "background"],
+        ),
+    ];
+    let mut s = String::new();
+    for (section, keys) in KEYS {
+        if rng.below(3) == 0 {
+            continue;
+        }
+        s += &format!("[{section}]\n");
+        if *section == "mesh" && rng.below(2) == 0 {
+            s += "builtin = \"plane\"\n";
+        }
+        for key in keys.iter() {
+            if rng.below(2) == 0 {
+                continue;
+            }
+            let vector = matches!(
+                *key,
+                "eye" | "target" | "up" | "direction" | "translate" | "rotate_deg" | "background"
+            );
+            let value = if vector {
+                format!("[{}, {}, {}]", number(rng), number(rng), number(rng))
+            } else {
+                number(rng)
+            };
+            s += &format!("{key} = {value}\n");
+        }
+    }
+    s.into_bytes()
+}
+
 fn main() {
     let secs: u64 = std::env::var("FUZZ_SECS")
         .ok()
@@ -135,9 +264,25 @@ fn main() {
 
     // Panics are caught and counted; keep the default hook quiet while fuzzing.
     std::panic::set_hook(Box::new(|_| {}));
-    let names = ["png", "f32", "sidecar", "obj", "scene", "csv", "cache"];
-    let mut runs = [0u64; 7];
+    let names = [
+        "png",
+        "f32",
+        "sidecar",
+        "obj",
+        "scene",
+        "csv",
+        "cache",
+        "obj-grammar",
+        "scene-grammar",
+    ];
+    let hang_ms: u128 = std::env::var("FUZZ_HANG_MS")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or(2000);
+    let mut runs = [0u64; 9];
+    let mut slowest = [0u128; 9];
     let mut panics = 0u64;
+    let mut hangs = 0u64;
     let start = Instant::now();
     while start.elapsed() < Duration::from_secs(secs) {
         let which = rng.below(names.len());
@@ -148,8 +293,11 @@ fn main() {
             3 => mutate(&mut rng, &obj),
             4 => mutate(&mut rng, &scene),
             5 => mutate(&mut rng, &csv),
-            _ => mutate(&mut rng, &cache_seed),
+            6 => mutate(&mut rng, &cache_seed),
+            7 => obj_grammar(&mut rng),
+            _ => scene_grammar(&mut rng),
         };
+        let began = Instant::now();
         let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| match which {
             0 => {
                 std::fs::write(file("x.png"), &input).unwrap();
@@ -166,13 +314,17 @@ fn main() {
                 std::fs::write(file("y.toml"), side).unwrap();
                 let _ = HeightField::load(&file("y.f32"), None, None);
             }
-            3 => {
+            3 | 7 => {
                 let text = String::from_utf8_lossy(&input);
                 let _ = Mesh::from_obj_str(&text, Path::new("fuzz.obj"));
             }
-            4 => {
+            4 | 8 => {
                 let text = String::from_utf8_lossy(&input);
-                let _ = Scene::from_toml_str(&text, Path::new("fuzz.toml"));
+                if let Ok(s) = Scene::from_toml_str(&text, Path::new("fuzz.toml")) {
+                    if s.mesh.builtin.as_deref() == Some("plane") && s.mesh.path.is_none() {
+                        let _ = s.mesh.load();
+                    }
+                }
             }
             5 => {
                 let text = String::from_utf8_lossy(&input);
@@ -184,6 +336,18 @@ fn main() {
             }
         }));
         runs[which] += 1;
+        let ms = began.elapsed().as_millis();
+        slowest[which] = slowest[which].max(ms);
+        if ms > hang_ms {
+            hangs += 1;
+            let keep = dir.join(format!("hang-{hangs}.{}", names[which]));
+            let _ = std::fs::write(&keep, &input);
+            eprintln!(
+                "fuzz: {ms} ms in the {} parser, input saved to {}",
+                names[which],
+                keep.display()
+            );
+        }
         if outcome.is_err() {
             panics += 1;
             let keep = dir.join(format!("panic-{panics}.{}", names[which]));
@@ -199,14 +363,15 @@ fn main() {
     let per: Vec<String> = names
         .iter()
         .zip(runs)
-        .map(|(n, r)| format!("{n} {r}"))
+        .zip(slowest)
+        .map(|((n, r), ms)| format!("{n} {r} (slowest {ms} ms)"))
         .collect();
     println!(
-        "fuzz: {total} inputs in {:.0} s ({}), {panics} panic(s)",
+        "fuzz: {total} inputs in {:.0} s ({}), {panics} panic(s), {hangs} hang(s) over {hang_ms} ms",
         start.elapsed().as_secs_f64(),
         per.join(", ")
     );
-    if panics == 0 {
+    if panics == 0 && hangs == 0 {
         let _ = std::fs::remove_dir_all(&dir);
     } else {
         std::process::exit(1);

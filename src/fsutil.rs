@@ -40,9 +40,27 @@ pub fn write_atomically(
     }
     let link_target = std::fs::symlink_metadata(path)
         .is_ok_and(|m| m.file_type().is_symlink())
-        .then(|| path.canonicalize().ok())
+        .then(|| link_destination(path))
         .flatten();
     replace(link_target.as_deref().unwrap_or(path), path, write)
+}
+
+/// Where the symbolic link `path` leads, following a chain of links: the file it names
+/// when that exists, else the path the last link names (a dangling link), which the write
+/// then creates, keeping the link. `None` for a loop or a chain of more than 40 links.
+fn link_destination(path: &Path) -> Option<PathBuf> {
+    if let Ok(c) = path.canonicalize() {
+        return Some(c);
+    }
+    let mut p = path.to_path_buf();
+    for _ in 0..40 {
+        match std::fs::read_link(&p) {
+            Ok(t) if t.is_absolute() => p = t,
+            Ok(t) => p = p.parent().unwrap_or(Path::new(".")).join(t),
+            Err(_) => return Some(p),
+        }
+    }
+    None
 }
 
 /// Writes `path` through a temporary sibling and a rename, whatever `path` is now (a link
@@ -94,7 +112,7 @@ fn write_into(
     let mut w = BufWriter::new(file);
     write(&mut w)?;
     w.into_inner()
-        .map_err(|e| Error::io(path, e.into_error()))?;
+        .map_err(|e| Error::write(path, e.into_error()))?;
     Ok(())
 }
 
@@ -129,8 +147,8 @@ fn replace(
     let result = write(&mut w).and_then(|()| {
         let file = w
             .into_inner()
-            .map_err(|e| Error::io(path, e.into_error()))?;
-        file.sync_all().map_err(|e| Error::io(path, e))
+            .map_err(|e| Error::write(path, e.into_error()))?;
+        file.sync_all().map_err(|e| Error::write(path, e))
     });
     let result =
         result.and_then(|()| std::fs::rename(&tmp, target).map_err(|e| Error::io(path, e)));
@@ -166,21 +184,31 @@ impl Drop for InFlight {
 /// Installs a Ctrl-C / SIGTERM / SIGHUP handler that removes the temporary files of writes
 /// in progress (a term cache file can be hundreds of MB) and exits with status 130. Call
 /// once, from the binary; a second call (or a host that already set a handler) is ignored.
+///
+/// The handler ends the process with `_exit`, whatever the other threads are doing: every
+/// loop of the program (a table build, a term precompute, a mesh's normals) stops at once,
+/// with no flag to poll. `exit` would first run the process's exit handlers, among them the
+/// Vulkan driver's, which wait for its worker threads and can block while the main thread
+/// is inside the driver.
 pub fn remove_temps_on_interrupt() {
     let _ = ctrlc::set_handler(|| {
+        // The list's lock is only ever held to push or remove one path, never across I/O.
         if let Ok(v) = IN_FLIGHT.lock() {
             for p in v.iter() {
                 let _ = std::fs::remove_file(p);
             }
         }
         eprintln!("error: interrupted");
-        std::process::exit(130);
+        // SAFETY: _exit ends the process without running exit handlers; nothing after it.
+        unsafe { libc::_exit(130) }
     });
 }
 
 /// [`write_atomically`] for a byte buffer.
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    write_atomically(path, |w| w.write_all(bytes).map_err(|e| Error::io(path, e)))
+    write_atomically(path, |w| {
+        w.write_all(bytes).map_err(|e| Error::write(path, e))
+    })
 }
 
 // ---- the output policy: checked before any work -------------------------------------------
@@ -213,16 +241,54 @@ pub fn check_output(path: &Path) -> Result<()> {
         if t.is_socket() {
             return bad("is a socket; expected a file, a character device or a FIFO");
         }
+        if is_stream(&meta) {
+            return if writable(path) {
+                Ok(())
+            } else {
+                bad("cannot be written (permission denied)")
+            };
+        }
     }
-    let dir = match path.parent() {
+    // A link (dangling or not) is written through: what matters is where its file is.
+    let is_link = std::fs::symlink_metadata(path).is_ok_and(|m| m.file_type().is_symlink());
+    let target = if is_link {
+        match link_destination(path) {
+            Some(t) => t,
+            None => return bad("is a loop of symbolic links"),
+        }
+    } else {
+        path.to_path_buf()
+    };
+    let dir = match target.parent() {
         Some(d) if !d.as_os_str().is_empty() => d,
         _ => Path::new("."),
     };
     match std::fs::metadata(dir) {
-        Ok(m) if m.is_dir() => Ok(()),
-        Ok(_) => bad(&format!("{} is not a directory", dir.display())),
-        Err(_) => bad(&format!("directory {} does not exist", dir.display())),
+        Ok(m) if m.is_dir() => {}
+        Ok(_) => return bad(&format!("{} is not a directory", dir.display())),
+        Err(_) => return bad(&format!("directory {} does not exist", dir.display())),
     }
+    // The file is written beside its target and renamed over it: the directory must take
+    // a new file (not read-only, not on a read-only file system).
+    if writable(dir) {
+        Ok(())
+    } else {
+        bad(&format!(
+            "directory {} cannot be written (read-only or permission denied)",
+            dir.display()
+        ))
+    }
+}
+
+/// Whether this process may write `path` (`access(2)` with `W_OK`: permissions and a
+/// read-only file system).
+fn writable(path: &Path) -> bool {
+    use std::os::unix::ffi::OsStrExt;
+    let Ok(c) = std::ffi::CString::new(path.as_os_str().as_bytes()) else {
+        return false;
+    };
+    // SAFETY: `c` is a valid NUL-terminated path; access only reads it.
+    unsafe { libc::access(c.as_ptr(), libc::W_OK) == 0 }
 }
 
 /// A path made comparable: the canonical path of the file, or of its directory joined with

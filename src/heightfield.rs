@@ -31,6 +31,9 @@ pub use seam::Tile;
 /// Largest accepted side length (samples). 4096² f64 heights are 128 MiB, and each DFT
 /// term of that size another 256 MiB: beyond this the precompute is not interactive.
 pub const MAX_SIDE: usize = 4096;
+/// Fewest samples of a height field: one sample has no neighbour, so no slope and no
+/// spatial frequency but zero.
+pub const MIN_SAMPLES: usize = 2;
 
 /// Smallest accepted pixel size (µm, 0.1 nm). At `dH = 1e-20 µm` the lookup offset
 /// `u·N·dH/λ` vanishes next to the centre index `N/2` in f64, so every direction read the
@@ -64,6 +67,14 @@ impl HeightField {
             return Err(Error::invalid(
                 "height field",
                 format!("size {nx}×{ny} is empty"),
+            ));
+        }
+        if nx * ny < MIN_SAMPLES {
+            return Err(Error::invalid(
+                "height field",
+                format!(
+                    "size {nx}×{ny} is a single sample, a flat mirror with no surface to diffract; at least {MIN_SAMPLES} samples (2×1, a profile along one axis, or larger)"
+                ),
             ));
         }
         if nx > MAX_SIDE || ny > MAX_SIDE {

@@ -73,10 +73,30 @@ pub fn write_png_srgb(
         .collect();
     let img = image::RgbImage::from_raw(width, height, bytes)
         .ok_or_else(|| image_err(path, "pixel buffer does not match the size"))?;
+    let bytes = encode(
+        path,
+        image::DynamicImage::ImageRgb8(img),
+        image::ImageFormat::Png,
+    )?;
+    write_bytes(path, &bytes)
+}
+
+/// Encodes an image in memory: what can fail here is the encoder, never the disk.
+fn encode(path: &Path, img: image::DynamicImage, format: image::ImageFormat) -> Result<Vec<u8>> {
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    img.write_to(&mut bytes, format)
+        .map_err(|e| image_err(path, format!("{format:?} encoding failed: {e}")))?;
+    Ok(bytes.into_inner())
+}
+
+/// Writes encoded bytes through the output policy; an I/O failure (a full disk) says
+/// `writing FILE: …`.
+fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
+    use std::io::Write as _;
     write_atomically(path, |w| {
-        image::DynamicImage::ImageRgb8(img)
-            .write_to(w, image::ImageFormat::Png)
-            .map_err(|e| image_err(path, format!("PNG encoding failed: {e}")))
+        w.write_all(bytes)
+            .and_then(|()| w.flush())
+            .map_err(|e| Error::write(path, e))
     })
 }
 
@@ -86,11 +106,12 @@ pub fn write_exr(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Resu
     let floats: Vec<f32> = rgb.iter().flat_map(|p| p.map(finite_or_zero)).collect();
     let img = image::Rgb32FImage::from_raw(width, height, floats)
         .ok_or_else(|| image_err(path, "pixel buffer does not match the size"))?;
-    write_atomically(path, |w| {
-        image::DynamicImage::ImageRgb32F(img)
-            .write_to(w, image::ImageFormat::OpenExr)
-            .map_err(|e| image_err(path, format!("EXR encoding failed: {e}")))
-    })
+    let bytes = encode(
+        path,
+        image::DynamicImage::ImageRgb32F(img),
+        image::ImageFormat::OpenExr,
+    )?;
+    write_bytes(path, &bytes)
 }
 
 /// Image file formats diffract writes.
@@ -103,14 +124,23 @@ pub enum OutputFormat {
 }
 
 /// The format a path's extension asks for, so callers can reject a bad name before any
-/// work is done.
+/// work is done. A character device or a FIFO (`/dev/null`, `/dev/stdout`, a named pipe)
+/// without either extension gets a PNG: it has no name to choose by.
 pub fn output_format(path: &Path) -> Result<OutputFormat> {
     let ext = path
         .extension()
         .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    let stream = || {
+        use std::os::unix::fs::FileTypeExt;
+        std::fs::metadata(path).is_ok_and(|m| {
+            let t = m.file_type();
+            t.is_char_device() || t.is_fifo()
+        })
+    };
     match ext.as_deref() {
         Some("png") => Ok(OutputFormat::Png),
         Some("exr") => Ok(OutputFormat::Exr),
+        _ if stream() => Ok(OutputFormat::Png),
         _ => Err(image_err(
             path,
             "unknown output format: use a .png (8-bit sRGB) or .exr (float linear) file name",
@@ -137,16 +167,59 @@ pub fn write_image(
     }
 }
 
-/// Opens an image and insists on its format (by content, falling back to the extension).
-fn open_as(path: &Path, format: image::ImageFormat, name: &str) -> Result<image::DynamicImage> {
-    let reader = image::ImageReader::open(path)
-        .map_err(|e| Error::io(path, e))?
-        .with_guessed_format()
-        .map_err(|e| Error::io(path, e))?;
-    if reader.format() != Some(format) {
-        return Err(image_err(path, format!("not a {name} file")));
+/// Largest side of an image read as a scene's texture (pixels): the side a 2D image has on
+/// most Vulkan devices (`maxImageDimension2D`).
+pub const MAX_TEXTURE_SIDE: u32 = 16384;
+
+/// Largest bytes per pixel any decoder here produces (RGBA, 32-bit float channels).
+const MAX_DECODED_PIXEL_BYTES: u64 = 16;
+
+/// A reader for `path` that will decode it as `format`, once its header passed the size
+/// check: the width and height are read from the header alone and an image with no pixels
+/// or wider or taller than `max_side` is refused there, before any pixel is decoded. The
+/// decoder is then held to that size and to the allocation it needs (a PNG whose header
+/// claims 20000×20000 in a few hundred KB is refused in milliseconds, not after gigabytes).
+/// `name` names the format in errors.
+pub fn open_bounded(
+    path: &Path,
+    format: image::ImageFormat,
+    name: &str,
+    max_side: u32,
+) -> Result<image::ImageReader<std::io::BufReader<std::fs::File>>> {
+    let open = || -> Result<_> {
+        let reader = image::ImageReader::open(path)
+            .map_err(|e| Error::io(path, e))?
+            .with_guessed_format()
+            .map_err(|e| Error::io(path, e))?;
+        if reader.format() != Some(format) {
+            return Err(image_err(path, format!("not a {name} file")));
+        }
+        Ok(reader)
+    };
+    let (w, h) = open()?
+        .into_dimensions()
+        .map_err(|e| image_err(path, format!("cannot read the {name} header: {e}")))?;
+    if w == 0 || h == 0 || w > max_side || h > max_side {
+        return Err(image_err(
+            path,
+            format!("its header says {w}×{h} pixels; at most {max_side} a side can be read"),
+        ));
     }
-    reader
+    let mut reader = open()?;
+    let mut limits = image::Limits::default();
+    limits.max_image_width = Some(w);
+    limits.max_image_height = Some(h);
+    // The decoded image plus the decoder's own buffers (a row, the inflate window).
+    limits.max_alloc = Some(u64::from(w) * u64::from(h) * MAX_DECODED_PIXEL_BYTES + (16 << 20));
+    reader.limits(limits);
+    Ok(reader)
+}
+
+/// Opens an image and insists on its format (by content, falling back to the extension),
+/// bounded by its header ([`open_bounded`]).
+fn open_as(path: &Path, format: image::ImageFormat, name: &str) -> Result<image::DynamicImage> {
+    crate::fsutil::check_input_file(path, name, crate::fsutil::MAX_PNG_BYTES)?;
+    open_bounded(path, format, name, MAX_TEXTURE_SIDE)?
         .decode()
         .map_err(|e| image_err(path, format!("cannot decode {name}: {e}")))
 }

@@ -50,6 +50,11 @@ enum Command {
 /// `--table-texel -1` reaches the range check instead of reading `-1` as a flag). An option
 /// of one floating-point value takes any value that starts with `-` (`-1e-3`, `-inf`), which
 /// clap's own test for negative numbers does not cover; its number parser then judges it.
+///
+/// Whole-number options take any value that starts with `-` too (`--size -inf`), and their
+/// parser says what is wrong and what is accepted (`not a whole number`, `negative`) instead
+/// of the standard library's "invalid digit found in string"; a float32 option refuses a
+/// number beyond float32's range instead of reading it as infinity.
 fn command() -> clap::Command {
     use std::any::TypeId;
     Cli::command().mut_subcommands(|sub| {
@@ -58,14 +63,87 @@ fn command() -> clap::Command {
                 return a;
             }
             let id = a.get_value_parser().type_id();
-            let float = id == TypeId::of::<f64>() || id == TypeId::of::<f32>();
             let single = a.get_num_args().is_none_or(|n| n.max_values() == 1);
-            if float && single {
+            let a = if id == TypeId::of::<f32>() {
+                a.value_parser(float32())
+            } else if let Some(parser) = whole_number_parser(|t| id == t) {
+                a.value_parser(parser)
+            } else {
+                a
+            };
+            let numeric = id == TypeId::of::<f64>()
+                || id == TypeId::of::<f32>()
+                || whole_number_parser(|t| id == t).is_some();
+            if numeric && single {
                 a.allow_hyphen_values(true)
             } else {
                 a.allow_negative_numbers(true)
             }
         })
+    })
+}
+
+/// The parser of a whole-number option, where `is` says its type is one.
+fn whole_number_parser(
+    is: impl Fn(std::any::TypeId) -> bool,
+) -> Option<clap::builder::ValueParser> {
+    use std::any::TypeId;
+    if is(TypeId::of::<u8>()) {
+        Some(whole::<u8>(0, u8::MAX.into()))
+    } else if is(TypeId::of::<u16>()) {
+        Some(whole::<u16>(0, u16::MAX.into()))
+    } else if is(TypeId::of::<u32>()) {
+        Some(whole::<u32>(0, u32::MAX.into()))
+    } else if is(TypeId::of::<u64>()) {
+        Some(whole::<u64>(0, u64::MAX.into()))
+    } else if is(TypeId::of::<usize>()) {
+        Some(whole::<usize>(0, usize::MAX as i128))
+    } else if is(TypeId::of::<i32>()) {
+        Some(whole::<i32>(i32::MIN.into(), i32::MAX.into()))
+    } else if is(TypeId::of::<i64>()) {
+        Some(whole::<i64>(i64::MIN.into(), i64::MAX.into()))
+    } else {
+        None
+    }
+}
+
+/// A whole number of `T` in `[min, max]`; the message names what is wrong with the value
+/// and what is accepted.
+fn whole<T>(min: i128, max: i128) -> clap::builder::ValueParser
+where
+    T: TryFrom<i128> + Clone + Send + Sync + 'static,
+{
+    clap::builder::ValueParser::new(move |s: &str| -> Result<T, String> {
+        let accepted = if max >= 1 << 32 {
+            format!("a whole number ≥ {min}")
+        } else {
+            format!("a whole number from {min} to {max}")
+        };
+        let t = s.trim();
+        match t.parse::<i128>() {
+            Ok(v) if v < min => Err(format!("{v} is below {min}; expected {accepted}")),
+            Ok(v) => T::try_from(v).map_err(|_| format!("{v} is too large; expected {accepted}")),
+            Err(_) => match t.parse::<f64>() {
+                Ok(x) if x.is_nan() => Err(format!("not a number; expected {accepted}")),
+                Ok(_) => Err(format!("not a whole number; expected {accepted}")),
+                Err(_) => Err(format!("not a number; expected {accepted}")),
+            },
+        }
+    })
+}
+
+/// A float32 option: any number float32 holds (NaN and ±inf pass to the option's own range
+/// check, which names the option); one beyond float32's range is refused here instead of
+/// becoming infinity.
+fn float32() -> clap::builder::ValueParser {
+    clap::builder::ValueParser::new(|s: &str| -> Result<f32, String> {
+        let x: f64 = s.trim().parse().map_err(|_| {
+            "not a number; expected a decimal number such as 0.5 or 2e3".to_string()
+        })?;
+        if x.is_finite() && x.abs() > f64::from(f32::MAX) {
+            return Err(format!("{x:e} is beyond float32's range (±{:e})", f32::MAX));
+        }
+        Ok(x as f32)
     })
 }
 
@@ -165,6 +243,17 @@ fn main() -> ExitCode {
         Err(code) => return code,
     };
     diffract::fsutil::remove_temps_on_interrupt();
+    // The environment is an input like the flags: a bad cache cap is refused before any
+    // work, by every command that may write the cache.
+    if !matches!(
+        cli.command,
+        Command::Variants { .. } | Command::Heightfield(_)
+    ) {
+        if let Err(e) = diffract::cache::cache_max_bytes() {
+            eprintln!("error: {e}");
+            return ExitCode::FAILURE;
+        }
+    }
     let result = match &cli.command {
         Command::Render(a) => diffract::cli::render::run(a),
         Command::Brdf(a) => diffract::cli::brdf::run(a),

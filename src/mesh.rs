@@ -117,7 +117,7 @@ impl Mesh {
     /// how missing ones are filled in. Zero-area triangles are dropped and said in
     /// [`Mesh::repairs`]. Errors name the file and the line, triangle or vertex at fault.
     pub fn load_obj(path: &Path) -> Result<Mesh> {
-        let bytes = std::fs::read(path).map_err(|e| Error::io(path, e))?;
+        let bytes = crate::fsutil::read_bounded(path, "mesh", crate::fsutil::MAX_OBJ_BYTES)?;
         let text = std::str::from_utf8(&bytes).map_err(|e| {
             Error::parse(
                 path,
@@ -225,7 +225,10 @@ impl Mesh {
             .file_stem()
             .map(|s| s.to_string_lossy().into_owned())
             .unwrap_or_else(|| "mesh".into());
-        finish(name, raw, path)
+        let rescaled = fit_to_scene_units(&mut raw, path);
+        let mut mesh = finish(name, raw, path)?;
+        mesh.repairs.extend(rescaled);
+        Ok(mesh)
     }
 
     /// Writes the mesh as OBJ (positions, UVs, normals and `v/vt/vn` faces; tangents are
@@ -659,6 +662,47 @@ fn prescan_obj(text: &str, path: &Path) -> Result<usize> {
         }
     }
     Ok(triangles)
+}
+
+/// Largest extent (bounding-box diagonal) and distance from the origin of a mesh used as it
+/// is, in scene units. The camera, the depth range and the shaders work in float32: a mesh
+/// far beyond the scene's few units (coordinates of 1e30, a model in nanometres) loses its
+/// shape in the view transform or overflows it.
+pub const MAX_SCENE_EXTENT: f64 = 1e4;
+/// Smallest extent of a mesh used as it is, in scene units (below it, float32 positions
+/// carry too few digits for smooth normals and a stable depth test).
+pub const MIN_SCENE_EXTENT: f64 = 1e-4;
+/// Extent a mesh outside the range above is scaled to: the size of the built-in meshes,
+/// which the default camera frames.
+const FITTED_EXTENT: f64 = 2.0;
+
+/// Recentres at the origin and rescales to [`FITTED_EXTENT`] a mesh whose extent or
+/// distance from the origin lies outside what float32 scene units hold
+/// ([`MAX_SCENE_EXTENT`], [`MIN_SCENE_EXTENT`]); returns the note for [`Mesh::repairs`].
+/// Uniform scaling and translation keep the normals a file gives.
+fn fit_to_scene_units(raw: &mut RawMesh, path: &Path) -> Option<String> {
+    let used = raw.indices.iter().map(|&i| raw.positions[i as usize]);
+    let (lo, hi) = used.fold(
+        (DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)),
+        |(lo, hi), p| (lo.min(v3(p)), hi.max(v3(p))),
+    );
+    let extent = (hi - lo).length();
+    let centre = 0.5 * (lo + hi);
+    let inside = extent <= MAX_SCENE_EXTENT && centre.length() <= MAX_SCENE_EXTENT;
+    if !extent.is_finite() || extent == 0.0 || (inside && extent >= MIN_SCENE_EXTENT) {
+        return None;
+    }
+    let scale = FITTED_EXTENT / extent;
+    for p in raw.positions.iter_mut() {
+        *p = f3((v3(*p) - centre) * scale);
+    }
+    Some(format!(
+        "{}: spans {extent:.3e} units around ({:.3e}, {:.3e}, {:.3e}), outside the scene's {MIN_SCENE_EXTENT:e} to {MAX_SCENE_EXTENT:e}; recentred at the origin and scaled by {scale:.3e} to {FITTED_EXTENT} units",
+        path.display(),
+        centre.x,
+        centre.y,
+        centre.z
+    ))
 }
 
 /// A `(nu+1) × (nv+1)` vertex grid over `u, v ∈ [0,1]` (rows of constant `v`) with two

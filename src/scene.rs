@@ -220,6 +220,12 @@ impl MeshSpec {
     }
 }
 
+/// Smallest exposure a scene or `--exposure` takes.
+pub const MIN_EXPOSURE: f32 = 1e-6;
+/// Largest exposure: a mirror's specular peak (~1e3 on the maps) times this still fits
+/// float32 with room to spare, and no scene needs more than a few hundred.
+pub const MAX_EXPOSURE: f32 = 1e6;
+
 /// Image size, exposure and background.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -639,7 +645,12 @@ impl Scene {
                 return Err(format!("[output] {what} = {v}: must be 1..=8192 pixels"));
             }
         }
-        positive("[output] exposure", o.exposure)?;
+        if !(MIN_EXPOSURE..=MAX_EXPOSURE).contains(&o.exposure) {
+            return Err(format!(
+                "[output] exposure = {}: expected {MIN_EXPOSURE:e} to {MAX_EXPOSURE:e}",
+                o.exposure
+            ));
+        }
         finite3("[output] background", o.background)?;
         if o.background.iter().any(|&c| c < 0.0) {
             return Err(format!(

@@ -540,6 +540,16 @@ pub struct StabilityArgs {
     pub out: PathBuf,
 }
 
+/// Smallest `--tolerance` the matrix judges: a float32 evaluation of ρ/C (a GPU map, a
+/// table variant) carries rounding of a few 1e-7 relative to a mirror's specular value, so
+/// a cell could never pass a finer tolerance.
+pub const MIN_TOLERANCE: f64 = 1e-6;
+
+/// A result for people: `1.23e-4`, or `none`.
+fn sci(x: Option<f64>) -> String {
+    x.map_or_else(|| "none".to_string(), |v| format!("{v:.2e}"))
+}
+
 /// Runs `diffract stability`.
 pub fn run(args: &StabilityArgs) -> Result<()> {
     stability_args(args)?;
@@ -574,9 +584,12 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
     );
     write_reports(&args.out, &spec, &cells, &table_cells, &header)?;
     for c in table_cells.iter().filter(|c| c.status == Status::Fail) {
-        eprintln!(
-            "FAIL: {} on {}, h_max {} µm: error {:?}",
-            c.variant, c.case, c.h_max_um, c.error
+        println!(
+            "FAIL: {} on {}, h_max {} µm: error {}",
+            c.variant,
+            c.case,
+            c.h_max_um,
+            sci(c.error)
         );
     }
     println!("{header}");
@@ -632,11 +645,12 @@ fn matrix_spec(args: &StabilityArgs) -> Result<MatrixSpec> {
     Ok(spec)
 }
 
-/// Progress on stderr: a failing cell at once, and a count every 20 cells.
+/// A failing cell at once on stdout (a result, for people), and progress on stderr: a
+/// count every 20 cells.
 fn report_cell(c: &Cell, done: usize, total: usize) {
     if c.status == Status::Fail {
-        eprintln!(
-            "FAIL: {}, h_max {} µm, θi {}°, λ {} nm, {} {} {}: error {:?}, f32 {:?} (bound {:?})",
+        println!(
+            "FAIL: {}, h_max {} µm, θi {}°, λ {} nm, {} {} {}: error {}, float32 error {} (bound {})",
             c.variant,
             c.h_max_um,
             c.theta_i_deg,
@@ -644,9 +658,9 @@ fn report_cell(c: &Cell, done: usize, total: usize) {
             c.expansion,
             c.terms_mode,
             c.evaluator,
-            c.error,
-            c.f32_error,
-            c.f32_bound
+            sci(c.error),
+            sci(c.f32_error),
+            sci(c.f32_bound)
         );
     }
     if done.is_multiple_of(20) || done == total {
@@ -1248,10 +1262,12 @@ pub fn stability_args(args: &StabilityArgs) -> Result<()> {
 /// The tolerance, heights, angles and wavelengths.
 fn check_axes(args: &StabilityArgs) -> Result<()> {
     let t = args.tolerance;
-    if !(t.is_finite() && t > 0.0 && t < 1.0) {
+    if !(t.is_finite() && (MIN_TOLERANCE..1.0).contains(&t)) {
         return Err(Error::invalid(
             "tolerance",
-            format!("{t}; must be in (0, 1)"),
+            format!(
+                "{t:e}; must be in [{MIN_TOLERANCE:e}, 1): the matrix's float32 evaluators (GPU maps, table variants) resolve no finer error on ρ/C"
+            ),
         ));
     }
     for &h in &args.hmax_um {

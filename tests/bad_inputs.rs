@@ -1301,7 +1301,7 @@ fn corpus() -> Vec<Case> {
             "flag: stability --tolerance nan",
             |_| {},
             &["stability", "--no-gpu", "--tolerance", "nan", "-o", "{d}/s"],
-            Fail("invalid tolerance: NaN; must be in (0, 1)"),
+            Fail("invalid tolerance: NaN; must be in [1e-6, 1)"),
         ),
         case(
             "flag: stability --tolerance 0",
@@ -1791,5 +1791,319 @@ fn dev_stdout_as_an_output_reaches_standard_output() {
         .unwrap()
         .file_type()
         .is_symlink());
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+// ---- numbers, sizes and outputs checked before any work, one test per command -------------
+
+mod bomb;
+use bomb::png_bomb;
+
+/// Runs `cases` like the corpus does (no Vulkan driver, so every refusal must come before
+/// the device opens) and reports every case that failed.
+fn run_cases(tag: &str, cases: Vec<Case>) {
+    let root = std::env::temp_dir().join(format!("diffract-bad-{tag}-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&root);
+    let failures: Vec<String> = cases
+        .iter()
+        .enumerate()
+        .filter_map(|(i, c)| run(c, &root, i).err().map(|m| format!("[{}] {m}", c.name)))
+        .collect();
+    assert!(
+        failures.is_empty(),
+        "{} of {} cases failed:\n\n{}",
+        failures.len(),
+        cases.len(),
+        failures.join("\n\n")
+    );
+    let _ = std::fs::remove_dir_all(&root);
+}
+
+#[test]
+fn a_png_bomb_is_a_valid_png_of_the_size_it_claims() {
+    // The generator's own check, on a size the image crate may decode here.
+    let img = image::load_from_memory(&png_bomb(300)).unwrap().to_luma8();
+    assert_eq!(img.dimensions(), (300, 300));
+    assert!(img.pixels().all(|p| p.0 == [0]));
+}
+
+#[test]
+fn render_checks_numbers_environment_and_mesh_file_before_any_work() {
+    use Expect::*;
+    let render = |extra: &[&'static str]| {
+        let mut v = vec!["render", "-o", "{d}/o.png"];
+        v.extend_from_slice(extra);
+        v
+    };
+    let cases = vec![
+        case(
+            "flag: render --size -inf (an integer option takes a leading '-')",
+            |_| {},
+            &render(&["--brdf-map", "--size", "-inf"]),
+            Fail("invalid value '-inf' for '--size <SIZE>': not a whole number"),
+        ),
+        case(
+            "flag: render --exposure 1e300 (beyond float32)",
+            |_| {},
+            &render(&["--exposure", "1e300"]),
+            Fail("1e300 is beyond float32's range"),
+        ),
+        case(
+            "flag: render --exposure 1e30 (beyond the exposure range)",
+            |_| {},
+            &render(&["--exposure", "1e30"]),
+            Fail("invalid exposure: 1e30; expected 1e-6 to 1e6"),
+        ),
+        case(
+            "flag: render --table-budget-mb -1",
+            |_| {},
+            &render(&["--table-budget-mb", "-1"]),
+            Fail("-1 is below 0; expected a whole number"),
+        ),
+        case(
+            "flag: render --table-budget-mb nan",
+            |_| {},
+            &render(&["--table-budget-mb", "nan"]),
+            Fail("'nan' for '--table-budget-mb <TABLE_BUDGET_MB>': not a number; expected a whole number"),
+        ),
+        case(
+            "flag: render --table-step-nm 0.5",
+            |_| {},
+            &render(&["--table-step-nm", "0.5"]),
+            Fail("not a whole number; expected a whole number"),
+        ),
+        case(
+            "flag: render --table-step-nm 200 (cannot resolve the spectrum)",
+            |_| {},
+            &render(&["--table-step-nm", "200"]),
+            Fail("invalid table step: 200 nm; expected at most 20 nm"),
+        ),
+        case(
+            "flag: render --table-step-nm 400",
+            |_| {},
+            &render(&["--table-step-nm", "400"]),
+            Fail("expected at most 20 nm"),
+        ),
+        case(
+            "flag: render --table-texel 1e-320",
+            |_| {},
+            &render(&["--table-texel", "1e-320"]),
+            Fail("invalid table texel: 1e-320; expected at least 1e-6"),
+        ),
+        case(
+            "env: render with DIFFRACT_CACHE_MAX=lots",
+            |_| {},
+            &render(&["--brdf-map", "--size", "8"]),
+            Fail("invalid DIFFRACT_CACHE_MAX: 'lots'"),
+        )
+        .env("DIFFRACT_CACHE_MAX", "lots"),
+        case(
+            "output: render -o a dangling link into a missing directory",
+            |d| link("gone/x.png", &d.join("o.png")),
+            &render(&["--brdf-map", "--size", "8"]),
+            Fail("directory"),
+        ),
+    ];
+    run_cases("render", cases);
+}
+
+#[test]
+fn heightfield_refuses_periods_it_cannot_resolve_and_bombs() {
+    use Expect::*;
+    let hf = |kind: &'static str, period: &'static str| -> Vec<&'static str> {
+        vec![
+            "heightfield",
+            "--kind",
+            kind,
+            "--period-um",
+            period,
+            "-o",
+            "{d}/x.png",
+        ]
+    };
+    let cases = vec![
+        case(
+            "flag: heightfield sinusoidal --period-um 1e-10",
+            |_| {},
+            &hf("sinusoidal", "1e-10"),
+            Fail("invalid period: 1e-10 µm is shorter than two"),
+        ),
+        case(
+            "flag: heightfield sinusoidal --period-um 1e-320",
+            |_| {},
+            &hf("sinusoidal", "1e-320"),
+            Fail("invalid period"),
+        ),
+        case(
+            "flag: heightfield elaphe --period-um 1e-10",
+            |_| {},
+            &hf("elaphe", "1e-10"),
+            Fail("invalid period"),
+        ),
+        case(
+            "flag: heightfield xenopeltis --period-um 1e-10",
+            |_| {},
+            &hf("xenopeltis", "1e-10"),
+            Fail("invalid period"),
+        ),
+        case(
+            "png: heightfield --from-sample a PNG bomb",
+            |d| {
+                put(&d.join("bomb.png"), png_bomb(20000));
+                put(&d.join("bomb.toml"), "dh_um = 0.1\nh_max_um = 0.2\n");
+            },
+            &[
+                "heightfield",
+                "--from-sample",
+                "{d}/bomb.png",
+                "-o",
+                "{d}/g.png",
+            ],
+            Fail("its header says 20000×20000 pixels; at most 4096 a side"),
+        ),
+    ];
+    run_cases("heightfield", cases);
+}
+
+#[test]
+fn brdf_refuses_a_single_sample_and_a_png_bomb_from_the_header() {
+    use Expect::*;
+    let cases = vec![
+        case(
+            "f32: brdf on a 1×1 height field",
+            |d| {
+                queries(&d.join("q.csv"));
+                f32_field(&d.join("one.f32"), 1, "dh_um = 0.1\nnx = 1\nny = 1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/one.f32",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+                "--no-cache",
+            ],
+            Fail("size 1×1 is a single sample"),
+        ),
+        case(
+            "png: brdf on a PNG bomb",
+            |d| {
+                queries(&d.join("q.csv"));
+                put(&d.join("bomb.png"), png_bomb(20000));
+                put(&d.join("bomb.toml"), "dh_um = 0.1\nh_max_um = 0.2\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/bomb.png",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "{d}/r.csv",
+                "--no-cache",
+            ],
+            Fail("its header says 20000×20000 pixels"),
+        ),
+        case(
+            "f32: brdf --method model on a one-row height field works like reference",
+            |d| {
+                queries(&d.join("q.csv"));
+                let bytes: Vec<u8> = (0..64)
+                    .flat_map(|i| (0.01 * (i % 7) as f32).to_le_bytes())
+                    .collect();
+                put(&d.join("row.f32"), bytes);
+                put(&d.join("row.toml"), "dh_um = 0.09\nnx = 64\nny = 1\n");
+            },
+            &[
+                "brdf",
+                "--heightfield",
+                "{d}/row.f32",
+                "--queries",
+                "{d}/q.csv",
+                "--out",
+                "/dev/null",
+                "--no-cache",
+                "--method",
+                "model",
+            ],
+            Ok,
+        ),
+    ];
+    run_cases("brdf", cases);
+}
+
+#[test]
+fn stability_refuses_a_tolerance_no_float32_evaluator_resolves() {
+    use Expect::*;
+    let cases = vec![case(
+        "flag: stability --tolerance 1e-320",
+        |_| {},
+        &[
+            "stability",
+            "--no-gpu",
+            "--tolerance",
+            "1e-320",
+            "-o",
+            "{d}/s",
+        ],
+        Fail("invalid tolerance: 1e-320; must be in [1e-6, 1)"),
+    )];
+    run_cases("stability", cases);
+}
+
+/// An output in a directory this process may not write is refused before any work, and
+/// nothing is created. Run as an unprivileged user where the test runs as root (root
+/// writes anywhere); without root, the directory's mode alone does it.
+#[test]
+fn an_output_in_a_read_only_directory_is_refused_before_any_work() {
+    use std::os::unix::fs::PermissionsExt;
+    use std::os::unix::process::CommandExt;
+    let d = scratch("readonly");
+    std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let ro = d.join("ro");
+    std::fs::create_dir(&ro).unwrap();
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+    let mut cmd = diffract(&["render", "-o"]);
+    cmd.arg(ro.join("x.exr"))
+        .env("VK_ICD_FILENAMES", "/nonexistent/icd.json")
+        .env("VK_DRIVER_FILES", "/nonexistent/icd.json");
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } == 0 {
+        cmd.uid(65534).gid(65534);
+    }
+    let o = cmd.output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(1), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(
+        err.contains("cannot be written (read-only or permission denied)"),
+        "{err}"
+    );
+    assert_eq!(std::fs::read_dir(&ro).unwrap().count(), 0);
+    let _ = std::fs::remove_dir_all(&d);
+}
+
+/// An output that is a dangling link is written through: the file it names is created
+/// and the link stays a link (the policy for a link to a file).
+#[test]
+fn an_output_onto_a_dangling_link_creates_its_file_and_keeps_the_link() {
+    let d = scratch("dangling");
+    brdf_base(&d);
+    std::fs::create_dir(d.join("sub")).unwrap();
+    let out = d.join("answers.csv");
+    link("sub/new.csv", &out);
+    let o = diffract(&[])
+        .args(brdf_args(&d, out.to_str().unwrap()))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(std::fs::symlink_metadata(&out)
+        .unwrap()
+        .file_type()
+        .is_symlink());
+    let text = std::fs::read_to_string(d.join("sub/new.csv")).unwrap();
+    assert!(text.starts_with("theta_i_deg,"), "{text}");
     let _ = std::fs::remove_dir_all(&d);
 }

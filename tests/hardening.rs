@@ -338,3 +338,47 @@ fn precompute_at_the_memory_limit_stays_under_4_gb() {
     assert!(kb < 500_000, "peak RSS {kb} kB for a refused request");
     let _ = std::fs::remove_dir_all(&d);
 }
+
+mod bomb;
+
+/// A PNG whose header claims 20000×20000 pixels (400 MB of grey, 2.5 MB of file) is refused
+/// from its header by every command that reads a height field, in well under 100 MB of
+/// peak memory: nothing is decoded.
+#[test]
+fn a_png_bomb_is_refused_from_its_header_in_little_memory() {
+    let d = scratch("bomb");
+    let png = d.join("bomb.png");
+    std::fs::write(&png, bomb::png_bomb(20000)).unwrap();
+    std::fs::write(d.join("bomb.toml"), "dh_um = 0.1\nh_max_um = 0.2\n").unwrap();
+    let q = queries(&d);
+    let mut brdf = bin();
+    brdf.args(["brdf", "--no-cache", "--heightfield"])
+        .arg(&png)
+        .arg("--queries")
+        .arg(&q)
+        .arg("--out")
+        .arg(d.join("r.csv"));
+    let mut grow = bin();
+    grow.args(["heightfield", "--from-sample"])
+        .arg(&png)
+        .arg("-o")
+        .arg(d.join("g.png"));
+    for (name, cmd) in [
+        ("brdf --heightfield", &mut brdf),
+        ("heightfield --from-sample", &mut grow),
+    ] {
+        let (kb, o) = peak_kb(cmd);
+        let err = String::from_utf8_lossy(&o.stderr);
+        eprintln!("{name}: peak RSS {kb} kB; {}", err.trim());
+        assert_eq!(o.status.code(), Some(1), "{name}: {err}");
+        assert!(
+            err.contains("its header says 20000×20000 pixels"),
+            "{name}: {err}"
+        );
+        assert!(
+            kb < 100_000,
+            "{name}: peak RSS {kb} kB for a refused PNG bomb"
+        );
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}

@@ -695,3 +695,34 @@ fn default_close_up_shows_scales_in_first_order() {
     let (w, h, px) = t.load().unwrap();
     assert_eq!(px.len(), (w * h) as usize);
 }
+
+/// A mesh far outside float32 scene units (coordinates of 1e30, or a micrometre-sized
+/// model) is recentred at the origin and scaled to 2 units, and says so; negative indices
+/// are the same faces as positive ones; a mesh in ordinary units is left as it is.
+#[test]
+fn meshes_outside_the_scene_units_are_recentred_and_rescaled_with_a_note() {
+    for (text, scale) in [
+        (
+            "v 1e30 1e30 0\nv 1.001e30 1e30 0\nv 1e30 1.001e30 0\nf 1 2 3\n",
+            "1e30",
+        ),
+        ("v 0 0 0\nv 1e-6 0 0\nv 0 1e-6 0\nf 1 2 3\n", "1e-6"),
+    ] {
+        let m = obj(text).unwrap();
+        let (lo, hi) = m.bounds();
+        let (lo, hi) = (Vec3::from(lo), Vec3::from(hi));
+        assert!(
+            ((hi - lo).length() - 2.0).abs() < 1e-4,
+            "{scale}: {lo} {hi}"
+        );
+        assert!(((hi + lo) * 0.5).length() < 1e-4, "{scale}: {lo} {hi}");
+        assert_eq!(m.repairs.len(), 1, "{scale}: {:?}", m.repairs);
+        assert!(m.repairs[0].contains("recentred at the origin and scaled by"));
+        assert_eq!(m.vertices[0].normal, [0.0, 0.0, 1.0], "{scale}");
+    }
+    let plain = obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n").unwrap();
+    assert!(plain.repairs.is_empty(), "{:?}", plain.repairs);
+    let negative = obj("v 0 0 0\nv 1 0 0\nv 0 1 0\nf -3 -2 -1\n").unwrap();
+    assert_eq!(negative.vertices, plain.vertices);
+    assert_eq!(negative.indices, plain.indices);
+}

@@ -54,7 +54,14 @@ pub fn run(args: &BrdfArgs) -> Result<()> {
         }
         Method::Model => {
             let cache = args.cache.dir();
-            let p = material.prepare(cache.as_deref(), &crate::report::Stderr)?;
+            // The model runs here in f64: its terms are planned for f64 rounding, not for
+            // the shaders' float32 (which a one-row field's narrow window cannot meet).
+            let p = material.prepare_for(
+                cache.as_deref(),
+                &crate::brdf::truncation::Reach::ALL,
+                crate::brdf::truncation::Precision::F64,
+                &crate::report::Stderr,
+            )?;
             let t = p.terms();
             answer_all(
                 &queries,

@@ -6,6 +6,15 @@ use crate::render::table_build::TableBuild;
 use crate::render::variant::{TableFormat, TableOptions, VariantKind};
 use crate::{Error, Result};
 
+/// Finest `--table-texel`: a tenth of the default spacing at the longest coherence length a
+/// material takes (1.75e-5 at 1e4 µm); anything finer is only ever coarsened to the budget.
+pub const MIN_TABLE_TEXEL: f64 = 1e-6;
+
+/// Coarsest `--table-step-nm`: the trapezoid rule over the CIE 1931 observer and D65 gives a
+/// white spectrum's X, Y, Z within 1 % of the 1 nm integral at 20 nm, but 5 % off at 50 nm
+/// and 99 % at 200 nm (a map 15 times too dark), whatever the lines of the grating do.
+pub const MAX_TABLE_STEP_NM: u32 = 20;
+
 /// Table options shared by `render`, `profile` and `view`.
 #[derive(Debug, Clone, clap::Args)]
 pub struct TableArgs {
@@ -53,6 +62,14 @@ impl TableArgs {
         use crate::brdf::table::MAX_NODES_W;
         if let Some(texel) = self.table_texel {
             crate::guard::positive("table texel", texel, "")?;
+            if texel < MIN_TABLE_TEXEL {
+                return Err(Error::invalid(
+                    "table texel",
+                    format!(
+                        "{texel:e}; expected at least {MIN_TABLE_TEXEL:e} (a tenth of the default spacing at the longest coherence length, 1.75e-5 at 1e4 µm)"
+                    ),
+                ));
+            }
         }
         if let Some(n) = self.table_w_nodes {
             if !(2..=MAX_NODES_W).contains(&n) {
@@ -64,6 +81,14 @@ impl TableArgs {
         }
         if let Some(step) = self.table_step_nm {
             crate::colour::ColourTable::new(step)?;
+            if step > MAX_TABLE_STEP_NM {
+                return Err(Error::invalid(
+                    "table step",
+                    format!(
+                        "{step} nm; expected at most {MAX_TABLE_STEP_NM} nm (a divisor of 400: 1, 2, 4, 5, 8, 10, 16 or 20): the colour integral of a white spectrum is off by 1 % at 20 nm, 5 % at 50 nm and 99 % at 200 nm"
+                    ),
+                ));
+            }
         }
         if self.table_budget_mb == 0 {
             return Err(Error::invalid(

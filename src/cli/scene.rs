@@ -34,10 +34,11 @@ impl SceneArgs {
             None => Scene::default_scene(),
         };
         if let Some(e) = self.exposure {
-            if !(e.is_finite() && e > 0.0) {
+            use crate::scene::{MAX_EXPOSURE, MIN_EXPOSURE};
+            if !(MIN_EXPOSURE..=MAX_EXPOSURE).contains(&e) {
                 return Err(Error::invalid(
                     "exposure",
-                    format!("{e}; must be finite and > 0"),
+                    format!("{e:e}; expected {MIN_EXPOSURE:e} to {MAX_EXPOSURE:e}"),
                 ));
             }
             scene.output.exposure = e;

@@ -155,6 +155,17 @@ impl GratingSpec {
         if !angle_deg.is_finite() {
             return Err(Error::invalid("angle", format!("{angle_deg}°")));
         }
+        // A period under two samples is not resolved; refusing it here also bounds the
+        // wave numbers below (|mx|, |my| ≤ half the samples across), so nothing overflows.
+        if period_um < 2.0 * self.dh_um {
+            return Err(Error::invalid(
+                "period",
+                format!(
+                    "{period_um:e} µm is shorter than two {:.4} µm samples; the grating is not resolved",
+                    self.dh_um
+                ),
+            ));
+        }
         let a = angle_deg.to_radians();
         let mx = (extent * a.cos() / period_um).round() as i64;
         let my = (extent * a.sin() / period_um).round() as i64;

@@ -387,10 +387,9 @@ fn read_png(path: &Path) -> Result<(usize, usize, Vec<f64>)> {
         path: path.to_path_buf(),
         msg,
     };
-    let reader = image::ImageReader::open(path).map_err(|e| Error::io(path, e))?;
-    let reader = reader
-        .with_guessed_format()
-        .map_err(|e| Error::io(path, e))?;
+    // The size is checked from the header before anything is decoded.
+    let side = super::MAX_SIDE as u32;
+    let reader = crate::image_io::open_bounded(path, image::ImageFormat::Png, "PNG", side)?;
     let img = reader
         .decode()
         .map_err(|e| image_err(format!("cannot decode: {e}")))?;

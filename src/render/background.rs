@@ -219,8 +219,8 @@ impl Renderer {
         // The mesh alone: the triangles in the camera's frame (as its pass asks); beside the
         // map, every lit one (as the map's pass asks).
         let in_frame = map_wi.is_none().then_some(aspect);
-        let mut need =
-            region::scene_region(scene, &mesh, in_frame, disc.is_some()).unwrap_or(Region::ALL);
+        let mut need = region::scene_region(scene, &mesh, in_frame, disc.is_some())
+            .unwrap_or_else(region::unlit);
         let mut output = OutputMode::Mesh;
         if let Some(wi) = map_wi {
             self.variant.check_output(OutputMode::MapDisplay)?;

@@ -518,7 +518,16 @@ impl Renderer {
         };
         // The triangles in the camera's frame: `render` fits its table to them, the viewer
         // covers them with a margin.
-        let region = scene_region(scene, mesh, Some(aspect), disc.is_some()).unwrap_or(Region::ALL);
+        let region = match scene_region(scene, mesh, Some(aspect), disc.is_some()) {
+            Some(r) => r,
+            None => {
+                self.report.warn(&format!(
+                    "no triangle of '{}' in the camera's frame is lit and seen from its front: the image shows no diffraction",
+                    mesh.name
+                ));
+                region::unlit()
+            }
+        };
         self.prepare_variant(prepared, region, OutputMode::Mesh, disc)?;
         let mut params = self.params(prepared);
         let eye = scene.camera.eye;

@@ -18,6 +18,14 @@ pub(super) fn load_scene_mesh(scene: &Scene) -> Result<crate::mesh::Mesh> {
     Ok(mesh)
 }
 
+/// The region a table covers when no triangle in view is lit: the diffraction term is zero
+/// at every pixel, so the smallest table (around the mirror direction at normal incidence)
+/// does. Covering every direction instead would build the largest table there is for a
+/// black image (minutes and hundreds of MB for one unlit triangle).
+pub(super) fn unlit() -> Region {
+    Region::around([[0.0, 0.0, -2.0]], 0.02).unwrap_or(Region::ALL)
+}
+
 /// `r` widened by `margin` on every side, within what is physically possible.
 pub(super) fn widen(r: &Region, margin: f64) -> Region {
     let all = Region::ALL;

@@ -481,8 +481,18 @@ impl TableOptions {
                 ),
             ));
         }
+        // The build's own limits (nodes a side, f64 samples) coarsen the spacing like the
+        // budget does: a spacing finer than they allow is what a small budget gives too.
+        let within_build = |t: f64| {
+            let nodes = |len: f64| ((len / t).ceil() + 1.0).max(2.0);
+            let (nu, nv) = (nodes(e[0]), nodes(e[1]));
+            let side = crate::brdf::table::MAX_NODES_UV as f64;
+            nu <= side
+                && nv <= side
+                && nu * nv * (3 * w_nodes) as f64 <= crate::brdf::table::MAX_SAMPLES as f64
+        };
         let mut texel = asked;
-        while bytes(texel) > self.budget_bytes as f64 {
+        while bytes(texel) > self.budget_bytes as f64 || !within_build(texel) {
             texel *= 1.1;
         }
         let spec = TableSpec {

@@ -111,6 +111,45 @@ pub(crate) fn packed_layers(planes: usize) -> usize {
 /// picture (ΔE2000 mean 0.04 against the 8-direction render, docs/tables.md).
 const DISC_STEP_NM: u32 = 2;
 
+/// Smooths every slice of a table coarser than asked by the cubic B-spline's own kernel,
+/// `(1, 4, 1)/6` along `u` and `v` (the end nodes kept). The representations interpolate
+/// their slices with a cubic spline ([`crate::brdf::table::spline_plane`]); interpolating the
+/// smoothed slices gives the spline whose coefficients are the samples themselves, a convex
+/// combination of them at every point: it never rises above the largest sample around it
+/// and loses a narrow lobe's height gradually instead of ringing.
+pub(crate) fn smooth_slices(slices: &mut Slices) {
+    let (nu, nv) = (slices.nu, slices.nv);
+    let pass = |plane: &mut [[f64; 3]], len: usize, stride: usize, count: usize, step: usize| {
+        if len < 3 {
+            return;
+        }
+        for line in 0..count {
+            let at = |k: usize| line * step + k * stride;
+            let old: Vec<[f64; 3]> = (0..len).map(|k| plane[at(k)]).collect();
+            for k in 1..len - 1 {
+                plane[at(k)] =
+                    [0, 1, 2].map(|c| (old[k - 1][c] + 4.0 * old[k][c] + old[k + 1][c]) / 6.0);
+            }
+        }
+    };
+    for plane in &mut slices.data {
+        pass(plane, nu, 1, nv, nu);
+        pass(plane, nv, nu, nu, 1);
+    }
+}
+
+/// The largest relative loss of a lobe's peak in a smoothed table of spacing `texel`: the
+/// smoothing spline widens a Gaussian lobe of standard deviation `σ` by the cubic
+/// B-spline's variance `texel²/3` along each axis, so its peak falls to
+/// `σ² / (σ² + texel²/3)`; the narrowest lobe, at 380 nm, has `σ = λ/(2π σs)` with
+/// `σs = coherence/4` (the window of MODEL §3).
+pub(crate) fn smoothing_loss(texel: f64, coherence_um: f64) -> f64 {
+    let sigma_s = coherence_um / 4.0;
+    let sigma = crate::colour::LAMBDA_MIN_NM as f64 * 1e-3 / (2.0 * std::f64::consts::PI * sigma_s);
+    let s2 = sigma * sigma;
+    1.0 - s2 / (s2 + texel * texel / 3.0)
+}
+
 /// Mirror of `TableInfo` in glsl/table.glsl (std140: vec4 members only).
 #[repr(C)]
 #[derive(Clone, Copy)]
@@ -152,13 +191,14 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let (spec, coarsened) = options.spec(kind, material, hi - lo, setup.region)?;
     if let Some(asked) = coarsened {
         setup.report.warn(&format!(
-            "{kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB",
+            "{kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB and the build's limits: smoothed, never above its samples; the narrowest lobes' peaks (380 nm) come out {:.0} % low on a node, more between nodes",
             spec.region.lo[0],
             spec.region.hi[0],
             spec.region.lo[1],
             spec.region.hi[1],
             spec.texel_uv,
-            setup.table.budget_bytes >> 20
+            setup.table.budget_bytes >> 20,
+            100.0 * smoothing_loss(spec.texel_uv, material.coherence_um)
         ));
     }
     // Leaving out: the build integrates only the wavelengths whose weight matters.
@@ -196,6 +236,13 @@ pub(crate) fn prepare<T: GTable + 'static>(
     // centre once instead of each of its directions (glsl/shade.glsl, DISC_PREFILTERED).
     if let Some(kernel) = &setup.disc {
         prefilter_disc(&mut samples, &spec.region, kernel);
+    }
+    // A spacing coarser than the one that resolves the coherence lobe (coarsened to fit, or
+    // asked for) cannot follow the lobes: the interpolating spline would ring beside them
+    // (a pixel beside the specular at 4.8 times the map's peak at texel 0.0070, clamped to 0
+    // at 0.02). Smoothed, the table loses their height gradually instead.
+    if spec.texel_uv > TableSpec::default_texel(material.coherence_um) * (1.0 + 1e-9) {
+        smooth_slices(&mut samples);
     }
     let table = assemble(spec.region, samples)?;
     let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
@@ -492,5 +539,66 @@ mod tests {
             [106.0, 107.0, 108.0, 0.0]
         );
         assert_eq!(packed_layers(12), 9);
+    }
+
+    /// A lobe of the 65 µm window at 380 nm (σ = 0.0037) on a table of texel 0.0071, its
+    /// centre between nodes: the interpolating spline rings (below zero beside the lobe)
+    /// and can rise above its samples; the smoothed table is a convex combination of its
+    /// samples everywhere (never above their peak, never below zero) and loses the lobe's
+    /// height by no more than [`smoothing_loss`] says, plus what sampling between the
+    /// nodes costs.
+    #[test]
+    fn a_coarse_table_is_smoothed_and_never_rises_above_its_samples() {
+        use crate::brdf::table::{ChebyshevW, GTable};
+        let (n, texel, sigma) = (15usize, 0.1 / 14.0, 0.0037f64);
+        let region = Region {
+            lo: [-0.05, -0.05, -1.6],
+            hi: [0.05, 0.05, -1.4],
+        };
+        let (cu, cv) = (0.3 * texel, 0.5 * texel);
+        let node = |i: usize| -0.05 + i as f64 * texel;
+        let slice: Vec<[f64; 3]> = (0..n)
+            .flat_map(|j| {
+                (0..n).map(move |i| {
+                    let (du, dv) = (node(i) - cu, node(j) - cv);
+                    [(-(du * du + dv * dv) / (2.0 * sigma * sigma)).exp(); 3]
+                })
+            })
+            .collect();
+        let max_sample = slice.iter().map(|p| p[1]).fold(0.0, f64::max);
+        let slices = Slices {
+            nu: n,
+            nv: n,
+            w: vec![-1.55, -1.45],
+            data: vec![slice.clone(), slice],
+        };
+        let extremes = |t: &dyn GTable| {
+            let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+            for j in 0..=200 {
+                for i in 0..=200 {
+                    let uvw = [-0.05 + i as f64 * 5e-4, -0.05 + j as f64 * 5e-4, -1.5];
+                    let g = t.g_unclamped(uvw).unwrap()[1];
+                    lo = lo.min(g);
+                    hi = hi.max(g);
+                }
+            }
+            (lo, hi)
+        };
+        let (ring_lo, _) = extremes(&ChebyshevW::from_nodes(region, &slices));
+        assert!(
+            ring_lo < -0.01,
+            "the interpolating spline rings: min {ring_lo}"
+        );
+        let mut smoothed = slices.clone();
+        smooth_slices(&mut smoothed);
+        let (lo, hi) = extremes(&ChebyshevW::from_nodes(region, &smoothed));
+        assert!(lo >= -1e-12, "min {lo}");
+        assert!(
+            hi <= max_sample * (1.0 + 1e-12),
+            "max {hi} above the samples' {max_sample}"
+        );
+        let loss = smoothing_loss(texel, 65.0);
+        assert!((0.4..0.7).contains(&loss), "{loss}");
+        assert!(hi >= (1.0 - loss) * max_sample, "max {hi}, loss {loss}");
     }
 }
