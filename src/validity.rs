@@ -635,6 +635,10 @@ pub const SUMMARY_LAMBDAS_NM: [f64; 3] = [450.0, 550.0, 650.0];
 /// Angle grid of the cached summary (degrees): requests are rounded to it.
 pub const SUMMARY_THETA_STEP: f64 = 15.0;
 
+/// The share of a field's height variance its mean 1-D profile must explain for the one-line
+/// model check to run: below it the field is no grating the 1-D solver can speak for.
+pub const SUMMARY_MIN_EXPLAINED: f64 = 0.1;
+
 /// Convergence tolerance of the validity map's and the cached summary's solves: they sort
 /// cells into 10 %, 25 % and worse, for which 5 % solves suffice, in a fraction of the time.
 pub const MAP_TOLERANCE: f64 = 0.05;
@@ -658,6 +662,13 @@ pub fn expected_error_line(
 fn summary(material: &Material, thetas_deg: &[f64], cache_dir: Option<&Path>) -> Result<String> {
     let hf = material.load_heightfield(&crate::report::Collect::default())?;
     let profile = extract_profile(&hf)?;
+    if profile.explained < SUMMARY_MIN_EXPLAINED || profile.depth_um() <= 0.0 {
+        return Ok(format!(
+            "model check: not run: the field's mean 1-D profile explains {:.0} % of its height \
+             variance (a rigorous check needs a grating); see diffract validity",
+            100.0 * profile.explained
+        ));
+    }
     let model = ScalarModel::of(material);
     let mut thetas: Vec<f64> = thetas_deg
         .iter()

@@ -557,7 +557,10 @@ pub fn converge(
     tolerance: f64,
     start: Option<(usize, usize)>,
 ) -> Result<Converged> {
-    let (mut n, mut s) = start.unwrap_or((first_harmonics(grating, lambda_um), FIRST_SLICES));
+    let (n0, s0) = start.unwrap_or((first_harmonics(grating, lambda_um), FIRST_SLICES));
+    // A long period asks for more harmonics than the cap: start at the cap, so one solve
+    // never costs more than a converged one may.
+    let (mut n, mut s) = (n0.min(MAX_HARMONICS), s0.min(MAX_SLICES));
     let mut pair = Pair::solve(grating, lambda_um, theta_i_deg, n, s)?;
     let mut harmonic_change;
     loop {
