@@ -109,7 +109,7 @@ fn a_small_environment_lit_map_is_drawn() {
             "--table-w-nodes",
             "4",
             "--table-step-nm",
-            "40",
+            "20",
             "--no-cache",
             "-o",
             out.to_str().unwrap(),

@@ -241,7 +241,7 @@ fn render_says_where_the_table_was_built() {
                 "--table-texel",
                 "0.05",
                 "--table-step-nm",
-                "40",
+                "20",
                 "--no-cache",
                 "--table-build",
                 build,
