@@ -295,7 +295,7 @@ fn render_draws_a_spinner_on_a_terminal_only() {
         return;
     }
     // `render`'s one report line of what it left out is printed on a pipe too.
-    assert_quiet(&o, &["left out:"]);
+    assert_quiet(&o, &["left out:", "model check:"]);
     assert!(String::from_utf8_lossy(&o.stdout).contains("BRDF map (XYZ) 32×32"));
     if !have_script() {
         return;
@@ -338,7 +338,7 @@ fn profile_draws_its_bars_on_a_terminal_only() {
         return;
     }
     // On a pipe: no bar, but a line as the run starts and one as each row finishes.
-    assert_quiet(&o, &["profile: "]);
+    assert_quiet(&o, &["profile: ", "model check:"]);
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
         err.lines()
