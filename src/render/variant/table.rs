@@ -111,6 +111,10 @@ pub(crate) fn packed_layers(planes: usize) -> usize {
 /// picture (ΔE2000 mean 0.04 against the 8-direction render, docs/tables.md).
 const DISC_STEP_NM: u32 = 2;
 
+/// How many times the lobe-resolving spacing a table's texel may be before it is smoothed
+/// ([`smooth_slices`]).
+const SMOOTH_ABOVE: f64 = 1.5;
+
 /// Smooths every slice of a table coarser than asked by the cubic B-spline's own kernel,
 /// `(1, 4, 1)/6` along `u` and `v` (the end nodes kept). The representations interpolate
 /// their slices with a cubic spline ([`crate::brdf::table::spline_plane`]); interpolating the
@@ -237,11 +241,14 @@ pub(crate) fn prepare<T: GTable + 'static>(
     if let Some(kernel) = &setup.disc {
         prefilter_disc(&mut samples, &spec.region, kernel);
     }
-    // A spacing coarser than the one that resolves the coherence lobe (coarsened to fit, or
-    // asked for) cannot follow the lobes: the interpolating spline would ring beside them
-    // (a pixel beside the specular at 4.8 times the map's peak at texel 0.0070, clamped to 0
-    // at 0.02). Smoothed, the table loses their height gradually instead.
-    if spec.texel_uv > TableSpec::default_texel(material.coherence_um) * (1.0 + 1e-9) {
+    // A spacing well coarser than the one that resolves the coherence lobe (coarsened to
+    // fit, or asked for) cannot follow the lobes: the interpolating spline would ring beside
+    // them (a pixel beside the specular at 4.8 times the map's peak at texel 0.0070, 2.6
+    // times that spacing; clamped to 0 at 0.02). Smoothed, the table loses their height
+    // gradually instead. Up to SMOOTH_ABOVE times the spacing the spline still follows the
+    // lobes (within 5 % of the peak at 0.004, tests/gpu_variants.rs) and smoothing would
+    // only cost height.
+    if spec.texel_uv > TableSpec::default_texel(material.coherence_um) * SMOOTH_ABOVE {
         smooth_slices(&mut samples);
     }
     let table = assemble(spec.region, samples)?;
