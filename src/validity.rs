@@ -630,6 +630,69 @@ pub fn map(
     })
 }
 
+/// Periods of the limits table, in wavelengths.
+pub const LIMITS_PERIODS: [f64; 7] = [1.6, 1.9, 2.1, 2.6, 3.3, 4.1, 5.0];
+/// Peak-to-valley depths of the limits table, in wavelengths.
+pub const LIMITS_DEPTHS: [f64; 8] = [0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0];
+
+impl Profile {
+    /// A sinusoidal grating of `period_um` and peak-to-valley `depth_um`, its ridges across
+    /// `x`.
+    pub fn sinusoid(period_um: f64, depth_um: f64) -> Self {
+        let m = PROFILE_BINS;
+        Profile {
+            period_um,
+            direction_deg: 0.0,
+            heights_um: (0..m)
+                .map(|b| {
+                    let t = (b as f64 + 0.5) / m as f64;
+                    0.5 * depth_um * (1.0 + (2.0 * std::f64::consts::PI * t).cos())
+                })
+                .collect(),
+            explained: 1.0,
+        }
+    }
+}
+
+/// Where scalar theory holds for sinusoidal gratings: the worst order-ratio error of `model`
+/// at `lambda_nm` for every period in `periods` and depth in `depths` (both in wavelengths),
+/// one Markdown table per angle in `thetas_deg`. `progress` is called after each cell.
+pub fn limits_table(
+    model: &ScalarModel,
+    lambda_nm: f64,
+    thetas_deg: &[f64],
+    periods: &[f64],
+    depths: &[f64],
+    tolerance: f64,
+    mut progress: impl FnMut(),
+) -> Result<String> {
+    use std::fmt::Write as _;
+    let lambda_um = lambda_nm * 1e-3;
+    let mut out = String::new();
+    let header: Vec<String> = depths.iter().map(|d| format!("{d}")).collect();
+    for &theta in thetas_deg {
+        let _ = writeln!(
+            out,
+            "θi = {theta}°, λ = {lambda_nm} nm, n = {}:\n",
+            model.shading.ior
+        );
+        let _ = writeln!(out, "| Λ/λ \\ d/λ | {} |", header.join(" | "));
+        let _ = writeln!(out, "|---|{}", "---|".repeat(depths.len()));
+        for &p in periods {
+            let mut cells = Vec::with_capacity(depths.len());
+            for &d in depths {
+                let g = Profile::sinusoid(p * lambda_um, d * lambda_um);
+                let c = check(&g, model, lambda_nm, theta, Solve::Converge(tolerance))?;
+                cells.push(percent(c.error));
+                progress();
+            }
+            let _ = writeln!(out, "| {p} | {} |", cells.join(" | "));
+        }
+        out.push('\n');
+    }
+    Ok(out)
+}
+
 /// Wavelengths of the one-line summary.
 pub const SUMMARY_LAMBDAS_NM: [f64; 3] = [450.0, 550.0, 650.0];
 /// Angle grid of the cached summary (degrees): requests are rounded to it.

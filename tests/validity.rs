@@ -32,9 +32,7 @@ fn profile(period_um: f64, f: impl Fn(f64) -> f64) -> Profile {
 }
 
 fn sinusoid(period_um: f64, depth_um: f64) -> Profile {
-    profile(period_um, |t| {
-        0.5 * depth_um * (1.0 + (2.0 * std::f64::consts::PI * t).cos())
-    })
+    Profile::sinusoid(period_um, depth_um)
 }
 
 #[test]
@@ -297,27 +295,37 @@ fn bad_input_gets_one_error_line() {
     }
 }
 
-/// The table of docs/accuracy.md: the worst unpolarised order-ratio error (η±1/η0,
-/// η±2/η±1) of a sinusoidal grating on n = 1.55 over Λ/λ and d/λ, at θi = 0° and 60°.
-/// `cargo test --release --test validity -- --ignored --nocapture`.
+/// The limits table (`diffract validity --limits`, docs/accuracy.md) on two of its cells: a
+/// shallow long-period sinusoid where scalar theory holds, a deep one where it does not, as
+/// one Markdown table whose cells are the checks' own errors.
 #[test]
-#[ignore]
-fn table_of_the_limits() {
+fn limits_table_sorts_shallow_from_deep_gratings() {
     let m = model(1.55);
-    let periods = [1.6, 1.9, 2.1, 2.6, 3.3, 4.1, 5.0];
-    let depths = [0.05, 0.1, 0.2, 0.3, 0.4, 0.5, 0.7, 1.0];
-    for theta in [0.0, 60.0] {
-        println!("\nθi = {theta}°: rows Λ/λ, columns d/λ = {depths:?}");
-        for p in periods {
-            let errs: Vec<String> = depths
-                .iter()
-                .map(|&d| {
-                    let g = sinusoid(p * 0.5, d * 0.5);
-                    let c = validity::check(&g, &m, 500.0, theta, Solve::Converge(0.02)).unwrap();
-                    validity::percent(c.error)
-                })
-                .collect();
-            println!("| {p} | {} |", errs.join(" | "));
-        }
-    }
+    let mut cells = 0;
+    let table =
+        validity::limits_table(&m, 500.0, &[0.0], &[5.0], &[0.05, 1.0], 0.02, || cells += 1)
+            .unwrap();
+    assert_eq!(cells, 2);
+    let shallow = validity::check(&sinusoid(2.5, 0.025), &m, 500.0, 0.0, Solve::Converge(0.02))
+        .unwrap()
+        .error;
+    let deep = validity::check(&sinusoid(2.5, 0.5), &m, 500.0, 0.0, Solve::Converge(0.02))
+        .unwrap()
+        .error;
+    assert!(shallow < 0.05, "shallow {shallow}");
+    assert!(deep > 0.1, "deep {deep}");
+    let row = format!(
+        "| 5 | {} | {} |",
+        validity::percent(shallow),
+        validity::percent(deep)
+    );
+    assert!(table.contains(&row), "{table}\nwants {row}");
+    assert!(table.contains("| Λ/λ \\ d/λ | 0.05 | 1 |"), "{table}");
+
+    // On the command line it prints to stdout and takes no output files.
+    let out = diffract(&["validity", "--limits", "--csv", "x.csv"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(err.trim().lines().count(), 1, "{err}");
+    assert!(err.contains("--limits"), "{err}");
 }
