@@ -603,3 +603,86 @@ fn table_variants_on_narrow_regions_are_right_or_refused() {
         .filter(|c| c.case == "narrow w" && c.variant.name() == "dhillon")
         .all(|c| c.status == Status::Pass));
 }
+
+/// `diffract stability` on the command line: the axes it is given, a time budget whose
+/// left-out cells are reported (each with its estimated cost, none dropped), and the model
+/// axis (the scalar model against the rigorous solver) in its own CSV and section.
+#[test]
+fn the_command_reports_skipped_cells_and_the_model_axis() {
+    let dir = std::env::temp_dir().join(format!("diffract-stab-budget-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |out: &str, extra: &[&str]| {
+        let out = dir.join(out);
+        let mut args = vec!["stability", "--no-gpu", "-o", out.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        let read = |f: &str| std::fs::read_to_string(out.join(f)).unwrap();
+        (
+            read("stability.csv"),
+            read("stability-model.csv"),
+            read("stability.md"),
+            err,
+        )
+    };
+
+    // Every axis given, no budget pressure: the model axis solves the normal-incidence cells
+    // of a shallow sinusoid (period 2.8 wavelengths: scalar theory holds) and refuses the
+    // grazing one, which is beyond the rigorous solver.
+    let axes = [
+        "--hmax-um",
+        "0.05",
+        "--theta-i",
+        "0",
+        "89.99",
+        "--lambda-nm",
+        "580",
+    ];
+    let (csv, model, md, err) = run("axes", &axes);
+    assert_eq!(csv.lines().count() - 1, 8, "{csv}");
+    assert!(!csv.contains(",skipped,"), "{csv}");
+    let rows: Vec<&str> = model.lines().skip(1).collect();
+    assert_eq!(rows.len(), 2, "{model}");
+    let normal: Vec<&str> = rows[0].split(',').collect();
+    let e: f64 = normal[3].parse().unwrap();
+    assert!(normal[..3] == ["0.05", "0", "580"] && e < 0.1, "{model}");
+    assert!(rows[1].contains("beyond the rigorous solver"), "{model}");
+    assert!(
+        md.contains("## The model against Maxwell's equations"),
+        "{md}"
+    );
+    assert!(
+        err.contains("stability: model h_max 0.05 µm, θi 0°, λ 580 nm"),
+        "{err}"
+    );
+
+    // The default axes on a budget of one second: the cells past it are in the CSV as
+    // skipped, with their estimate, and the header counts them.
+    let (csv, model, md, err) = run("budget", &["--budget-s", "1"]);
+    let cells = 3 * 3 * 2 * 2 * 2;
+    assert_eq!(csv.lines().count() - 1, cells, "{csv}");
+    let skipped = csv.lines().filter(|l| l.contains(",skipped,")).count();
+    assert!(skipped > 0, "{csv}");
+    assert!(
+        csv.lines()
+            .filter(|l| l.contains(",skipped,"))
+            .all(|l| l.contains("over the time budget: estimated")),
+        "{csv}"
+    );
+    assert!(
+        md.contains(&format!("{skipped} skipped by the 1 s budget")),
+        "{md}"
+    );
+    assert_eq!(model.lines().count() - 1, 18, "{model}");
+    assert!(model.contains("over the time budget"), "{model}");
+    assert!(
+        err.contains(&format!("stability: {cells}/{cells} cells")),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
