@@ -169,7 +169,7 @@ fn redirected_stderr_gets_a_line_per_row() {
     let dir = scratch("lines");
     let hf = field(&dir);
     let log = dir.join("stderr.txt");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+    let mut o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
         .args(["profile", "--heightfield", &hf, "--size", "17"])
         .args(["--only", "taylor R=2,chebyshev-w", "--variant-terms", "8"])
         .args(["--pixels", "4", "--brightest", "2", "--budget-s", "30"])
@@ -181,9 +181,29 @@ fn redirected_stderr_gets_a_line_per_row() {
             "--no-cache",
         ])
         .env("DIFFRACT_VALIDATION", "1")
+        .stdout(std::process::Stdio::piped())
         .stderr(std::fs::File::create(&log).unwrap())
-        .output()
+        .spawn()
         .expect("run diffract");
+    // Watch the file while the profile runs: the first row's line must be there before the
+    // process ends (written as the row completes, not flushed at exit).
+    let mut first_row_while_running = false;
+    loop {
+        let running = o.try_wait().unwrap().is_none();
+        let text = std::fs::read_to_string(&log).unwrap_or_default();
+        if text
+            .lines()
+            .any(|l| l.starts_with("profile: ") && l.contains(": warm-up"))
+        {
+            first_row_while_running = running;
+            break;
+        }
+        if !running {
+            break;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let o = o.wait_with_output().expect("run diffract");
     let err = std::fs::read_to_string(&log).unwrap();
     if err
         .lines()
@@ -193,6 +213,7 @@ fn redirected_stderr_gets_a_line_per_row() {
         return;
     }
     assert!(o.status.success(), "{err}");
+    assert!(first_row_while_running, "no row line before the end: {err}");
     let lines: Vec<&str> = err.lines().filter(|l| l.starts_with("profile: ")).collect();
     assert!(lines[0].starts_with("profile: 2 rows"), "{err}");
     for name in ["taylor R=2", "chebyshev-w"] {
