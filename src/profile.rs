@@ -1112,7 +1112,7 @@ impl Run<'_> {
         let modelled: Vec<[f64; 3]> = pixels
             .iter()
             .map(|p| model.xyz(prepared, &colour, wi32, wr_of(setup, p)))
-            .collect();
+            .collect::<Result<_>>()?;
         // Dark: every reference sample lies under the error the variants promise there,
         // the tolerance on ρ/C (relative to a mirror's specular value) times the gain C.
         let reference_dark = pixels.iter().zip(&refs).all(|(p, r)| {
