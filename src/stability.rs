@@ -238,25 +238,25 @@ fn max_error(
     dirs: &[(String, [f64; 3])],
     wi: [f64; 3],
     shading: &crate::brdf::Shading,
-    eval: impl Fn([f64; 3]) -> f64 + Sync,
-    refer: impl Fn([f64; 3]) -> f64 + Sync,
+    eval: impl Fn([f64; 3]) -> Result<f64> + Sync,
+    refer: impl Fn([f64; 3]) -> Result<f64> + Sync,
 ) -> Result<(f64, String)> {
     let errs: Vec<(f64, String)> = dirs
         .par_iter()
         .map(|(name, wr)| {
             let c = gain(wi, *wr, shading);
             if c == 0.0 {
-                return (0.0, name.clone());
+                return Ok((0.0, name.clone()));
             }
-            let (a, b) = (eval(*wr), refer(*wr));
+            let (a, b) = (eval(*wr)?, refer(*wr)?);
             let e = if a.is_finite() && b.is_finite() {
                 (a - b).abs() / c
             } else {
                 f64::INFINITY
             };
-            (e, name.clone())
+            Ok((e, name.clone()))
         })
-        .collect();
+        .collect::<Result<_>>()?;
     let worst = errs
         .into_iter()
         .max_by(|a, b| a.0.total_cmp(&b.0))
@@ -562,7 +562,16 @@ fn model_cell(
         wi,
         shading,
         |wr| (p.rho)(prepared, shading, wi, wr, p.lambda),
-        |wr| reference::rho(hf, spec.coherence_um, shading, wi, wr, p.lambda),
+        |wr| {
+            Ok(reference::rho(
+                hf,
+                spec.coherence_um,
+                shading,
+                wi,
+                wr,
+                p.lambda,
+            ))
+        },
     )?;
     Ok((e, worst, None))
 }
@@ -585,14 +594,21 @@ fn gpu_cell(
         .iter()
         .map(|(wr, _)| (format!("pixel ({:.3}, {:.3})", wr[0], wr[1]), *wr))
         .collect();
-    let lookup = |wr: [f64; 3]| -> f64 {
-        pixels
+    let lookup = |wr: [f64; 3]| -> Result<f64> {
+        Ok(pixels
             .iter()
             .find(|(d, _)| *d == wr)
-            .map_or(f64::NAN, |(_, v)| *v)
+            .map_or(f64::NAN, |(_, v)| *v))
     };
     let (e_ref, worst) = max_error(&dirs, wi32, shading, lookup, |wr| {
-        reference::rho(hf, spec.coherence_um, shading, wi32, wr, l32)
+        Ok(reference::rho(
+            hf,
+            spec.coherence_um,
+            shading,
+            wi32,
+            wr,
+            l32,
+        ))
     })?;
     let (e_model, _) = max_error(&dirs, wi32, shading, lookup, |wr| {
         (p.rho)(prepared, shading, wi32, wr, l32)

@@ -44,7 +44,15 @@ fn model_error(p: &diffract::material::PreparedMaterial, theta_i: f64, lambda: f
         if c == 0.0 {
             continue;
         }
-        let m = model::rho(&p.stack, p.terms(), &p.window, &s, wi, wr, lambda);
+        let m = model::rho(
+            p.stack.get().unwrap(),
+            p.terms(),
+            &p.window,
+            &s,
+            wi,
+            wr,
+            lambda,
+        );
         let r = reference::rho(&p.heightfield, p.material.coherence_um, &s, wi, wr, lambda);
         assert!(m.is_finite() && r.is_finite());
         worst = worst.max((m - r).abs() / c);
@@ -60,7 +68,7 @@ fn why_tall_taylor_default_now_switches_to_chebyshev_and_is_right() {
         let m = material(src, Some(2.0), Expansion::Taylor, Terms::Auto);
         let p = m.prepare(None, &diffract::report::Stderr).unwrap();
         assert_eq!(p.plan.expansion, Expansion::Chebyshev, "{src}");
-        assert_eq!(p.stack.expansion, Expansion::Chebyshev);
+        assert_eq!(p.stack.get().unwrap().expansion, Expansion::Chebyshev);
         assert!(
             p.plan
                 .warnings
@@ -202,12 +210,20 @@ fn why_smallest_pixel_size_gives_zero_off_specular_in_model_and_reference() {
     let wi = direction(30.0, 0.0);
     for t in [0.0, 10.0, 50.0] {
         let wr = direction(t, 180.0);
-        let a = model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, 500.0);
+        let a = model::rho(
+            p.stack.get().unwrap(),
+            p.terms(),
+            &p.window,
+            &p.shading,
+            wi,
+            wr,
+            500.0,
+        );
         let b = reference::rho(&hf, m.coherence_um, &p.shading, wi, wr, 500.0);
         assert!(a.abs() < 1e-12 && b.abs() < 1e-12, "θr = {t}: {a} {b}");
     }
     let spec = model::rho(
-        &p.stack,
+        p.stack.get().unwrap(),
         p.terms(),
         &p.window,
         &p.shading,
@@ -264,7 +280,15 @@ fn why_grazing_limit_is_continuous_at_exactly_90_degrees() {
         .prepare_planned(hf.clone(), plan, None, &diffract::report::Stderr)
         .unwrap();
     let (wi, wr) = (direction(90.0, 0.0), direction(90.0, 180.0));
-    let a = model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, 500.0);
+    let a = model::rho(
+        p.stack.get().unwrap(),
+        p.terms(),
+        &p.window,
+        &p.shading,
+        wi,
+        wr,
+        500.0,
+    );
     let b = reference::rho(&hf, m.coherence_um, &p.shading, wi, wr, 500.0);
     assert!((a - 1.0).abs() < 1e-9 && (b - 1.0).abs() < 1e-9, "{a} {b}");
 }

@@ -292,8 +292,8 @@ impl CpuModel for TableModel {
         _colour: &ColourTable,
         wi: [f64; 3],
         wr: [f64; 3],
-    ) -> [f64; 3] {
-        self.0.xyz(&p.shading, wi, wr)
+    ) -> Result<[f64; 3]> {
+        Ok(self.0.xyz(&p.shading, wi, wr))
     }
 
     fn table(&self) -> Option<&dyn GTable> {

@@ -1,0 +1,337 @@
+//! What a profile found and how it is written: the rows' reports, the Markdown table with
+//! its notes, the CSV and the Pareto plot of error against GPU time.
+
+use super::budget::Frames;
+use super::plan::{ProfileSetup, Variant};
+use super::stats::{ErrorIntervals, ErrorStats};
+use crate::{Error, Result};
+
+/// One row of the profile.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VariantReport {
+    pub variant: Variant,
+    /// Median GPU time of the map frames after the warm-up (ms); `None` without timestamps.
+    pub gpu_ms: Option<f64>,
+    /// The 10th and 90th percentiles of the same frames' times (GPU, else wall).
+    pub spread_ms: Option<(f64, f64)>,
+    /// Timed map frames after the warm-up.
+    pub frames: usize,
+    /// Wall time of the warm-up frame (ms): preparing the row (terms, table) and its draw.
+    pub warm_up_ms: f64,
+    /// Median wall time of a map frame after the warm-up (ms), upload and readback included.
+    pub wall_ms: f64,
+    /// Building and uploading the variant's resources (ms): table build or term upload.
+    pub build_ms: f64,
+    /// GPU memory of the variant's resources (bytes).
+    pub gpu_bytes: usize,
+    /// Texel fetches per pixel.
+    pub fetches: usize,
+    /// The variant's own description of its settings.
+    pub detail: String,
+    /// Median GPU time of the mesh view (ms), when profiled.
+    pub mesh_gpu_ms: Option<f64>,
+    /// Condition number of the representation's sum, where float32 rounding limits it.
+    pub conditioning: Option<f64>,
+    /// Table variants: the most negative `G` (any channel) of the interpolant over the map
+    /// before the clamp to `G ≥ 0`, relative to the map's largest `G_Y` (0: none).
+    pub overshoot: Option<f64>,
+    /// The reference is dark: every scored sample is below what the variants may err by
+    /// there (the tolerance times the gain `C`: `ρ/C` under the tolerance of a mirror's
+    /// specular value), so ratios to it measure noise and the table says `reference dark`.
+    pub reference_dark: bool,
+    /// GPU against the f64 reference.
+    pub vs_reference: ErrorStats,
+    /// 95 % bootstrap intervals of `vs_reference` over the scored pixels.
+    pub intervals: ErrorIntervals,
+    /// GPU against the f64 model of the same variant (float32 and driver error only).
+    pub vs_model: ErrorStats,
+    /// With `--per-vertex`: the mesh view against the per-pixel reference variant's mesh
+    /// render.
+    pub mesh_vs_reference: Option<ErrorStats>,
+    /// A per-vertex row (thesis §1.5.1): only its mesh columns are measured (a BRDF map has
+    /// no vertices; its map columns repeat the per-pixel variant's).
+    pub per_vertex: bool,
+}
+
+/// A row that was not measured, and why.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Skipped {
+    pub variant: Variant,
+    /// Its estimated cost (s) where it did not fit the budget; `None` where it refused the
+    /// material.
+    pub estimated_s: Option<f64>,
+    pub reason: String,
+}
+
+/// What a profile measured: the rows in the order asked for, and those it skipped.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ProfileRun {
+    pub reports: Vec<VariantReport>,
+    pub skipped: Vec<Skipped>,
+    /// Wall time of the whole profile (s).
+    pub wall_s: f64,
+    /// Pixels scored: those asked for, or fewer where the budget's share of the reference
+    /// ran out (the first ones picked, bright and spread in proportion).
+    pub scored: usize,
+}
+
+/// A time in ms to two decimals, `n/a` without one.
+pub(super) fn ms(v: Option<f64>) -> String {
+    v.map_or("n/a".into(), |g| format!("{g:.2}"))
+}
+
+/// The table's first line: the device, the map, the pixels and how frames were counted.
+fn header(device: &str, setup: &ProfileSetup, run: &ProfileRun) -> String {
+    let mesh = setup.mesh.as_ref().map_or(String::new(), |s| {
+        format!("; mesh view {}×{}", s.output.width, s.output.height)
+    });
+    let frames = match setup.frames {
+        Frames::Fixed(n) => format!("GPU ms = median of {n} frames after a warm-up"),
+        Frames::Budget(b) => format!(
+            "budget {:.0} s ({:.0} s spent): each row draws frames after a warm-up until its median's standard error is under {:.0} % or its share of the budget is spent; GPU ms = their median, p10–p90 their spread",
+            b.total_s,
+            run.wall_s,
+            100.0 * b.precision
+        ),
+    };
+    let asked = setup.brightest + setup.pixels;
+    let scored = if run.scored < asked {
+        format!(
+            "{} of {asked} scored pixels (the reference's share of the budget ran out; {} brightest + {} spread asked)",
+            run.scored, setup.brightest, setup.pixels
+        )
+    } else {
+        format!(
+            "{asked} scored pixels ({} brightest + {} spread)",
+            setup.brightest, setup.pixels
+        )
+    };
+    format!(
+        "device: {device}; BRDF map {}² at θi = {}°, φi = {}°{mesh}; {scored}, errors against the reference with 95 % bootstrap intervals over them; {frames}; reference: f64 direct sum at 1 nm\n\n",
+        setup.size,
+        setup.theta_i_deg,
+        setup.phi_i_deg,
+    )
+}
+
+/// One row of the Markdown table (`mesh_cols`: the per-vertex columns, or empty).
+fn table_row(r: &VariantReport, mesh_cols: &str) -> String {
+    if r.per_vertex {
+        return format!(
+            "| {} | — | — | — | — | — | — | {} | — | — | — | — | — | — |{mesh_cols}\n",
+            r.variant.name,
+            ms(r.mesh_gpu_ms)
+        );
+    }
+    let e = &r.vs_reference;
+    let i = &r.intervals;
+    let errors = if r.reference_dark {
+        format!("reference dark | {:.2e} | — | — | —", e.max_abs_y)
+    } else {
+        format!(
+            "{:.2e} ({:.2e}–{:.2e}) | {:.2e} | {:.3} | {:.3} ({:.3}–{:.3}) | {:.3}",
+            e.rel_l2,
+            i.rel_l2.lo,
+            i.rel_l2.hi,
+            e.max_abs_y,
+            e.p50_de,
+            e.p99_de,
+            i.p99_de.lo,
+            i.p99_de.hi,
+            e.max_de
+        )
+    };
+    let spread = r
+        .spread_ms
+        .map_or("—".to_string(), |(a, b)| format!("{a:.2}–{b:.2}"));
+    format!(
+        "| {} | {} | {:.0} | {:.1} | {} | {} | {spread} | {} | {errors} | {:.2e} |{mesh_cols}\n",
+        r.variant.name,
+        r.fetches,
+        r.build_ms,
+        r.gpu_bytes as f64 / 1e6,
+        r.frames,
+        ms(r.gpu_ms),
+        ms(r.mesh_gpu_ms),
+        r.vs_model.rel_l2
+    )
+}
+
+/// Formats a profile as a Markdown table, then its notes: skipped rows, dark references,
+/// conditioning and overshoot.
+pub fn format_table(device: &str, setup: &ProfileSetup, run: &ProfileRun) -> String {
+    let reports = &run.reports;
+    let mut s = header(device, setup, run);
+    let mesh_scored = reports.iter().any(|r| r.mesh_vs_reference.is_some());
+    if mesh_scored {
+        s.push_str("Per-vertex rows (thesis §1.5.1) measure the mesh view only: `mesh GPU ms` evaluated per vertex, and the last two columns, the mesh view against a per-pixel render of it by the reference variant at 1 nm (rel L2 of XYZ, ΔE2000 p99). A BRDF map has no vertices: their map columns are `—`.\n\n");
+    }
+    s.push_str("| variant | fetches/px | build ms | GPU MB | frames | GPU ms | p10–p90 ms | mesh GPU ms | rel L2 vs ref (95 %) | max ΔY vs ref | ΔE p50 | ΔE p99 (95 %) | max ΔE | rel L2 vs f64 model |");
+    s.push_str(if mesh_scored {
+        " mesh rel L2 vs 1 nm | mesh ΔE p99 |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+    } else {
+        "\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n"
+    });
+    for r in reports {
+        let mesh_cols = if mesh_scored {
+            r.mesh_vs_reference.map_or(" — | — |".to_string(), |m| {
+                format!(" {:.2e} | {:.3} |", m.rel_l2, m.p99_de)
+            })
+        } else {
+            String::new()
+        };
+        s.push_str(&table_row(r, &mesh_cols));
+    }
+    s.push_str(&notes(run));
+    s
+}
+
+/// The notes under the table.
+fn notes(run: &ProfileRun) -> String {
+    let reports = &run.reports;
+    let mut s = String::new();
+    for k in &run.skipped {
+        s.push_str(&format!("\nskipped: {}: {}\n", k.variant.name, k.reason));
+    }
+    if reports.iter().any(|r| r.reference_dark) {
+        s.push_str("\nreference dark: every reference sample is below the tolerance times its gain C (ρ/C under the tolerance of a mirror's specular value), the error every variant is allowed there; relative errors and ΔE of a dark map measure noise, so only max ΔY is shown.\n");
+    }
+    for r in reports {
+        if let Some(k) = r.conditioning {
+            s.push_str(&format!(
+                "\n{}: condition number of its sum {k:.2e}; × float32's 6e-8 ≈ {:.1e} relative error expected\n",
+                r.variant.name,
+                k * 6e-8
+            ));
+        }
+    }
+    let over: Vec<String> = reports
+        .iter()
+        .filter_map(|r| Some(format!("{} {:.1e}", r.variant.name, r.overshoot?)))
+        .collect();
+    if !over.is_empty() {
+        s.push_str(&format!(
+            "\novershoot (most negative G of the interpolant over the map before the clamp to G ≥ 0, relative to the peak G_Y): {}\n",
+            over.join(", ")
+        ));
+    }
+    s
+}
+
+/// The CSV of a profile: a line per measured row with every figure of the table and the
+/// intervals; a skipped row has its name, its settings, `skipped`, the reason and its
+/// estimated cost only.
+pub fn format_csv(run: &ProfileRun) -> String {
+    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref,overshoot,reference_dark,leave_out,frames,gpu_ms_p10,gpu_ms_p90,rel_l2_ref_lo,rel_l2_ref_hi,p99_de_ref_lo,p99_de_ref_hi,skipped,estimated_s\n");
+    let opt = |v: Option<f64>| v.map_or(String::new(), |g| g.to_string());
+    let settings = |v: &Variant| {
+        format!(
+            "{},{},{},{},{},{:?}",
+            v.name, v.expansion, v.terms, v.window_radius, v.lambda_step_nm, v.storage
+        )
+    };
+    for r in &run.reports {
+        let v = &r.variant;
+        let (e, m, i) = (&r.vs_reference, &r.vs_model, &r.intervals);
+        let columns = [
+            opt(r.gpu_ms),
+            r.wall_ms.to_string(),
+            e.rel_l2.to_string(),
+            e.max_abs_y.to_string(),
+            e.mean_de.to_string(),
+            e.max_de.to_string(),
+            m.rel_l2.to_string(),
+            v.kind.to_string(),
+            r.detail.replace(',', ";"),
+            r.fetches.to_string(),
+            r.build_ms.to_string(),
+            r.gpu_bytes.to_string(),
+            opt(r.mesh_gpu_ms),
+            e.p50_de.to_string(),
+            e.p99_de.to_string(),
+            m.p99_de.to_string(),
+            opt(r.conditioning),
+            r.per_vertex.to_string(),
+            opt(r.mesh_vs_reference.map(|m| m.rel_l2)),
+            opt(r.mesh_vs_reference.map(|m| m.p99_de)),
+            opt(r.overshoot),
+            r.reference_dark.to_string(),
+            v.leave_out.to_string(),
+            r.frames.to_string(),
+            opt(r.spread_ms.map(|s| s.0)),
+            opt(r.spread_ms.map(|s| s.1)),
+            i.rel_l2.lo.to_string(),
+            i.rel_l2.hi.to_string(),
+            i.p99_de.lo.to_string(),
+            i.p99_de.hi.to_string(),
+            "false".to_string(),
+            String::new(),
+        ];
+        csv.push_str(&format!("{},{}\n", settings(v), columns.join(",")));
+    }
+    for k in &run.skipped {
+        let mut columns = vec![String::new(); 32];
+        columns[7] = k.variant.kind.to_string();
+        columns[8] = k.reason.replace(',', ";");
+        columns[22] = k.variant.leave_out.to_string();
+        columns[30] = "true".to_string();
+        columns[31] = opt(k.estimated_s);
+        csv.push_str(&format!("{},{}\n", settings(&k.variant), columns.join(",")));
+    }
+    csv
+}
+
+/// The Pareto plot of error against GPU time: the map rows, and the per-vertex rows with
+/// their per-pixel twins on the mesh view.
+pub(super) fn write_plot(
+    path: &std::path::Path,
+    setup: &ProfileSetup,
+    reports: &[VariantReport],
+    device: &str,
+) -> Result<()> {
+    // A dark reference's relative errors are noise: such rows are not plotted, and a map
+    // that is dark for every row gives no plot at all.
+    if reports.iter().all(|r| r.reference_dark) {
+        return Err(Error::invalid(
+            "plot",
+            format!(
+                "the reference map is dark (every sample below the tolerance), so its relative errors are noise and {} is not written; lobes narrower than a pixel are missed by a small map: try a larger or odd --size (an odd map's middle row lies in the plane of incidence)",
+                path.display()
+            ),
+        ));
+    }
+    let mut points: Vec<crate::plot::Point> = reports
+        .iter()
+        .filter(|r| !r.reference_dark)
+        .filter_map(|r| {
+            r.gpu_ms.map(|t| crate::plot::Point {
+                label: r.variant.name.clone(),
+                time_ms: t,
+                error: r.vs_reference.rel_l2,
+            })
+        })
+        .collect();
+    points.extend(reports.iter().filter_map(|r| {
+        let e = r.mesh_vs_reference?;
+        let per_vertex_twin = r.per_vertex
+            || reports
+                .iter()
+                .any(|o| o.variant.name == format!("{} per-vertex", r.variant.name));
+        (per_vertex_twin && e.rel_l2 > 0.0).then(|| crate::plot::Point {
+            label: format!("{} (mesh)", r.variant.name),
+            time_ms: r.mesh_gpu_ms.unwrap_or(f64::NAN),
+            error: e.rel_l2,
+        })
+    }));
+    crate::plot::error_vs_time(
+        path,
+        &format!(
+            "diffract profile: {} at θi = {}°, {}² map, {device}",
+            crate::plot::source_name(&setup.base.heightfield),
+            setup.theta_i_deg,
+            setup.size,
+        ),
+        "relative L2 error of XYZ vs the f64 reference at 1 nm",
+        &points,
+    )
+}
