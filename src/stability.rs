@@ -29,6 +29,7 @@ use crate::render::{Renderer, TableOptions, VariantKind};
 use crate::spectrum::Expansion;
 use crate::{validity, Error, Result};
 
+pub mod lighting;
 pub mod model_axis;
 
 /// Which evaluator a cell measures.
@@ -714,6 +715,16 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
         }
     }
     let table_cells = run_table_cases(&spec)?;
+    let lighting_cells = match &renderer {
+        Some(r) => {
+            let cells = lighting::run(r.device())?;
+            if r.validation_messages() > 0 {
+                return Err(Error::Validation(r.validation_messages()));
+            }
+            cells
+        }
+        None => Vec::new(),
+    };
     let model_cells = if args.no_model {
         Vec::new()
     } else {
@@ -741,6 +752,7 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
     let reports = Reports {
         cells: &cells,
         table_cells: &table_cells,
+        lighting_cells: &lighting_cells,
         model_cells: &model_cells,
         header: &header,
     };
@@ -752,6 +764,7 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
 struct Reports<'a> {
     cells: &'a [Cell],
     table_cells: &'a [TableCell],
+    lighting_cells: &'a [lighting::LightingCell],
     model_cells: &'a [model_axis::ModelCell],
     header: &'a str,
 }
@@ -770,12 +783,19 @@ fn print_results(spec: &MatrixSpec, r: &Reports, out: &Path) -> Result<()> {
     }
     println!("{}", r.header);
     println!("{}", summary(spec, r.cells).join("\n"));
+    for line in lighting::summary(r.lighting_cells) {
+        println!("{line}");
+    }
     if !r.model_cells.is_empty() {
         println!("{}", model_axis::summary(r.model_cells));
     }
     println!("→ {}/stability.{{md,csv,png}}", out.display());
     let fails = r.cells.iter().filter(|c| c.status == Status::Fail).count()
         + r.table_cells
+            .iter()
+            .filter(|c| c.status == Status::Fail)
+            .count()
+        + r.lighting_cells
             .iter()
             .filter(|c| c.status == Status::Fail)
             .count();
@@ -864,6 +884,9 @@ fn write_reports(dir: &Path, spec: &MatrixSpec, r: &Reports) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
     crate::fsutil::write_atomic(&dir.join("stability.csv"), to_csv(r.cells).as_bytes())?;
     let mut md = to_markdown(spec, r.cells, r.header) + &table_cases_markdown(spec, r.table_cells);
+    if !r.lighting_cells.is_empty() {
+        md += &lighting::to_markdown(r.lighting_cells);
+    }
     if !r.model_cells.is_empty() {
         md += &model_axis::to_markdown(spec, r.model_cells);
         crate::fsutil::write_atomic(
