@@ -635,8 +635,8 @@ pub struct StabilityArgs {
     #[arg(long, requires = "heightfield")]
     pub level: Option<String>,
     /// Peak-to-valley heights (µm) [default: 0.05 1 5; with --full: 0.05 0.25 0.5 1 2 5].
-    #[arg(long, num_args = 1..)]
-    pub hmax_um: Vec<f64>,
+    #[arg(long = "hmax-um", num_args = 1..)]
+    pub h_max_um: Vec<f64>,
     /// Light polar angles (degrees) [default: 0 80 89.99; with --full: 0 45 80 89 89.99].
     #[arg(long, num_args = 1..)]
     pub theta_i: Vec<f64>,
@@ -838,7 +838,7 @@ fn matrix_spec(args: &StabilityArgs) -> Result<MatrixSpec> {
         (true, true) => full.to_vec(),
         (true, false) => quick.to_vec(),
     };
-    spec.h_max_um = axis(&args.hmax_um, &QUICK_H_MAX_UM, &H_MAX_UM);
+    spec.h_max_um = axis(&args.h_max_um, &QUICK_H_MAX_UM, &H_MAX_UM);
     spec.theta_i_deg = axis(&args.theta_i, &QUICK_THETA_I_DEG, &THETA_I_DEG);
     spec.lambdas_nm = axis(&args.lambda_nm, &QUICK_LAMBDAS_NM, &LAMBDAS_NM);
     spec.budget_s = args.budget_s.or((!args.full).then_some(DEFAULT_BUDGET_S));
@@ -1503,7 +1503,7 @@ fn check_axes(args: &StabilityArgs) -> Result<()> {
     if let Some(b) = args.budget_s {
         crate::guard::in_range("budget-s", b, 1.0..=1e6, " s")?;
     }
-    for &h in &args.hmax_um {
+    for &h in &args.h_max_um {
         if !(h.is_finite() && h >= 0.0) {
             return Err(Error::invalid(
                 "hmax-um",
