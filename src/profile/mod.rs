@@ -25,6 +25,7 @@
 
 mod budget;
 mod command;
+mod env;
 mod output;
 mod plan;
 mod progress;
@@ -34,7 +35,8 @@ mod stats;
 
 pub use budget::{Budget, FrameTimes, Frames};
 pub use command::{profile_args, run, Counts, ProfileArgs};
+pub use env::{EnvProfile, EnvRow, EnvRun, EnvSkipped, DEFAULT_ENV_PIXELS, DEFAULT_ENV_SPP};
 pub use output::{format_csv, format_table, ProfileRun, Skipped, VariantReport};
 pub use plan::{flss_variants, standard_variants, table_variants, ProfileSetup, Variant};
-pub use run::profile;
+pub use run::{profile, profile_with_env};
 pub use stats::{bootstrap, error_stats, ErrorIntervals, ErrorStats, Interval};
