@@ -4,9 +4,11 @@
 use std::path::PathBuf;
 
 use super::budget::{Budget, Frames};
-use super::env::{EnvProfile, DEFAULT_ENV_PIXELS, DEFAULT_ENV_SPP};
 use super::output::{format_csv, format_table, write_plot};
-use super::plan::{flss_variants, table_variants, ProfileSetup, Variant};
+use super::plan::{
+    flss_variants, table_variants, EnvProfile, ProfileSetup, Variant, DEFAULT_ENV_PIXELS,
+    DEFAULT_ENV_SPP,
+};
 use super::run::profile_with_env;
 use crate::cli::cache::CacheArgs;
 use crate::cli::gpu::TableArgs;

@@ -9,101 +9,23 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use super::budget::{FrameTimes, Frames};
+use super::output::{row_name, EnvRow, EnvRun, EnvSkipped};
+use super::plan::EnvProfile;
 use super::score::pick_pixels;
-use super::stats::{bootstrap, error_stats, ErrorIntervals, ErrorStats};
+use super::stats::{bootstrap, error_stats};
 use crate::brdf::env_reference::{env_radiance, Frame, Quadrature};
 use crate::brdf::table::{GTable, TableSpec};
 use crate::gpu::Device;
 use crate::heightfield::HeightField;
-use crate::light::env::EnvMap;
 use crate::material::Material;
 use crate::render::env::{render_env_brdf_map, EnvLighting, EnvMapRequest, EnvPicture};
 use crate::render::map_direction;
 use crate::{Error, Result};
 
-/// Samples per pixel of the environment rows unless `--env-spp` says otherwise.
-pub const DEFAULT_ENV_SPP: [u32; 5] = [1, 4, 16, 64, 256];
-/// Pixels scored against the environment's f64 quadrature unless `--env-pixels` says.
-pub const DEFAULT_ENV_PIXELS: usize = 8;
 /// The fewest pixels the reference scores, whatever the budget.
 const REFERENCE_MIN_PIXELS: usize = 4;
 /// Share of the environment rows' time the reference may take (at least its fewest pixels).
 const REFERENCE_SHARE: f64 = 0.4;
-
-/// What the environment rows draw.
-#[derive(Debug, Clone)]
-pub struct EnvProfile {
-    pub map: EnvMap,
-    /// Samples per pixel, one row each, ascending and distinct.
-    pub samples: Vec<u32>,
-    /// The radiance table (`render --brdf-map --env`'s: `u, v ∈ [−2, 2]`, `w ∈ [−2, 0]`).
-    pub spec: TableSpec,
-    /// Pixels scored, spread evenly over the map's disk.
-    pub pixels: usize,
-}
-
-/// One measured environment row.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EnvRow {
-    pub samples: u32,
-    /// Median time of the dispatches (submit to fence, as `render` reports it) (ms).
-    pub gpu_ms: f64,
-    /// Their 10th and 90th percentiles.
-    pub spread_ms: Option<(f64, f64)>,
-    pub frames: usize,
-    /// Median wall time of a whole map (uploads, pipeline, dispatches, readback) (ms).
-    pub wall_ms: f64,
-    /// The map against the f64 quadrature at the scored pixels.
-    pub vs_reference: ErrorStats,
-    /// 95 % bootstrap intervals of `vs_reference` over the scored pixels.
-    pub intervals: ErrorIntervals,
-}
-
-/// An environment row that did not fit the budget.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EnvSkipped {
-    pub samples: u32,
-    pub estimated_s: f64,
-    pub reason: String,
-}
-
-/// What the environment rows measured, with what they share: the table, the first
-/// dispatch and the reference.
-#[derive(Debug, Clone, PartialEq)]
-pub struct EnvRun {
-    /// The environment's name (`builtin:sky`, a file name).
-    pub source: String,
-    /// The table on one line, as `render --brdf-map --env` prints it.
-    pub table: String,
-    /// Building the radiance table and its density on the CPU (ms).
-    pub build_ms: f64,
-    /// The first map at 1 sample per pixel: its wall time (uploads and the pipeline's
-    /// compile included) and its dispatch time (ms).
-    pub first_wall_ms: f64,
-    pub first_gpu_ms: f64,
-    /// The reference: its wall time (ms), the finest cell side `h` in `(u, v)` a pixel
-    /// reached, and the largest difference of a channel between a pixel's last two cell
-    /// sides, relative to the brightest scored pixel's Y (as the rows' errors are scaled).
-    pub reference_ms: f64,
-    pub reference_h: f64,
-    pub reference_error: f64,
-    /// Pixels scored, and asked for.
-    pub scored: usize,
-    pub asked: usize,
-    pub rows: Vec<EnvRow>,
-    pub skipped: Vec<EnvSkipped>,
-}
-
-impl EnvRow {
-    /// The row's name in the table, the CSV and the plot.
-    pub fn name(&self) -> String {
-        row_name(self.samples)
-    }
-}
-
-pub(super) fn row_name(samples: u32) -> String {
-    format!("env {samples} spp")
-}
 
 /// The pace of the environment rows: a map costs `overhead + samples · per_sample` (ms).
 struct EnvPace {

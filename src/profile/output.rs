@@ -2,7 +2,6 @@
 //! its notes, the CSV and the Pareto plot of error against GPU time.
 
 use super::budget::Frames;
-use super::env::{row_name, EnvRun};
 use super::plan::{ProfileSetup, Variant};
 use super::stats::{ErrorIntervals, ErrorStats};
 use crate::{Error, Result};
@@ -75,7 +74,70 @@ pub struct ProfileRun {
     /// ran out (the first ones picked, bright and spread in proportion).
     pub scored: usize,
     /// The environment-lit rows (`--env`), when asked for.
-    pub env: Option<super::env::EnvRun>,
+    pub env: Option<EnvRun>,
+}
+
+/// One measured environment row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvRow {
+    pub samples: u32,
+    /// Median time of the dispatches (submit to fence, as `render` reports it) (ms).
+    pub gpu_ms: f64,
+    /// Their 10th and 90th percentiles.
+    pub spread_ms: Option<(f64, f64)>,
+    pub frames: usize,
+    /// Median wall time of a whole map (uploads, pipeline, dispatches, readback) (ms).
+    pub wall_ms: f64,
+    /// The map against the f64 quadrature at the scored pixels.
+    pub vs_reference: ErrorStats,
+    /// 95 % bootstrap intervals of `vs_reference` over the scored pixels.
+    pub intervals: ErrorIntervals,
+}
+
+/// An environment row that did not fit the budget.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvSkipped {
+    pub samples: u32,
+    pub estimated_s: f64,
+    pub reason: String,
+}
+
+/// What the environment rows measured, with what they share: the table, the first
+/// dispatch and the reference.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvRun {
+    /// The environment's name (`builtin:sky`, a file name).
+    pub source: String,
+    /// The table on one line, as `render --brdf-map --env` prints it.
+    pub table: String,
+    /// Building the radiance table and its density on the CPU (ms).
+    pub build_ms: f64,
+    /// The first map at 1 sample per pixel: its wall time (uploads and the pipeline's
+    /// compile included) and its dispatch time (ms).
+    pub first_wall_ms: f64,
+    pub first_gpu_ms: f64,
+    /// The reference: its wall time (ms), the finest cell side `h` in `(u, v)` a pixel
+    /// reached, and the largest difference of a channel between a pixel's last two cell
+    /// sides, relative to the brightest scored pixel's Y (as the rows' errors are scaled).
+    pub reference_ms: f64,
+    pub reference_h: f64,
+    pub reference_error: f64,
+    /// Pixels scored, and asked for.
+    pub scored: usize,
+    pub asked: usize,
+    pub rows: Vec<EnvRow>,
+    pub skipped: Vec<EnvSkipped>,
+}
+
+impl EnvRow {
+    /// The row's name in the table, the CSV and the plot.
+    pub fn name(&self) -> String {
+        row_name(self.samples)
+    }
+}
+
+pub(super) fn row_name(samples: u32) -> String {
+    format!("env {samples} spp")
 }
 
 /// A time in ms to two decimals, `n/a` without one.
@@ -168,7 +230,7 @@ pub fn format_table(device: &str, setup: &ProfileSetup, run: &ProfileRun) -> Str
         .as_ref()
         .map_or(String::new(), |e| env_table(device, setup, e));
     if run.reports.is_empty() && run.skipped.is_empty() && run.env.is_some() {
-        return env;
+        return env.trim_start().to_string();
     }
     variant_table(device, setup, run) + &env
 }

@@ -4,9 +4,9 @@
 use std::time::{Duration, Instant};
 
 use super::budget::{Budget, Deadline, FrameTimes, Frames, OverBudget, Pace};
-use super::env::{env_rows, EnvProfile};
+use super::env::env_rows;
 use super::output::{ProfileRun, Skipped, VariantReport};
-use super::plan::{ProfileSetup, Variant};
+use super::plan::{EnvProfile, ProfileSetup, Variant};
 use super::progress::{row_line, skipped_line, Progress};
 use super::score::{mesh_error, mesh_reference, reference_samples, score_map, Samples, Scores};
 use super::stats::ErrorStats;
