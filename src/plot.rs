@@ -1244,6 +1244,40 @@ mod heat_tests {
     }
 
     #[test]
+    fn a_side_curve_is_drawn_in_green_beside_the_front() {
+        let p = scratch("curve.png");
+        let point = |label: &str, t, e| Point {
+            label: label.into(),
+            time_ms: t,
+            error: e,
+        };
+        let green = |img: &image::RgbImage| {
+            img.pixels()
+                .filter(|q| q[1] > 100 && q[0] < 60 && q[2] < 100)
+                .count()
+        };
+        let front = [point("a", 3.0, 0.1), point("b", 30.0, 0.01)];
+        error_vs_time(&p, "title", "error", &front).unwrap();
+        assert_eq!(green(&image::open(&p).unwrap().to_rgb8()), 0);
+        let curve = SideCurve {
+            label: "by samples".into(),
+            points: vec![
+                point("1", 1.0, 1.0),
+                point("16", 10.0, 0.3),
+                point("256", 200.0, 0.05),
+            ],
+        };
+        error_vs_time_with(&p, "title", "error", &front, Some(&curve)).unwrap();
+        assert!(
+            green(&image::open(&p).unwrap().to_rgb8()) > 500,
+            "the curve"
+        );
+        // The curve alone is a plot too.
+        error_vs_time_with(&p, "title", "error", &[], Some(&curve)).unwrap();
+        assert!(error_vs_time_with(&p, "title", "error", &[], None).is_err());
+    }
+
+    #[test]
     fn tick_labels_and_source_names() {
         assert_eq!(source_name("/work/main/assets/elaphe.png"), "elaphe.png");
         assert_eq!(source_name("builtin:elaphe-grown"), "builtin:elaphe-grown");

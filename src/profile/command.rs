@@ -26,7 +26,8 @@ pub struct ProfileArgs {
     /// Taylor terms T of the FLSS variants (Chebyshev gets ⌈2T/3⌉).
     #[arg(long = "variant-terms", default_value_t = 30)]
     pub variant_terms: usize,
-    /// Profile only these (comma-separated names from the table; default: all).
+    /// Profile only these (comma-separated names from the table; default: all; `env`: the
+    /// environment rows of --env alone).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
     /// Polar angle of the light (degrees).
