@@ -11,7 +11,8 @@ use diffract::heightfield::HeightField;
 use diffract::light::env::{EnvMap, EnvSource};
 use diffract::material::Material;
 use diffract::profile::{
-    format_csv, format_table, profile_with_env, Budget, EnvProfile, Frames, ProfileSetup,
+    flss_variants, format_csv, format_table, profile_with_env, Budget, EnvProfile, Frames,
+    ProfileSetup,
 };
 
 fn scratch(name: &str) -> std::path::PathBuf {
@@ -172,6 +173,36 @@ fn env_rows_over_the_budget_are_skipped_with_their_estimates() {
     assert!(csv
         .lines()
         .any(|l| l.starts_with("env 1024 spp,") && l.contains(",true,")));
+    assert_eq!(renderer.validation_messages(), 0);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+#[test]
+fn env_rows_beside_variant_rows() {
+    let Some(mut renderer) = gpu_util::renderer() else {
+        return;
+    };
+    let dir = scratch("mixed");
+    let hf = grating(&dir);
+    let mut setup = setup(&hf, Frames::Fixed(1));
+    setup.variants = flss_variants(8)
+        .into_iter()
+        .filter(|v| v.name == "taylor R=2")
+        .collect();
+    assert_eq!(setup.variants.len(), 1);
+    let run = profile_with_env(&mut renderer, &setup, Some(&env(&[1, 16]))).unwrap();
+    assert_eq!(run.reports.len(), 1, "the variant row");
+    assert_eq!(run.env.as_ref().unwrap().rows.len(), 2, "the env rows");
+    let table = format_table("lavapipe", &setup, &run);
+    let variant = table.find("| taylor R=2 |").expect("the variant's table");
+    let env = table.find("| env 16 spp |").expect("the env table");
+    assert!(variant < env, "the variants' table first: {table}");
+    let csv = format_csv(&run);
+    assert_eq!(
+        csv.lines().count(),
+        4,
+        "header, the variant, two env rows: {csv}"
+    );
     assert_eq!(renderer.validation_messages(), 0);
     let _ = std::fs::remove_dir_all(dir);
 }
