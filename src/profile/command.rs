@@ -5,8 +5,11 @@ use std::path::PathBuf;
 
 use super::budget::{Budget, Frames};
 use super::output::{format_csv, format_table, write_plot};
-use super::plan::{flss_variants, table_variants, ProfileSetup, Variant};
-use super::run::profile;
+use super::plan::{
+    flss_variants, table_variants, EnvProfile, ProfileSetup, Variant, DEFAULT_ENV_PIXELS,
+    DEFAULT_ENV_SPP,
+};
+use super::run::profile_with_env;
 use crate::cli::cache::CacheArgs;
 use crate::cli::gpu::TableArgs;
 use crate::cli::material::MaterialArgs;
@@ -23,7 +26,8 @@ pub struct ProfileArgs {
     /// Taylor terms T of the FLSS variants (Chebyshev gets ⌈2T/3⌉).
     #[arg(long = "variant-terms", default_value_t = 30)]
     pub variant_terms: usize,
-    /// Profile only these (comma-separated names from the table; default: all).
+    /// Profile only these (comma-separated names from the table; default: all; `env`: the
+    /// environment rows of --env alone).
     #[arg(long, value_delimiter = ',')]
     pub only: Vec<String>,
     /// Polar angle of the light (degrees).
@@ -73,6 +77,25 @@ pub struct ProfileArgs {
     /// Also write a PNG plot of error against GPU time (log–log, Pareto front marked).
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Also profile the environment-lit BRDF map under SOURCE (an equirectangular .hdr or
+    /// .exr, builtin:sky, builtin:studio, builtin:white) at each of --env-spp, lit by the
+    /// environment alone, against the f64 quadrature of the environment. `--only env`:
+    /// these rows alone.
+    #[arg(long, value_name = "SOURCE")]
+    pub env: Option<String>,
+    /// The environment's radiance scale [default: 1].
+    #[arg(long)]
+    pub env_intensity: Option<f64>,
+    /// The environment's rotation about +Y in degrees [default: 0].
+    #[arg(long, allow_negative_numbers = true)]
+    pub env_rotate_deg: Option<f64>,
+    /// Samples per pixel of the environment rows, comma-separated [default: 1,4,16,64,256].
+    #[arg(long, value_delimiter = ',', value_name = "N,...")]
+    pub env_spp: Vec<u32>,
+    /// Pixels of the environment rows scored against the f64 quadrature, spread over the
+    /// map's disk [default: 8].
+    #[arg(long)]
+    pub env_pixels: Option<usize>,
     #[command(flatten)]
     pub table: TableArgs,
     #[command(flatten)]
@@ -114,6 +137,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     let counts = args.counts();
     let variants = selected_rows(args)?;
     let base = args.material.apply(Material::default());
+    let env = env_profile(args, &base)?;
     // The user's numbers and height field are checked before the device opens (each
     // variant loads the field again when it prepares; that is cheap next to its terms).
     base.validate()?;
@@ -141,13 +165,14 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         per_vertex: args.per_vertex,
         cache_dir: args.cache.dir(),
     };
-    let run = profile(&mut renderer, &setup)?;
+    let run = profile_with_env(&mut renderer, &setup, env.as_ref())?;
     print!("{}", format_table(renderer.device_name(), &setup, &run));
     if let Some(path) = &args.csv {
         crate::fsutil::write_atomic(path, format_csv(&run).as_bytes())?;
     }
     if let Some(path) = &args.plot {
-        write_plot(path, &setup, &run.reports, renderer.device_name())?;
+        let env = run.env.as_ref();
+        write_plot(path, &setup, &run.reports, env, renderer.device_name())?;
     }
     let n = renderer.validation_messages();
     if n > 0 {
@@ -165,14 +190,54 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     Ok(())
 }
 
-/// The rows of every registered variant, or those `--only` names.
+/// The environment rows `--env` asks for, the map loaded and checked (render's flags and
+/// checks: one error line for a bad map, before any device work).
+fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>> {
+    let env_args = crate::cli::env::EnvArgs {
+        env: args.env.clone(),
+        env_samples: None,
+        env_intensity: args.env_intensity,
+        env_rotate_deg: args.env_rotate_deg,
+        no_sun: false,
+    };
+    let Some(map) = env_args.load(true, &Scene::default())? else {
+        return Ok(None);
+    };
+    let t = &args.table;
+    let spec = crate::cli::env::map_table_spec(
+        t.table_texel,
+        t.table_w_nodes,
+        t.table_step_nm,
+        base.coherence_um,
+    )?;
+    let mut samples = if args.env_spp.is_empty() {
+        DEFAULT_ENV_SPP.to_vec()
+    } else {
+        args.env_spp.clone()
+    };
+    samples.sort_unstable();
+    samples.dedup();
+    Ok(Some(EnvProfile {
+        map,
+        samples,
+        spec,
+        pixels: args.env_pixels.unwrap_or(DEFAULT_ENV_PIXELS),
+    }))
+}
+
+/// The rows of every registered variant, or those `--only` names (`env` names the
+/// environment rows, which `--env` adds whatever `--only` says).
 fn selected_rows(args: &ProfileArgs) -> Result<Vec<Variant>> {
     let mut variants = flss_variants(args.variant_terms);
     variants.extend(table_variants(&args.table.options()));
+    let only: Vec<&String> = args.only.iter().filter(|n| *n != "env").collect();
     if args.only.is_empty() {
         return Ok(variants);
     }
-    for name in &args.only {
+    if only.is_empty() {
+        return Ok(Vec::new());
+    }
+    for name in only {
         if !variants.iter().any(|v| &v.name == name) {
             let names: Vec<&str> = variants.iter().map(|v| v.name.as_str()).collect();
             return Err(Error::invalid(
@@ -203,6 +268,7 @@ pub fn profile_args(args: &ProfileArgs) -> Result<()> {
     crate::guard::finite("phi-i", args.phi_i)?;
     crate::guard::positive("budget-s", args.budget_s, " s")?;
     check_counts(&c, args)?;
+    check_env(&c, args)?;
     args.table.check()?;
     if args.variant_terms > 64 {
         return Err(Error::invalid(
@@ -268,6 +334,46 @@ fn check_counts(c: &Counts, args: &ProfileArgs) -> Result<()> {
             return Err(Error::invalid(
                 "mesh-quads",
                 format!("{q}; expected 1..=32 with a mesh view (--mesh-size > 0)"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The environment rows' flags: each needs `--env` (as `--only env` does); samples per
+/// pixel within what a map draws; scored pixels within the map's disk.
+fn check_env(c: &Counts, args: &ProfileArgs) -> Result<()> {
+    let asks = !args.env_spp.is_empty()
+        || args.env_pixels.is_some()
+        || args.only.iter().any(|n| n == "env");
+    if args.env.is_none() && asks {
+        return Err(Error::invalid(
+            "env",
+            "--env-spp, --env-pixels and --only env need an environment (--env SOURCE)",
+        ));
+    }
+    use crate::render::env::MAX_SAMPLES;
+    if let Some(&n) = args
+        .env_spp
+        .iter()
+        .find(|&&n| !(1..=MAX_SAMPLES).contains(&n))
+    {
+        return Err(Error::invalid(
+            "env-spp",
+            format!("{n}; expected 1 to {MAX_SAMPLES} samples per pixel"),
+        ));
+    }
+    if let Some(n) = args.env_pixels {
+        let inside = (0..c.size * c.size)
+            .filter(|k| map_direction(k % c.size, k / c.size, c.size).is_some())
+            .count();
+        if !(1..=inside).contains(&n) {
+            return Err(Error::invalid(
+                "env-pixels",
+                format!(
+                    "{n}; a {}² map has {inside} pixels inside its disk to score (at least 1)",
+                    c.size
+                ),
             ));
         }
     }

@@ -25,6 +25,7 @@
 
 mod budget;
 mod command;
+mod env;
 mod output;
 mod plan;
 mod progress;
@@ -34,7 +35,12 @@ mod stats;
 
 pub use budget::{Budget, FrameTimes, Frames};
 pub use command::{profile_args, run, Counts, ProfileArgs};
-pub use output::{format_csv, format_table, ProfileRun, Skipped, VariantReport};
-pub use plan::{flss_variants, standard_variants, table_variants, ProfileSetup, Variant};
-pub use run::profile;
+pub use output::{
+    format_csv, format_table, EnvRow, EnvRun, EnvSkipped, ProfileRun, Skipped, VariantReport,
+};
+pub use plan::{
+    flss_variants, standard_variants, table_variants, EnvProfile, ProfileSetup, Variant,
+    DEFAULT_ENV_PIXELS, DEFAULT_ENV_SPP,
+};
+pub use run::{profile, profile_with_env};
 pub use stats::{bootstrap, error_stats, ErrorIntervals, ErrorStats, Interval};

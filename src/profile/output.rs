@@ -73,6 +73,71 @@ pub struct ProfileRun {
     /// Pixels scored: those asked for, or fewer where the budget's share of the reference
     /// ran out (the first ones picked, bright and spread in proportion).
     pub scored: usize,
+    /// The environment-lit rows (`--env`), when asked for.
+    pub env: Option<EnvRun>,
+}
+
+/// One measured environment row.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvRow {
+    pub samples: u32,
+    /// Median time of the dispatches (submit to fence, as `render` reports it) (ms).
+    pub gpu_ms: f64,
+    /// Their 10th and 90th percentiles.
+    pub spread_ms: Option<(f64, f64)>,
+    pub frames: usize,
+    /// Median wall time of a whole map (uploads, pipeline, dispatches, readback) (ms).
+    pub wall_ms: f64,
+    /// The map against the f64 quadrature at the scored pixels.
+    pub vs_reference: ErrorStats,
+    /// 95 % bootstrap intervals of `vs_reference` over the scored pixels.
+    pub intervals: ErrorIntervals,
+}
+
+/// An environment row that did not fit the budget.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvSkipped {
+    pub samples: u32,
+    pub estimated_s: f64,
+    pub reason: String,
+}
+
+/// What the environment rows measured, with what they share: the table, the first
+/// dispatch and the reference.
+#[derive(Debug, Clone, PartialEq)]
+pub struct EnvRun {
+    /// The environment's name (`builtin:sky`, a file name).
+    pub source: String,
+    /// The table on one line, as `render --brdf-map --env` prints it.
+    pub table: String,
+    /// Building the radiance table and its density on the CPU (ms).
+    pub build_ms: f64,
+    /// The first map at 1 sample per pixel: its wall time (uploads and the pipeline's
+    /// compile included) and its dispatch time (ms).
+    pub first_wall_ms: f64,
+    pub first_gpu_ms: f64,
+    /// The reference: its wall time (ms), the finest cell side `h` in `(u, v)` a pixel
+    /// reached, and the largest difference of a channel between a pixel's last two cell
+    /// sides, relative to the brightest scored pixel's Y (as the rows' errors are scaled).
+    pub reference_ms: f64,
+    pub reference_h: f64,
+    pub reference_error: f64,
+    /// Pixels scored, and asked for.
+    pub scored: usize,
+    pub asked: usize,
+    pub rows: Vec<EnvRow>,
+    pub skipped: Vec<EnvSkipped>,
+}
+
+impl EnvRow {
+    /// The row's name in the table, the CSV and the plot.
+    pub fn name(&self) -> String {
+        row_name(self.samples)
+    }
+}
+
+pub(super) fn row_name(samples: u32) -> String {
+    format!("env {samples} spp")
 }
 
 /// A time in ms to two decimals, `n/a` without one.
@@ -160,6 +225,18 @@ fn table_row(r: &VariantReport, mesh_cols: &str) -> String {
 /// Formats a profile as a Markdown table, then its notes: skipped rows, dark references,
 /// conditioning and overshoot.
 pub fn format_table(device: &str, setup: &ProfileSetup, run: &ProfileRun) -> String {
+    let env = run
+        .env
+        .as_ref()
+        .map_or(String::new(), |e| env_table(device, setup, e));
+    if run.reports.is_empty() && run.skipped.is_empty() && run.env.is_some() {
+        return env.trim_start().to_string();
+    }
+    variant_table(device, setup, run) + &env
+}
+
+/// The variant rows' Markdown table and its notes.
+fn variant_table(device: &str, setup: &ProfileSetup, run: &ProfileRun) -> String {
     let reports = &run.reports;
     let mut s = header(device, setup, run);
     let mesh_scored = reports.iter().any(|r| r.mesh_vs_reference.is_some());
@@ -183,6 +260,56 @@ pub fn format_table(device: &str, setup: &ProfileSetup, run: &ProfileRun) -> Str
         s.push_str(&table_row(r, &mesh_cols));
     }
     s.push_str(&notes(run));
+    s
+}
+
+/// The environment rows' Markdown table: what they share (the table, the first map, the
+/// reference) on one line, a row per sample count, then the skipped ones.
+fn env_table(device: &str, setup: &ProfileSetup, e: &EnvRun) -> String {
+    let mut s = format!(
+        "\ndevice: {device}; environment-lit BRDF map {}² under {}, the environment alone (no sun); {}; first map (1 spp: uploads, pipeline compile, dispatch) {:.1} ms wall, {:.2} ms dispatch; reference: f64 quadrature of the same table and environment at {} of {} pixels spread over the disk, cells halved from half a texel until two values agree to 2e-3 (down to {:.5} in (u, v)), the largest difference between a pixel's last two {:.1e} of the brightest pixel's Y, {:.1} s; errors against it with 95 % bootstrap intervals over the pixels; GPU ms = the dispatches' median (submit to fence), p10–p90 their spread, wall ms a whole map's\n\n",
+        setup.size,
+        e.source,
+        e.table,
+        e.first_wall_ms,
+        e.first_gpu_ms,
+        e.scored,
+        e.asked,
+        e.reference_h,
+        e.reference_error,
+        e.reference_ms / 1e3,
+    );
+    s.push_str("| row | samples/px | frames | GPU ms | p10–p90 ms | wall ms | rel L2 vs ref (95 %) | max ΔY vs ref | ΔE p50 | ΔE p99 (95 %) | max ΔE |\n|---|---|---|---|---|---|---|---|---|---|---|\n");
+    for r in &e.rows {
+        let (v, i) = (&r.vs_reference, &r.intervals);
+        let spread = r
+            .spread_ms
+            .map_or("—".to_string(), |(a, b)| format!("{a:.2}–{b:.2}"));
+        s.push_str(&format!(
+            "| {} | {} | {} | {:.2} | {spread} | {:.2} | {:.2e} ({:.2e}–{:.2e}) | {:.2e} | {:.3} | {:.3} ({:.3}–{:.3}) | {:.3} |\n",
+            r.name(),
+            r.samples,
+            r.frames,
+            r.gpu_ms,
+            r.wall_ms,
+            v.rel_l2,
+            i.rel_l2.lo,
+            i.rel_l2.hi,
+            v.max_abs_y,
+            v.p50_de,
+            v.p99_de,
+            i.p99_de.lo,
+            i.p99_de.hi,
+            v.max_de
+        ));
+    }
+    for k in &e.skipped {
+        s.push_str(&format!(
+            "\nskipped: {}: {}\n",
+            row_name(k.samples),
+            k.reason
+        ));
+    }
     s
 }
 
@@ -222,7 +349,7 @@ fn notes(run: &ProfileRun) -> String {
 /// intervals; a skipped row has its name, its settings, `skipped`, the reason and its
 /// estimated cost only.
 pub fn format_csv(run: &ProfileRun) -> String {
-    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref,overshoot,reference_dark,leave_out,frames,gpu_ms_p10,gpu_ms_p90,rel_l2_ref_lo,rel_l2_ref_hi,p99_de_ref_lo,p99_de_ref_hi,skipped,estimated_s\n");
+    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref,overshoot,reference_dark,leave_out,frames,gpu_ms_p10,gpu_ms_p90,rel_l2_ref_lo,rel_l2_ref_hi,p99_de_ref_lo,p99_de_ref_hi,skipped,estimated_s,env_spp\n");
     let opt = |v: Option<f64>| v.map_or(String::new(), |g| g.to_string());
     let settings = |v: &Variant| {
         format!(
@@ -266,11 +393,12 @@ pub fn format_csv(run: &ProfileRun) -> String {
             i.p99_de.hi.to_string(),
             "false".to_string(),
             String::new(),
+            String::new(),
         ];
         csv.push_str(&format!("{},{}\n", settings(v), columns.join(",")));
     }
     for k in &run.skipped {
-        let mut columns = vec![String::new(); 32];
+        let mut columns = vec![String::new(); 33];
         columns[7] = k.variant.kind.to_string();
         columns[8] = k.reason.replace(',', ";");
         columns[22] = k.variant.leave_out.to_string();
@@ -278,20 +406,74 @@ pub fn format_csv(run: &ProfileRun) -> String {
         columns[31] = opt(k.estimated_s);
         csv.push_str(&format!("{},{}\n", settings(&k.variant), columns.join(",")));
     }
+    if let Some(e) = &run.env {
+        csv.push_str(&env_csv(e));
+    }
     csv
 }
 
-/// The Pareto plot of error against GPU time: the map rows, and the per-vertex rows with
-/// their per-pixel twins on the mesh view.
+/// The environment rows' CSV lines, in the columns of [`format_csv`]: the figures they
+/// have, `env` as their kind, the table's build as theirs, and their samples per pixel.
+fn env_csv(e: &EnvRun) -> String {
+    let mut csv = String::new();
+    let detail = format!("{}; {}", e.source, e.table).replace(',', ";");
+    for r in &e.rows {
+        let (v, i) = (&r.vs_reference, &r.intervals);
+        let mut c = vec![String::new(); 39];
+        c[0] = r.name();
+        c[6] = r.gpu_ms.to_string();
+        c[7] = r.wall_ms.to_string();
+        c[8] = v.rel_l2.to_string();
+        c[9] = v.max_abs_y.to_string();
+        c[10] = v.mean_de.to_string();
+        c[11] = v.max_de.to_string();
+        c[13] = "env".into();
+        c[14] = detail.clone();
+        c[16] = e.build_ms.to_string();
+        c[19] = v.p50_de.to_string();
+        c[20] = v.p99_de.to_string();
+        c[23] = "false".into();
+        c[27] = "false".into();
+        c[29] = r.frames.to_string();
+        if let Some((lo, hi)) = r.spread_ms {
+            c[30] = lo.to_string();
+            c[31] = hi.to_string();
+        }
+        c[32] = i.rel_l2.lo.to_string();
+        c[33] = i.rel_l2.hi.to_string();
+        c[34] = i.p99_de.lo.to_string();
+        c[35] = i.p99_de.hi.to_string();
+        c[36] = "false".into();
+        c[38] = r.samples.to_string();
+        csv.push_str(&(c.join(",") + "\n"));
+    }
+    for k in &e.skipped {
+        let mut c = vec![String::new(); 39];
+        c[0] = row_name(k.samples);
+        c[13] = "env".into();
+        c[14] = k.reason.replace(',', ";");
+        c[36] = "true".into();
+        c[37] = k.estimated_s.to_string();
+        c[38] = k.samples.to_string();
+        csv.push_str(&(c.join(",") + "\n"));
+    }
+    csv
+}
+
+/// The Pareto plot of error against GPU time: the map rows, the per-vertex rows with
+/// their per-pixel twins on the mesh view, and the environment rows as a curve of their
+/// own (their errors are against the environment's quadrature).
 pub(super) fn write_plot(
     path: &std::path::Path,
     setup: &ProfileSetup,
     reports: &[VariantReport],
+    env: Option<&EnvRun>,
     device: &str,
 ) -> Result<()> {
     // A dark reference's relative errors are noise: such rows are not plotted, and a map
     // that is dark for every row gives no plot at all.
-    if reports.iter().all(|r| r.reference_dark) {
+    let env_points = env.map_or(0, |e| e.rows.len());
+    if env_points == 0 && reports.iter().all(|r| r.reference_dark) {
         return Err(Error::invalid(
             "plot",
             format!(
@@ -323,15 +505,46 @@ pub(super) fn write_plot(
             error: e.rel_l2,
         })
     }));
-    crate::plot::error_vs_time(
+    // The environment rows' errors are against their own reference: a curve of their
+    // own beside the variants' Pareto front.
+    let curve = env.map(|e| crate::plot::SideCurve {
+        label: format!(
+            "under {} (vs f64 quadrature), by samples per pixel",
+            e.source
+        ),
+        points: e
+            .rows
+            .iter()
+            .map(|r| crate::plot::Point {
+                label: r.name(),
+                time_ms: r.gpu_ms,
+                error: r.vs_reference.rel_l2,
+            })
+            .collect(),
+    });
+    let (lit, y_label) = match (env, points.is_empty()) {
+        (Some(e), true) => (
+            format!("under {}", e.source),
+            "relative L2 error of XYZ vs the f64 quadrature of the environment",
+        ),
+        (Some(_), false) => (
+            format!("at θi = {}°", setup.theta_i_deg),
+            "relative L2 error of XYZ vs the f64 reference (env rows: its quadrature)",
+        ),
+        (None, _) => (
+            format!("at θi = {}°", setup.theta_i_deg),
+            "relative L2 error of XYZ vs the f64 reference at 1 nm",
+        ),
+    };
+    crate::plot::error_vs_time_with(
         path,
         &format!(
-            "diffract profile: {} at θi = {}°, {}² map, {device}",
+            "diffract profile: {} {lit}, {}² map, {device}",
             crate::plot::source_name(&setup.base.heightfield),
-            setup.theta_i_deg,
             setup.size,
         ),
-        "relative L2 error of XYZ vs the f64 reference at 1 nm",
+        y_label,
         &points,
+        curve.as_ref(),
     )
 }

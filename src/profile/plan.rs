@@ -4,7 +4,9 @@
 use std::path::PathBuf;
 
 use super::budget::Frames;
+use crate::brdf::table::TableSpec;
 use crate::gpu::StorageFormat;
+use crate::light::env::EnvMap;
 use crate::material::Material;
 use crate::render::variant::{Family, Preset};
 use crate::render::{TableOptions, VariantKind};
@@ -141,4 +143,21 @@ pub struct ProfileSetup {
     /// [`VariantKind::REFERENCE`] at 1 nm.
     pub per_vertex: bool,
     pub cache_dir: Option<PathBuf>,
+}
+
+/// Samples per pixel of the environment rows unless `--env-spp` says otherwise.
+pub const DEFAULT_ENV_SPP: [u32; 5] = [1, 4, 16, 64, 256];
+/// Pixels scored against the environment's f64 quadrature unless `--env-pixels` says.
+pub const DEFAULT_ENV_PIXELS: usize = 8;
+
+/// What the environment rows draw.
+#[derive(Debug, Clone)]
+pub struct EnvProfile {
+    pub map: EnvMap,
+    /// Samples per pixel, one row each, ascending and distinct.
+    pub samples: Vec<u32>,
+    /// The radiance table (`render --brdf-map --env`'s: `u, v ∈ [−2, 2]`, `w ∈ [−2, 0]`).
+    pub spec: TableSpec,
+    /// Pixels scored, spread evenly over the map's disk.
+    pub pixels: usize,
 }

@@ -1,11 +1,12 @@
 //! A profile in progress: the rows in the order the budget favours, each one's warm-up,
 //! timed frames, scores and mesh views, and the entry [`profile`].
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use super::budget::{Budget, Deadline, FrameTimes, Frames, OverBudget, Pace};
+use super::env::env_rows;
 use super::output::{ProfileRun, Skipped, VariantReport};
-use super::plan::{ProfileSetup, Variant};
+use super::plan::{EnvProfile, ProfileSetup, Variant};
 use super::progress::{row_line, skipped_line, Progress};
 use super::score::{mesh_error, mesh_reference, reference_samples, score_map, Samples, Scores};
 use super::stats::ErrorStats;
@@ -38,7 +39,21 @@ struct Run<'a> {
 /// Renders and scores every row. The reference (1 nm, direct sum) is computed once at the
 /// sampled pixels, so its cost is `pixels × N² × 401` complex multiply-adds.
 pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<ProfileRun> {
-    if setup.variants.is_empty() {
+    profile_with_env(renderer, setup, None)
+}
+
+/// Share of the budget the environment rows may take when variant rows follow them.
+const ENV_SHARE: f64 = 0.5;
+
+/// [`profile`], with the environment-lit rows of `env` first (within [`ENV_SHARE`] of the
+/// budget when variant rows follow, else all of it). `setup.variants` may be empty when
+/// `env` is given.
+pub fn profile_with_env(
+    renderer: &mut Renderer,
+    setup: &ProfileSetup,
+    env: Option<&EnvProfile>,
+) -> Result<ProfileRun> {
+    if setup.variants.is_empty() && env.is_none() {
         return Err(Error::invalid("variants", "none to profile"));
     }
     if setup.pixels + setup.brightest == 0 || setup.frames == Frames::Fixed(0) {
@@ -49,6 +64,48 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<ProfileR
     }
     let start = Instant::now();
     let heightfield = setup.base.load_heightfield(&crate::report::Stderr)?;
+    let env_run = match env {
+        Some(e) => {
+            let share = if setup.variants.is_empty() {
+                1.0
+            } else {
+                ENV_SHARE
+            };
+            let end = match setup.frames {
+                Frames::Budget(b) => Some(start + Duration::from_secs_f64(share * b.total_s)),
+                Frames::Fixed(_) => None,
+            };
+            let dev = renderer.device().clone();
+            let size = setup.size;
+            Some(env_rows(
+                &dev,
+                &heightfield,
+                &setup.base,
+                size,
+                setup.frames,
+                e,
+                end,
+            )?)
+        }
+        None => None,
+    };
+    let mut out = if setup.variants.is_empty() {
+        ProfileRun::default()
+    } else {
+        variant_rows(renderer, setup, heightfield, start)?
+    };
+    out.env = env_run;
+    out.wall_s = start.elapsed().as_secs_f64();
+    Ok(out)
+}
+
+/// The variant rows of `setup`, the budget counted from `start`.
+fn variant_rows(
+    renderer: &mut Renderer,
+    setup: &ProfileSetup,
+    heightfield: crate::heightfield::HeightField,
+    start: Instant,
+) -> Result<ProfileRun> {
     let mut run = Run {
         setup,
         start,
@@ -75,7 +132,6 @@ pub fn profile(renderer: &mut Renderer, setup: &ProfileSetup) -> Result<ProfileR
             RowOutcome::Skipped(skipped) => out.skipped.push(skipped),
         }
     }
-    out.wall_s = run.start.elapsed().as_secs_f64();
     out.scored = run.samples.as_ref().map_or(0, |s| s.0.len());
     Ok(out)
 }

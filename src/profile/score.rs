@@ -226,7 +226,12 @@ pub(super) fn mesh_error(reference: &[[f64; 3]], rgb: &[[f32; 3]]) -> ErrorStats
 /// Pixels to score: the `bright` brightest of `map` and `spread` more spread evenly over the
 /// rest of the disk, each at most once; in an order whose every prefix holds bright and
 /// spread pixels in proportion, the spread ones spread over the disk.
-fn pick_pixels(map: &[[f32; 3]], size: u32, bright: usize, spread: usize) -> Vec<(u32, u32)> {
+pub(super) fn pick_pixels(
+    map: &[[f32; 3]],
+    size: u32,
+    bright: usize,
+    spread: usize,
+) -> Vec<(u32, u32)> {
     let mut inside: Vec<(u32, u32, f32)> = (0..size * size)
         .filter_map(|k| {
             let (i, j) = (k % size, k / size);
