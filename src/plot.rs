@@ -1067,8 +1067,11 @@ mod heat_tests {
         assert_eq!(ramp(f64::NAN), ramp(0.0));
     }
 
+    /// `name` in a directory of its own: the tests run in parallel and each removes its
+    /// directory.
     fn scratch(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("diffract-plot-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("diffract-plot-{}-{name}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         dir.join(name)
     }
@@ -1185,7 +1188,9 @@ mod heat_tests {
         // Grey cells for the missing values, and the legend's swatch.
         let grey = img.pixels().filter(|p| p.0 == [150, 150, 150]).count();
         assert!(grey > 100, "{grey} grey pixels");
-        std::fs::remove_dir_all(scratch("x").parent().unwrap()).ok();
+        for name in ["labelled.png", "bare.png"] {
+            std::fs::remove_dir_all(scratch(name).parent().unwrap()).ok();
+        }
     }
 
     #[test]
