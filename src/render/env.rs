@@ -18,7 +18,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
-use crate::brdf::env_reference::radiance_table;
+use crate::brdf::env_reference::{absolute_factor, radiance_table};
 use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, TableSpec};
 use crate::brdf::Shading;
 use crate::colour::{linear_srgb_to_xyz, ColourTable};
@@ -192,6 +192,10 @@ pub struct EnvLighting {
     pub density: GDensity,
     /// D65's white XYZ (`Y = 1`): the colour of the sun.
     pub white: [f64; 3],
+    /// The factor that turns the relative reflectance `ρ` into the absolute BRDF,
+    /// `A_λ·R0` (`A_λ` alone without Fresnel) weighted by D65's luminance `w_Y`:
+    /// `Σ A_λ R0 w_Y,λ / Σ w_Y,λ` (about 440 for 65 µm with Fresnel).
+    pub mirror_scale: f64,
     pub build_ms: f64,
 }
 
@@ -206,11 +210,20 @@ impl EnvLighting {
         let start = Instant::now();
         let table = radiance_table(hf, coherence_um, shading, spec)?;
         let density = GDensity::new(&table);
-        let white = crate::brdf::env_reference::white(&ColourTable::new(spec.step_nm)?);
+        let colours = ColourTable::new(spec.step_nm)?;
+        let white = crate::brdf::env_reference::white(&colours);
+        let mirror_scale = colours
+            .lambdas_nm
+            .iter()
+            .zip(&colours.weights)
+            .map(|(&l, w)| absolute_factor(l, coherence_um, shading) * w[1])
+            .sum::<f64>()
+            / white[1];
         Ok(EnvLighting {
             table,
             density,
             white,
+            mirror_scale,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
         })
     }
@@ -237,12 +250,85 @@ pub struct EnvPicture {
     pub gpu_ms: f64,
 }
 
+/// A light evaluated once per pixel, in full: a direction of the sun's disc, or a disc
+/// light of no angular size.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PointLight {
+    /// Towards the light, world space, unit.
+    pub towards: [f64; 3],
+    /// Irradiance on a surface facing it, XYZ.
+    pub irradiance_xyz: [f64; 3],
+}
+
+/// A disc light sampled uniformly in its cone (MODEL §10: radiance `I·colour/Ω`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SampledDisc {
+    /// Towards the disc's centre, world space, unit.
+    pub towards: [f64; 3],
+    /// Cosine of the angular radius.
+    pub cos_radius: f64,
+    /// Solid angle `2π(1 − cos α)`.
+    pub solid_angle: f64,
+    /// Radiance, XYZ.
+    pub radiance_xyz: [f64; 3],
+}
+
+/// Every light besides the environment.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Lights {
+    pub points: Vec<PointLight>,
+    pub discs: Vec<SampledDisc>,
+}
+
+impl Lights {
+    /// The light sampler's probabilities: the environment's (from its luminance integral
+    /// `env_power`) and each disc's, in proportion to `Y·Ω`.
+    fn probabilities(&self, env_power: f64) -> (f64, Vec<f64>) {
+        let powers: Vec<f64> = self
+            .discs
+            .iter()
+            .map(|d| d.radiance_xyz[1].max(0.0) * d.solid_angle)
+            .collect();
+        let total = env_power.max(0.0) + powers.iter().sum::<f64>();
+        if total <= 0.0 {
+            return (0.0, vec![0.0; powers.len()]);
+        }
+        (
+            env_power.max(0.0) / total,
+            powers.iter().map(|p| p / total).collect(),
+        )
+    }
+
+    /// The shader's light buffer (env_common.glsl) with the discs' probabilities.
+    fn buffer(&self, disc_probs: &[f64]) -> Vec<f32> {
+        let mut v = Vec::new();
+        for p in &self.points {
+            v.extend(p.towards.iter().chain(&[0.0]).map(|&x| x as f32));
+            v.extend(p.irradiance_xyz.iter().chain(&[0.0]).map(|&x| x as f32));
+        }
+        for (d, q) in self.discs.iter().zip(disc_probs) {
+            v.extend(d.towards.iter().chain(&[d.cos_radius]).map(|&x| x as f32));
+            v.extend(
+                d.radiance_xyz
+                    .iter()
+                    .chain(&[d.solid_angle])
+                    .map(|&x| x as f32),
+            );
+            v.extend([*q as f32, 0.0, 0.0, 0.0]);
+        }
+        if v.is_empty() {
+            v.extend([0.0; 4]);
+        }
+        v
+    }
+}
+
 #[repr(C)]
 #[derive(Clone, Copy)]
 struct ParamsSsbo {
     region_lo: [f32; 4],
     region_hi: [f32; 4],
-    sun_wi: [f32; 4],
+    blend: [f32; 4],
     white: [f32; 4],
     cdf_lo: [f32; 4],
     cdf_step: [f32; 4],
@@ -251,6 +337,7 @@ struct ParamsSsbo {
     env_dims: [i32; 4],
     flags: [i32; 4],
     env_rot: [f32; 4],
+    light_dims: [i32; 4],
 }
 
 // SAFETY: repr(C) of 4-byte scalars in 16-byte groups: no padding.
@@ -260,19 +347,39 @@ fn f32_bytes(v: impl IntoIterator<Item = f32>) -> Vec<u8> {
     v.into_iter().flat_map(|x| x.to_le_bytes()).collect()
 }
 
-/// Draws `req` with `lighting` on `dev`.
-pub fn render_env_brdf_map(
+/// One integration over `pixels` invocations of a stage that includes env_common.glsl.
+pub(crate) struct Dispatch<'a> {
+    pub env: &'a EnvMap,
+    pub lights: &'a Lights,
+    pub shading: Shading,
+    pub samples: u32,
+    pub seed: u32,
+    /// Texture blending's `w_diffuse`, `None` without a texture.
+    pub w_diffuse: Option<f64>,
+    pub pixels: u64,
+    /// A BRDF map's side in pixels (0 for a G-buffer).
+    pub map_side: u32,
+    /// vec4s each pixel writes.
+    pub outputs: u64,
+    /// The stage's own buffer at binding 7 (the G-buffer), if any.
+    pub extra: Option<&'a [u8]>,
+    pub spirv: &'a [u8],
+    pub name: &'a str,
+}
+
+/// Runs `d` with `lighting`: the per-pixel sums divided by the samples, and the GPU time.
+pub(crate) fn dispatch(
     dev: &Arc<Device>,
     lighting: &EnvLighting,
-    req: &EnvMapRequest<'_>,
-) -> Result<EnvPicture> {
-    if !(1..=MAX_SAMPLES).contains(&req.samples) {
+    d: &Dispatch<'_>,
+) -> Result<(Vec<[f32; 4]>, f64)> {
+    if !(1..=MAX_SAMPLES).contains(&d.samples) {
         return Err(Error::invalid(
             "env samples",
-            format!("{}; expected 1 to {MAX_SAMPLES}", req.samples),
+            format!("{}; expected 1 to {MAX_SAMPLES}", d.samples),
         ));
     }
-    let env = req.env;
+    let env = d.env;
     let t = &lighting.table;
     let r = t.region;
     let sampler = EnvSampler::new(env);
@@ -290,38 +397,33 @@ pub fn render_env_brdf_map(
             .flat_map(|p| linear_srgb_to_xyz(p.map(f64::from)).map(|x| x as f32)),
     );
     let coeff = f32_bytes(t.splines.iter().flatten().flatten().map(|&x| x as f32));
-    let d = &lighting.density;
-    let (sun, irradiance) = req.sun.unwrap_or(([0.0, 0.0, 1.0], 0.0));
+    let g = &lighting.density;
+    let (q_env, q_discs) = d.lights.probabilities(sampler.total);
     let params = ParamsSsbo {
         region_lo: [r.lo[0] as f32, r.lo[1] as f32, r.lo[2] as f32, 0.0],
         region_hi: [r.hi[0] as f32, r.hi[1] as f32, r.hi[2] as f32, 0.0],
-        sun_wi: [
-            sun[0] as f32,
-            sun[1] as f32,
-            sun[2] as f32,
-            irradiance as f32,
-        ],
+        blend: [d.w_diffuse.unwrap_or(0.0) as f32, q_env as f32, 0.0, 0.0],
         white: [
             lighting.white[0] as f32,
             lighting.white[1] as f32,
             lighting.white[2] as f32,
-            crate::brdf::schlick_r0(req.shading.ior) as f32,
+            crate::brdf::schlick_r0(d.shading.ior) as f32,
         ],
-        cdf_lo: [d.lo[0] as f32, d.lo[1] as f32, d.w0 as f32, d.dw as f32],
-        cdf_step: [d.step[0] as f32, d.step[1] as f32, 0.0, 0.0],
+        cdf_lo: [g.lo[0] as f32, g.lo[1] as f32, g.w0 as f32, g.dw as f32],
+        cdf_step: [g.step[0] as f32, g.step[1] as f32, 0.0, 0.0],
         table_dims: [t.nu as i32, t.nv as i32, t.coeffs.len() as i32, 0],
-        cdf_dims: [d.bins[0] as i32, d.bins[1] as i32, d.nodes as i32, 0],
+        cdf_dims: [g.bins[0] as i32, g.bins[1] as i32, g.nodes as i32, 0],
         env_dims: [
             env.width as i32,
             env.height as i32,
-            req.samples as i32,
-            req.size as i32,
+            d.samples as i32,
+            d.pixels as i32,
         ],
         flags: [
-            i32::from(req.shading.fresnel),
-            i32::from(req.shading.shadowing),
-            i32::from(sampler.total > 0.0),
-            req.seed as i32,
+            i32::from(d.shading.fresnel),
+            i32::from(d.shading.shadowing),
+            i32::from(q_env > 0.0),
+            d.seed as i32,
         ],
         env_rot: [
             env.rotate_rad.cos() as f32,
@@ -329,46 +431,51 @@ pub fn render_env_brdf_map(
             0.0,
             0.0,
         ],
+        light_dims: [
+            d.lights.points.len() as i32,
+            d.lights.discs.len() as i32,
+            i32::from(d.w_diffuse.is_some()),
+            d.map_side as i32,
+        ],
     };
     let b = |name: &str, bytes: &[u8]| {
-        compute::storage_with_data(dev, &format!("env map {name}"), bytes)
+        compute::storage_with_data(dev, &format!("{} {name}", d.name), bytes)
     };
     let params_buf = b("params", crate::gpu::memory::bytes_of(&[params]))?;
     let coeff_buf = b("table", &coeff)?;
     let env_buf = b("radiance", &env_xyz)?;
     let env_cdf_buf = b("environment CDFs", &env_cdf)?;
-    let g_buf = b("BRDF density", &f32_bytes(d.data.iter().copied()))?;
-    let pixels = u64::from(req.size) * u64::from(req.size);
-    let out_bytes = pixels * 16;
-    let out = compute::storage(dev, "env map output", out_bytes)?;
+    let g_buf = b("BRDF density", &f32_bytes(g.data.iter().copied()))?;
+    let lights_buf = b("lights", &f32_bytes(d.lights.buffer(&q_discs)))?;
+    let extra_buf = d.extra.map(|e| b("G-buffer", e)).transpose()?;
+    let out_bytes = (d.pixels * d.outputs * 16).max(16);
+    let out = compute::storage(dev, &format!("{} output", d.name), out_bytes)?;
     let readback = Buffer::new(
         dev,
-        "env map readback",
-        out_bytes.max(4),
+        &format!("{} readback", d.name),
+        out_bytes,
         vk::BufferUsageFlags::TRANSFER_DST,
         MemoryLocation::GpuToCpu,
     )?;
-    let layout = ComputeLayout::new(dev, "env map", 6, 8)?;
-    let set = StorageSet::new(
-        dev,
-        "env map",
-        &layout,
-        &[
-            &params_buf,
-            &coeff_buf,
-            &env_buf,
-            &env_cdf_buf,
-            &g_buf,
-            &out,
-        ],
-    )?;
-    let pipeline = ComputePipeline::new(dev, "env map", &layout, SPIRV, &[])?;
+    let mut buffers = vec![
+        &params_buf,
+        &coeff_buf,
+        &env_buf,
+        &env_cdf_buf,
+        &g_buf,
+        &out,
+        &lights_buf,
+    ];
+    buffers.extend(extra_buf.as_ref());
+    let layout = ComputeLayout::new(dev, d.name, buffers.len() as u32, 8)?;
+    let set = StorageSet::new(dev, d.name, &layout, &buffers)?;
+    let pipeline = ComputePipeline::new(dev, d.name, &layout, d.spirv, &[])?;
     let start = Instant::now();
-    dev.submit_once("env map", |cb| {
-        for base in (0..req.samples).step_by(CHUNK as usize) {
-            let count = CHUNK.min(req.samples - base);
+    dev.submit_once(d.name, |cb| {
+        for base in (0..d.samples).step_by(CHUNK as usize) {
+            let count = CHUNK.min(d.samples - base);
             let push: Vec<u8> = [base, count].iter().flat_map(|v| v.to_le_bytes()).collect();
-            layout.dispatch(cb, &pipeline, &set, &push, pixels)?;
+            layout.dispatch(cb, &pipeline, &set, &push, d.pixels.max(1))?;
             compute::compute_barrier(dev, cb);
         }
         compute::copy_to_host(dev, cb, &out, &readback, out_bytes);
@@ -376,19 +483,60 @@ pub fn render_env_brdf_map(
     })?;
     let gpu_ms = start.elapsed().as_secs_f64() * 1e3;
     let raw = readback.mapped()?;
-    let xyz = raw
+    let n = d.samples as f32;
+    let sums = raw
         .chunks_exact(16)
-        .take(pixels as usize)
+        .take((d.pixels * d.outputs) as usize)
         .map(|c| {
             let f =
                 |i: usize| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]);
-            let n = req.samples as f32;
-            [f(0) / n, f(1) / n, f(2) / n]
+            [f(0) / n, f(1) / n, f(2) / n, f(3)]
         })
         .collect();
+    Ok((sums, gpu_ms))
+}
+
+/// Draws `req` with `lighting` on `dev`.
+pub fn render_env_brdf_map(
+    dev: &Arc<Device>,
+    lighting: &EnvLighting,
+    req: &EnvMapRequest<'_>,
+) -> Result<EnvPicture> {
+    // The sun in the world: the map's patch is N = +Y, T = +X, B = −Z (MODEL §10).
+    let frame = crate::brdf::env_reference::Frame::BRDF_MAP;
+    let lights = Lights {
+        points: req
+            .sun
+            .filter(|s| s.1 > 0.0)
+            .map(|(wi, e)| PointLight {
+                towards: frame.to_world(wi),
+                irradiance_xyz: lighting.white.map(|w| w * e),
+            })
+            .into_iter()
+            .collect(),
+        discs: Vec::new(),
+    };
+    let (sums, gpu_ms) = dispatch(
+        dev,
+        lighting,
+        &Dispatch {
+            env: req.env,
+            lights: &lights,
+            shading: req.shading,
+            samples: req.samples,
+            seed: req.seed,
+            w_diffuse: None,
+            pixels: u64::from(req.size) * u64::from(req.size),
+            map_side: req.size,
+            outputs: 1,
+            extra: None,
+            spirv: SPIRV,
+            name: "env map",
+        },
+    )?;
     Ok(EnvPicture {
         size: req.size,
-        xyz,
+        xyz: sums.iter().map(|p| [p[0], p[1], p[2]]).collect(),
         gpu_ms,
     })
 }
