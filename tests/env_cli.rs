@@ -200,3 +200,55 @@ fn a_small_scene_under_an_environment_and_a_disc_light_is_drawn() {
     assert!(px.iter().flatten().all(|c| c.is_finite()));
     assert!(px.iter().any(|p| p[1] > 0.0), "a black picture");
 }
+
+#[test]
+fn a_second_render_reads_the_environment_table_from_the_cache() {
+    if gpu_util::device().is_none() {
+        return;
+    }
+    let d = dir("cache");
+    let cache = d.join("cache");
+    let _ = std::fs::remove_dir_all(&cache);
+    let run = |out: &str| {
+        let o = render(
+            &[
+                "--brdf-map",
+                "--env",
+                "builtin:sky",
+                "--heightfield",
+                "builtin:blazed",
+                "--size",
+                "8",
+                "--env-samples",
+                "4",
+                "--table-texel",
+                "0.02",
+                "--table-w-nodes",
+                "4",
+                "--table-step-nm",
+                "20",
+                "--cache-dir",
+                cache.to_str().unwrap(),
+                "-o",
+                out,
+            ],
+            &d,
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).to_string()
+    };
+    let cold = run("cold.exr");
+    let warm = run("warm.exr");
+    assert!(cold.contains("built on the CPU"), "{cold}");
+    assert!(warm.contains("samples read from the cache"), "{warm}");
+    // The cache holds the samples as float32: the pictures agree to that rounding.
+    let read = |f: &str| diffract::image_io::read_exr(&d.join(f)).unwrap().2;
+    let (a, b) = (read("cold.exr"), read("warm.exr"));
+    let peak = a.iter().flatten().fold(0f32, |m, c| m.max(c.abs()));
+    let worst = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0f32, |m, (x, y)| m.max((x - y).abs()));
+    assert!(peak > 0.1 && worst < 1e-5 * peak, "{worst} of {peak}");
+}

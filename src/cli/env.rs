@@ -132,9 +132,10 @@ pub fn draw_map(
     args: &EnvArgs,
     size: u32,
     sun_deg: (f64, f64),
+    cache: &crate::cli::cache::CacheArgs,
 ) -> Result<EnvMapOutput> {
     let shading = material.shading();
-    let lighting = EnvLighting::build(hf, material.coherence_um, &shading, spec)?;
+    let (lighting, built) = lighting_for(hf, material, spec, cache)?;
     let samples = args.env_samples.unwrap_or(DEFAULT_SAMPLES);
     let sun = (!args.no_sun).then(|| (crate::brdf::direction(sun_deg.0, sun_deg.1), 1.0));
     let req = EnvMapRequest {
@@ -146,7 +147,7 @@ pub fn draw_map(
         seed: 0,
     };
     let pic = render_env_brdf_map(dev, &lighting, &req)?;
-    let table_line = table_line(&lighting, spec, true);
+    let table_line = table_line(&lighting, spec, built);
     let rgb = pic
         .xyz
         .iter()
@@ -198,7 +199,7 @@ pub fn run_env_scene(
     )?;
     let dev = crate::gpu::Device::new(crate::cli::gpu::validation_requested())?;
     let shading = material.shading();
-    let (lighting, built) = lighting_for(&hf, &material, &shading, &spec, args)?;
+    let (lighting, built) = lighting_for(&hf, &material, &spec, &args.cache)?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);
     let samples = args.env.env_samples.unwrap_or(DEFAULT_SAMPLES);
     let frame = crate::render::env_scene::render_env_scene(
@@ -267,18 +268,24 @@ pub fn run_env_scene(
     Ok(())
 }
 
-/// The radiance table of `spec` and its density: built, and whether it was.
+/// The radiance table of `spec` and its density, through the cache unless `--no-cache`;
+/// and whether it was built (not read from the cache).
 fn lighting_for(
     hf: &crate::heightfield::HeightField,
     material: &crate::material::Material,
-    shading: &crate::brdf::Shading,
     spec: &TableSpec,
-    _args: &crate::cli::render::RenderArgs,
+    cache: &crate::cli::cache::CacheArgs,
 ) -> Result<(EnvLighting, bool)> {
-    Ok((
-        EnvLighting::build(hf, material.coherence_um, shading, spec)?,
-        true,
-    ))
+    let dir = cache.dir();
+    let (l, cached) = EnvLighting::build_cached(
+        hf,
+        material.coherence_um,
+        &material.shading(),
+        spec,
+        dir.as_deref(),
+        &crate::report::Stderr,
+    )?;
+    Ok((l, !cached))
 }
 
 /// The one line that says what the environment table holds and where it came from.
@@ -288,7 +295,10 @@ fn table_line(lighting: &EnvLighting, spec: &TableSpec, built: bool) -> String {
     let origin = if built {
         format!("built on the CPU in {:.1} s", lighting.build_ms / 1e3)
     } else {
-        format!("read from the cache in {:.1} s", lighting.build_ms / 1e3)
+        format!(
+            "samples read from the cache, prepared in {:.1} s",
+            lighting.build_ms / 1e3
+        )
     };
     format!(
         "environment table: u, v ∈ [−2, 2], w ∈ [−2, 0], texel {:.4}, K = {}, {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",

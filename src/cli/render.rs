@@ -230,7 +230,17 @@ fn run_env_map(args: &RenderArgs, scene: &Scene, env: &crate::light::env::EnvMap
         args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I),
         args.phi_i.unwrap_or(0.0),
     );
-    let out = crate::cli::env::draw_map(&dev, &hf, &material, &spec, env, &args.env, size, sun)?;
+    let out = crate::cli::env::draw_map(
+        &dev,
+        &hf,
+        &material,
+        &spec,
+        env,
+        &args.env,
+        size,
+        sun,
+        &args.cache,
+    )?;
     if out.rgb.iter().flatten().any(|c| !c.is_finite()) {
         return Err(Error::invalid(
             "render",

@@ -18,7 +18,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
-use crate::brdf::env_reference::{absolute_factor, radiance_table};
+use crate::brdf::env_reference::{absolute_factor, radiance_slices};
 use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, TableSpec};
 use crate::brdf::Shading;
 use crate::colour::{linear_srgb_to_xyz, ColourTable};
@@ -207,8 +207,48 @@ impl EnvLighting {
         shading: &Shading,
         spec: &TableSpec,
     ) -> Result<Self> {
+        Self::build_cached(
+            hf,
+            coherence_um,
+            shading,
+            spec,
+            None,
+            &crate::report::Stderr,
+        )
+        .map(|(l, _)| l)
+    }
+
+    /// [`Self::build`] with the table's samples through the on-disk table cache in `dir`
+    /// ([`crate::brdf::table_cache`], keyed like every sampled table, tagged with the
+    /// radiance weights and the Fresnel factor they carry); also whether they were read
+    /// from it. `build_ms` is the whole preparation either way.
+    pub fn build_cached(
+        hf: &HeightField,
+        coherence_um: f64,
+        shading: &Shading,
+        spec: &TableSpec,
+        dir: Option<&std::path::Path>,
+        report: &dyn crate::report::Report,
+    ) -> Result<(Self, bool)> {
         let start = Instant::now();
-        let table = radiance_table(hf, coherence_um, shading, spec)?;
+        let tag = format!(
+            "radiance weights, Fresnel {} (ior {:016x})",
+            shading.fresnel,
+            shading.ior.to_bits()
+        );
+        let (slices, cached) = crate::brdf::table_cache::sample_g_cached_by(
+            hf,
+            coherence_um,
+            spec,
+            &ChebyshevW::nodes(spec),
+            None,
+            dir,
+            Some(&tag),
+            report,
+            &|| radiance_slices(hf, coherence_um, shading, spec),
+        )?;
+        let table = ChebyshevW::from_nodes(spec.region, &slices);
+        drop(slices);
         let density = GDensity::new(&table);
         let colours = ColourTable::new(spec.step_nm)?;
         let white = crate::brdf::env_reference::white(&colours);
@@ -219,13 +259,14 @@ impl EnvLighting {
             .map(|(&l, w)| absolute_factor(l, coherence_um, shading) * w[1])
             .sum::<f64>()
             / white[1];
-        Ok(EnvLighting {
+        let lighting = EnvLighting {
             table,
             density,
             white,
             mirror_scale,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
-        })
+        };
+        Ok((lighting, cached))
     }
 }
 
