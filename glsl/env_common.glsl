@@ -43,11 +43,15 @@ layout(std430, set = 0, binding = 4) readonly buffer GCdf { float gCdf[]; };
 layout(std430, set = 0, binding = 5) buffer Out { vec4 outSum[]; };
 // Point lights (2 vec4 each: towards the light in world space; irradiance XYZ), then disc
 // lights (3 vec4 each: towards the centre, w: cos of the angular radius; radiance XYZ,
-// w: solid angle; x: probability among the light samples).
+// w: solid angle; x: probability among the light samples), then the environment's
+// irradiance E(n) = ∫ L cos dω (linear sRGB) at IRR_W×IRR_H normals placed like the map's
+// pixel centres (world frame).
 layout(std430, set = 0, binding = 6) readonly buffer Lights { vec4 lights[]; };
 layout(push_constant) uniform Chunk { int base; int count; } chunk;
 
 const float PI = 3.14159265358979;
+const int IRR_W = 128;
+const int IRR_H = 64;
 
 // XYZ → linear sRGB (MODEL §5, colour.glsl; columns listed).
 const mat3 XYZ_TO_SRGB = mat3(
@@ -216,20 +220,35 @@ float unitFloat(uint x) { return float(x >> 8) * (1.0 / 16777216.0); }
 
 // Radiance XYZ of every light at world direction d (the environment's pixel penv, or its
 // own pixel when penv < 0) and the density in solid angle of the light sampler there.
-vec3 radianceAt(vec3 d, int penv, out float pLight) {
+// lDisc: the disc lights' part of it.
+vec3 radianceAt(vec3 d, int penv, out float pLight, out vec3 lDisc) {
     int p = penv >= 0 ? penv : envPixel(d);
-    vec3 l = envRadiance(p);
+    lDisc = vec3(0.0);
     pLight = P.flags.z != 0 ? P.blend.y * envPdf(p) : 0.0;
     int base = 2 * P.lightDims.x;
     for (int j = 0; j < P.lightDims.y; ++j) {
         vec4 axis = lights[base + 3 * j];
         if (dot(d, axis.xyz) >= axis.w) {
             vec4 rad = lights[base + 3 * j + 1];
-            l += rad.xyz;
+            lDisc += rad.xyz;
             pLight += lights[base + 3 * j + 2].x / rad.w;
         }
     }
-    return l;
+    return envRadiance(p) + lDisc;
+}
+
+// The environment's irradiance at the world normal n: bilinear between the table's
+// normals (wrapping in azimuth).
+vec3 irradianceAt(vec3 n) {
+    int base = 2 * P.lightDims.x + 3 * P.lightDims.y;
+    float x = fract(0.5 + atan(n.x, -n.z) / (2.0 * PI)) * float(IRR_W) - 0.5;
+    float y = clamp(acos(clamp(n.y, -1.0, 1.0)) / PI * float(IRR_H) - 0.5, 0.0, float(IRR_H - 1));
+    int i0 = int(floor(x)), j0 = min(int(floor(y)), IRR_H - 2);
+    float fx = x - float(i0), fy = y - float(j0);
+    int ia = (i0 + IRR_W) % IRR_W, ib = (i0 + 1 + IRR_W) % IRR_W;
+    vec3 a = lights[base + j0 * IRR_W + ia].xyz, b = lights[base + j0 * IRR_W + ib].xyz;
+    vec3 c = lights[base + (j0 + 1) * IRR_W + ia].xyz, d = lights[base + (j0 + 1) * IRR_W + ib].xyz;
+    return mix(mix(a, b, fx), mix(c, d, fx), fy);
 }
 
 // A direction uniform in the cone of half-angle acos(cosA) around the unit vector a.
@@ -280,8 +299,12 @@ struct Surface {
 vec3 toWorld(Surface s, vec3 v) { return v.x * s.t + v.y * s.b + v.z * s.n; }
 vec3 toTangent(Surface s, vec3 d) { return vec3(dot(d, s.t), dot(d, s.b), dot(d, s.n)); }
 
-// Adds scale·L·[(1 − w_d)·C·G] to xyz and scale·L·((1 − α) + w_d)·t to rgb (header).
-void addDirection(Surface s, vec3 wi, vec3 l, float scale, inout vec3 xyz, inout vec3 rgb) {
+// Adds scale·L·[(1 − w_d)·C·G] to xyz and the texture part to rgb (header): of the lights
+// outside the irradiance table (lOwn) scale·L·((1 − α) + w_d)·t; of the environment only
+// −scale·L·α·t, its (1 + w_d)·t·E(n) being added once from the table (a control variate:
+// the Monte Carlo part is the small Fresnel term alone).
+void addDirection(Surface s, vec3 wi, vec3 l, vec3 lOwn, float scale, inout vec3 xyz,
+                  inout vec3 rgb) {
     float c = gain(wi, s.wr);
     if (c > 0.0) {
         vec3 g = tableG(vec3(-wi.xy - s.wr.xy, -wi.z - s.wr.z));
@@ -294,7 +317,8 @@ void addDirection(Surface s, vec3 wi, vec3 l, float scale, inout vec3 xyz, inout
         float r0 = P.white.w;
         float m = 1.0 - cosRH;
         float alpha = min(1.0, abs(r0 + (1.0 - r0) * m * m * m * m * m));
-        rgb += scale * ((1.0 - alpha) + P.blend.x) * (XYZ_TO_SRGB * l) * s.tex;
+        vec3 k = ((1.0 - alpha) + P.blend.x) * lOwn - alpha * (l - lOwn);
+        rgb += scale * (XYZ_TO_SRGB * k) * s.tex;
     }
 }
 
@@ -307,8 +331,10 @@ void integrate(Surface s, uint idx, out vec3 xyz, out vec3 rgb) {
     if (chunk.base == 0) {
         for (int j = 0; j < P.lightDims.x; ++j) {
             vec3 wi = toTangent(s, lights[2 * j].xyz);
-            if (wi.z > 0.0) addDirection(s, wi, lights[2 * j + 1].xyz, float(n) * wi.z, xyz, rgb);
+            vec3 e = lights[2 * j + 1].xyz;
+            if (wi.z > 0.0) addDirection(s, wi, e, e, float(n) * wi.z, xyz, rgb);
         }
+        if (P.lightDims.z != 0) rgb += float(n) * (1.0 + P.blend.x) * irradianceAt(s.n) * s.tex;
     }
     // R5: α_k = φ^−k, φ the real root of x⁶ = x + 1, as 32-bit fixed-point fractions so
     // that the n-th point is exact for every n (x_n = rot + n·α mod 1, wrapping).
@@ -332,10 +358,11 @@ void integrate(Surface s, uint idx, out vec3 xyz, out vec3 rgb) {
         if (s2 < 1.0 && pUv > 0.0) {
             vec3 wi = vec3(ixy, sqrt(1.0 - s2));
             float pl;
-            vec3 l = radianceAt(toWorld(s, wi), -1, pl);
+            vec3 own;
+            vec3 l = radianceAt(toWorld(s, wi), -1, pl, own);
             float pb = pUv * wi.z;
             float mis = pb * pb / (pb * pb + pl * pl);
-            addDirection(s, wi, l, mis / pUv, xyz, rgb);
+            addDirection(s, wi, l, own, mis / pUv, xyz, rgb);
         }
         // The lights' sample: the integrand per dωi (times cos θi) over p_ω.
         if (lightSampling) {
@@ -343,11 +370,12 @@ void integrate(Surface s, uint idx, out vec3 xyz, out vec3 rgb) {
             vec3 d = sampleLight(vec2(xi[3], xi[4]), p);
             vec3 wi = toTangent(s, d);
             float pl;
-            vec3 l = radianceAt(d, p, pl);
+            vec3 own;
+            vec3 l = radianceAt(d, p, pl, own);
             if (wi.z > 0.0 && pl > 0.0) {
                 float pb = brdfDensity(-wi.xy - s.wr.xy, m0, m1, tw) * wi.z;
                 float mis = pl * pl / (pb * pb + pl * pl);
-                addDirection(s, wi, l, wi.z * mis / pl, xyz, rgb);
+                addDirection(s, wi, l, own, wi.z * mis / pl, xyz, rgb);
             }
         }
     }

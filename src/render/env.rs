@@ -26,8 +26,9 @@ use crate::gpu::compute::{self, ComputeLayout, ComputePipeline, StorageSet};
 use crate::gpu::memory::Buffer;
 use crate::gpu::Device;
 use crate::heightfield::HeightField;
-use crate::light::env::{EnvMap, EnvSampler};
+use crate::light::env::{map_to_direction, EnvMap, EnvSampler};
 use crate::{Error, Result};
+use std::f64::consts::PI;
 
 const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_map.comp.spv"));
 
@@ -340,8 +341,9 @@ impl Lights {
         )
     }
 
-    /// The shader's light buffer (env_common.glsl) with the discs' probabilities.
-    fn buffer(&self, disc_probs: &[f64]) -> Vec<f32> {
+    /// The shader's light buffer (env_common.glsl) with the discs' probabilities and,
+    /// for texture blending, the environment's irradiance table.
+    fn buffer(&self, disc_probs: &[f64], irradiance: &[[f64; 3]]) -> Vec<f32> {
         let mut v = Vec::new();
         for p in &self.points {
             v.extend(p.towards.iter().chain(&[0.0]).map(|&x| x as f32));
@@ -357,11 +359,109 @@ impl Lights {
             );
             v.extend([*q as f32, 0.0, 0.0, 0.0]);
         }
+        for e in irradiance {
+            v.extend(e.iter().chain(&[0.0]).map(|&x| x as f32));
+        }
         if v.is_empty() {
             v.extend([0.0; 4]);
         }
         v
     }
+}
+
+/// Normals of the irradiance table, around and down (env_common.glsl's IRR_W, IRR_H).
+pub const IRRADIANCE_SIZE: (u32, u32) = (128, 64);
+/// Largest map the irradiance table sums directly; a larger one is summed over blocks.
+const IRRADIANCE_MAP: u32 = 256;
+
+/// The irradiance `E(n) = ∫ L(ω)·max(0, n·ω) dω` (linear sRGB) of `env` at the normals of
+/// [`IRRADIANCE_SIZE`], placed like a map's pixel centres in the world frame, row-major from
+/// the zenith. The map is summed as about 256×128 patches of constant radiance, each at its
+/// middle direction with its exact `Σ L·Ω`: a smaller map's pixels are split into
+/// sub-patches; a larger map's square blocks of pixels are merged, each at its
+/// luminance-weighted mean direction (exact for a block that holds one small source, such
+/// as a sun). `E` is the cosine's convolution of the map, so the shader interpolates it
+/// bilinearly (within about 0.03 % at 2.8° between normals, where it is smooth).
+pub fn irradiance_table(env: &EnvMap) -> Vec<[f64; 3]> {
+    let patches = irradiance_patches(env);
+    let (w, h) = IRRADIANCE_SIZE;
+    (0..w * h)
+        .into_par_iter()
+        .map(|k| {
+            let n = crate::light::env::map_to_direction(
+                (f64::from(k % w) + 0.5) / f64::from(w),
+                (f64::from(k / w) + 0.5) / f64::from(h),
+            );
+            let mut e = [0.0; 3];
+            for (s, d) in &patches {
+                let c = n[0] * d[0] + n[1] * d[1] + n[2] * d[2];
+                if c > 0.0 {
+                    for ch in 0..3 {
+                        e[ch] += s[ch] * c;
+                    }
+                }
+            }
+            e
+        })
+        .collect()
+}
+
+/// The patches [`irradiance_table`] sums: `(Σ L·Ω, unit direction)`, black ones left out.
+fn irradiance_patches(env: &EnvMap) -> Vec<([f64; 3], [f64; 3])> {
+    let (w, h) = (env.width, env.height);
+    if w < IRRADIANCE_MAP {
+        // Each pixel split into sub × sub patches, uniform in θ and φ.
+        let sub = IRRADIANCE_MAP.div_ceil(w);
+        let (sw, sh) = (f64::from(w * sub), f64::from(h * sub));
+        return (0..w * sub * h * sub)
+            .into_par_iter()
+            .filter_map(|k| {
+                let (a, b) = (k % (w * sub), k / (w * sub));
+                let l = env.radiance[((b / sub) * w + a / sub) as usize];
+                let (t0, t1) = (f64::from(b) / sh * PI, f64::from(b + 1) / sh * PI);
+                let omega = 2.0 * PI / sw * (t0.cos() - t1.cos());
+                let ct = 0.5 * (t0.cos() + t1.cos());
+                let m = map_to_direction((f64::from(a) + 0.5) / sw, ct.acos() / PI);
+                let d = rotate_y(m, env.rotate_rad);
+                let s = l.map(|c| f64::from(c) * omega);
+                s.iter().any(|&x| x > 0.0).then_some((s, d))
+            })
+            .collect();
+    }
+    let f = w.div_ceil(IRRADIANCE_MAP);
+    let (bw, bh) = (w.div_ceil(f), h.div_ceil(f));
+    (0..bw * bh)
+        .into_par_iter()
+        .filter_map(|b| {
+            let (bi, bj) = (b % bw, b / bw);
+            let (mut sum, mut dir, mut centre) = ([0.0; 3], [0.0; 3], [0.0; 3]);
+            for j in bj * f..((bj + 1) * f).min(h) {
+                let omega = env.pixel_solid_angle(j);
+                for i in bi * f..((bi + 1) * f).min(w) {
+                    let l = env.radiance[(j * w + i) as usize];
+                    let d = env.pixel_direction(i, j);
+                    let y = crate::light::env::luminance(l) * omega;
+                    for c in 0..3 {
+                        sum[c] += f64::from(l[c]) * omega;
+                        dir[c] += y * d[c];
+                        centre[c] += d[c];
+                    }
+                }
+            }
+            let norm = |v: [f64; 3]| {
+                let n = (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt();
+                (n > 0.0).then(|| v.map(|x| x / n))
+            };
+            let d = norm(dir).or_else(|| norm(centre))?;
+            sum.iter().any(|&x| x > 0.0).then_some((sum, d))
+        })
+        .collect()
+}
+
+/// `R_y(a)·d`, counter-clockwise about `+Y` seen from above (as the map turns).
+fn rotate_y(d: [f64; 3], a: f64) -> [f64; 3] {
+    let (s, c) = a.sin_cos();
+    [c * d[0] + s * d[2], d[1], -s * d[0] + c * d[2]]
 }
 
 #[repr(C)]
@@ -487,7 +587,12 @@ pub(crate) fn dispatch(
     let env_buf = b("radiance", &env_xyz)?;
     let env_cdf_buf = b("environment CDFs", &env_cdf)?;
     let g_buf = b("BRDF density", &f32_bytes(g.data.iter().copied()))?;
-    let lights_buf = b("lights", &f32_bytes(d.lights.buffer(&q_discs)))?;
+    let irradiance = if d.w_diffuse.is_some() {
+        irradiance_table(env)
+    } else {
+        Vec::new()
+    };
+    let lights_buf = b("lights", &f32_bytes(d.lights.buffer(&q_discs, &irradiance)))?;
     let extra_buf = d.extra.map(|e| b("G-buffer", e)).transpose()?;
     let out_bytes = (d.pixels * d.outputs * 16).max(16);
     let out = compute::storage(dev, &format!("{} output", d.name), out_bytes)?;
@@ -589,4 +694,50 @@ pub fn map_direction(i: u32, j: u32, size: u32) -> Option<[f64; 3]> {
     let y = 1.0 - 2.0 * (f64::from(j) + 0.5) / f64::from(size);
     let r2 = x * x + y * y;
     (r2 < 1.0).then(|| [x, y, (1.0 - r2).sqrt()])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::light::env::EnvSource;
+
+    #[test]
+    fn the_irradiance_table_is_the_cosine_integral_of_the_map() {
+        let (w, h) = IRRADIANCE_SIZE;
+        let normal = |k: u32| {
+            map_to_direction(
+                (f64::from(k % w) + 0.5) / f64::from(w),
+                (f64::from(k / w) + 0.5) / f64::from(h),
+            )
+        };
+        // Uniform radiance 1: E = π for every normal.
+        let white = EnvMap::load(&EnvSource::White, 1.0, 0.0).unwrap();
+        let e = irradiance_table(&white);
+        let worst = e
+            .iter()
+            .flatten()
+            .fold(0f64, |m, x| m.max((x / std::f64::consts::PI - 1.0).abs()));
+        assert!(worst < 2e-3, "{worst} ({}×{})", white.width, white.height);
+        // One bright pixel of a 1024×512 map (summed over 4×4 blocks), turned by 40°:
+        // E = L·Ω·max(0, n·d) at its direction d, whichever block holds it.
+        let (mw, mh) = (1024u32, 512u32);
+        let (col, row) = (301u32, 130u32);
+        let mut px = vec![[0.0f32; 3]; (mw * mh) as usize];
+        px[(row * mw + col) as usize] = [1000.0, 500.0, 250.0];
+        let mut map = EnvMap::from_pixels(mw, mh, px, "one pixel").unwrap();
+        map.rotate_rad = 40f64.to_radians();
+        let d = map.pixel_direction(col, row);
+        let omega = map.pixel_solid_angle(row);
+        let e = irradiance_table(&map);
+        for (k, got) in e.iter().enumerate() {
+            let n = normal(k as u32);
+            let c = (n[0] * d[0] + n[1] * d[1] + n[2] * d[2]).max(0.0);
+            for (ch, l) in [1000.0, 500.0, 250.0].iter().enumerate() {
+                assert!(
+                    (got[ch] - l * omega * c).abs() < 1e-9 * l * omega,
+                    "{k}: {got:?}"
+                );
+            }
+        }
+    }
 }
