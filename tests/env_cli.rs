@@ -77,6 +77,17 @@ fn bad_maps_and_flags_get_one_error_line() {
         (&["--env", "builtin:sky", "--repeat", "2"], "--repeat"),
         (&["--env", "builtin:sky", "--size", "8"], "--size"),
         (
+            &[
+                "--env",
+                "builtin:sky",
+                "--width",
+                "8192",
+                "--height",
+                "8192",
+            ],
+            "G-buffer pixels",
+        ),
+        (
             &["--env", "builtin:sky", "--env-samples", "70000"],
             "env samples",
         ),

@@ -179,6 +179,7 @@ pub fn run_env_scene(
         ],
         "a scene lit by an environment, disc lights or --no-sun (it draws the chebyshev-w radiance table)",
     )?;
+    crate::render::env_scene::check_size(None, scene)?;
     let start = std::time::Instant::now();
     let material = args.material.apply(scene.material.clone());
     let (hf, _) = material.load_planned(
@@ -198,6 +199,7 @@ pub fn run_env_scene(
         material.coherence_um,
     )?;
     let dev = crate::gpu::Device::new(crate::cli::gpu::validation_requested())?;
+    crate::render::env_scene::check_size(Some(&dev), scene)?;
     let shading = material.shading();
     let (lighting, built) = lighting_for(&hf, &material, &spec, &args.cache)?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);

@@ -398,6 +398,28 @@ pub struct EnvSceneFrame {
     pub raster_ms: f64,
 }
 
+/// Most G-buffer pixels (`width × height × supersample²`) of an environment-lit scene: the
+/// host holds about 100 bytes a pixel while it rasterises (2 GB here).
+pub const MAX_GBUFFER_PIXELS: u64 = 4096 * 4096;
+
+/// Refuses a scene whose G-buffer would pass [`MAX_GBUFFER_PIXELS`] or, given `dev`, the
+/// largest storage buffer it binds (64 bytes a pixel), before any work.
+pub fn check_size(dev: Option<&Device>, scene: &Scene) -> Result<()> {
+    let (w, h) = scene.output.render_size();
+    let pixels = u64::from(w) * u64::from(h);
+    let device = dev.map_or(u64::MAX, |d| crate::gpu::compute::max_storage_range(d) / 64);
+    let limit = MAX_GBUFFER_PIXELS.min(device);
+    if pixels > limit {
+        return Err(crate::Error::invalid(
+            "image size",
+            format!(
+                "{w}×{h} G-buffer pixels (width × height × supersample²); an environment-lit scene draws at most {limit}"
+            ),
+        ));
+    }
+    Ok(())
+}
+
 /// Draws `req` with `lighting` on `dev`.
 pub fn render_env_scene(
     dev: &Arc<Device>,
@@ -406,6 +428,7 @@ pub fn render_env_scene(
 ) -> Result<EnvSceneFrame> {
     let start = std::time::Instant::now();
     let scene = req.scene;
+    check_size(Some(dev), scene)?;
     let out = &scene.output;
     let (w, h) = out.render_size();
     let ss = out.supersample.max(1);
