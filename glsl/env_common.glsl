@@ -322,9 +322,11 @@ void addDirection(Surface s, vec3 wi, vec3 l, vec3 lOwn, float scale, inout vec3
     }
 }
 
-// The sums of this dispatch's samples at pixel idx (XYZ of the diffraction part, linear
+// The sums of this dispatch's samples at a pixel (XYZ of the diffraction part, linear
 // sRGB of the texture part); the first dispatch adds the point lights times the total.
-void integrate(Surface s, uint idx, out vec3 xyz, out vec3 rgb) {
+// key scrambles the sequence; offset is where in it the pixel's samples start (pixels that
+// share a key take consecutive stretches of one low-discrepancy sequence).
+void integrate(Surface s, uint key, uint offset, out vec3 xyz, out vec3 rgb) {
     xyz = vec3(0.0);
     rgb = vec3(0.0);
     int n = P.envDims.z;
@@ -340,7 +342,7 @@ void integrate(Surface s, uint idx, out vec3 xyz, out vec3 rgb) {
     // that the n-th point is exact for every n (x_n = rot + n·α mod 1, wrapping).
     const uint alpha[5] = uint[5](3785032106u, 3335640776u, 2939605022u, 2590590015u,
                                   2283013049u);
-    uint h = hash(idx * 9781u + uint(P.flags.w) * 6271u + 1u);
+    uint h = hash(key * 9781u + uint(P.flags.w) * 6271u + 1u);
     uint rot[5];
     for (int d = 0; d < 5; ++d) { h = hash(h + uint(d)); rot[d] = h; }
     int m0, m1;
@@ -349,7 +351,7 @@ void integrate(Surface s, uint idx, out vec3 xyz, out vec3 rgb) {
     bool lightSampling = P.flags.z != 0 || P.lightDims.y > 0;
     for (int k = chunk.base; k < chunk.base + chunk.count; ++k) {
         float xi[5];
-        for (int d = 0; d < 5; ++d) xi[d] = unitFloat(rot[d] + uint(k + 1) * alpha[d]);
+        for (int d = 0; d < 5; ++d) xi[d] = unitFloat(rot[d] + (uint(k + 1) + offset) * alpha[d]);
         // The BRDF's sample: (u, v), then ωi; the integrand per du dv over p_uv.
         vec2 uv = sampleBrdf(vec3(xi[0], xi[1], xi[2]), m0, m1, tw);
         vec2 ixy = -uv - s.wr.xy;

@@ -26,7 +26,7 @@ void main() {
     Surface s = Surface(vec3(1.0, 0.0, 0.0), vec3(0.0, 0.0, -1.0), vec3(0.0, 1.0, 0.0),
                         vec3(x, y, sqrt(1.0 - r2)), vec3(0.0));
     vec3 xyz, rgb;
-    integrate(s, idx, xyz, rgb);
+    integrate(s, idx, 0u, xyz, rgb);
     vec3 before = chunk.base == 0 ? vec3(0.0) : outSum[idx].xyz;
     outSum[idx] = vec4(before + xyz, 1.0);
 }

@@ -133,7 +133,7 @@ fn the_sun_as_a_map_renders_the_sun_lit_picture() {
     let radius = f64::from(scene.light.angular_diameter_deg).to_radians() / 2.0;
     let e = f64::from(scene.light.intensity);
     let map = disc_map(2048, towards, radius, l.white.map(|c| c * e));
-    let covered = rasterise(&mesh, &scene.camera, size, size, None).covered;
+    let covered = rasterise(&mesh, &scene.camera, (size, size, 1), None).covered;
     assert!(covered.len() > 500, "{} pixels", covered.len());
     // With the skin blended in, as the scene has it, and the diffraction alone.
     for skin in [true, false] {
@@ -195,7 +195,7 @@ fn a_disc_light_matches_the_f64_reference() {
     };
     scene.disc_lights = vec![light.clone()];
     let mesh = scene.mesh.load().expect("mesh");
-    let g = rasterise(&mesh, &scene.camera, size, size, None);
+    let g = rasterise(&mesh, &scene.camera, (size, size, 1), None);
     let shading = scene.material.shading();
     let lights = scene_lights(&scene, false, l.white);
     assert_eq!((lights.points.len(), lights.discs.len()), (0, 1));
@@ -253,7 +253,7 @@ fn scene_pixels_under_the_sky_match_the_f64_reference() {
     let spec = scene.texture.as_ref().expect("skin");
     let (tw, th, bytes) = spec.load().expect("skin");
     let albedo = Albedo::from_srgb8(tw, th, &bytes, f64::from(spec.gain) * l.mirror_scale);
-    let g = rasterise(&mesh, &scene.camera, size, size, Some(&albedo));
+    let g = rasterise(&mesh, &scene.camera, (size, size, 1), Some(&albedo));
     let env = EnvMap::load(&EnvSource::Sky, 1.0, 0.0).unwrap();
     let shading = scene.material.shading();
     let w_d = f64::from(spec.w_diffuse);

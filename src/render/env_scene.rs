@@ -84,8 +84,10 @@ pub struct GBuffer {
     pub height: u32,
     /// Row-major index of each covered pixel.
     pub covered: Vec<u32>,
-    /// 16 floats per covered pixel: `(T, t_r), (B, t_g), (N, t_b), (ωr, 0)`, the frame
-    /// orthonormal in world space, `ωr` in it, `t` the albedo.
+    /// 16 floats per covered pixel: `(T, t_r), (B, t_g), (N, t_b), (ωr, key)`, the frame
+    /// orthonormal in world space, `ωr` in it, `t` the albedo; the key's bits are the
+    /// output pixel × 16 plus the pixel's place among its output pixel's `ss²`: they share
+    /// one low-discrepancy sequence, each taking the next stretch of samples.
     pub data: Vec<f32>,
 }
 
@@ -215,12 +217,12 @@ fn nearest_triangles(
     out
 }
 
-/// Rasterises `mesh` (world space) as `camera` sees it at `width`×`height`.
+/// Rasterises `mesh` (world space) as `camera` sees it at `width`×`height`, `ss`×`ss`
+/// pixels to an output pixel (the key of each pixel's sequence, [`GBuffer::data`]).
 pub fn rasterise(
     mesh: &Mesh,
     camera: &Camera,
-    width: u32,
-    height: u32,
+    (width, height, ss): (u32, u32, u32),
     albedo: Option<&Albedo>,
 ) -> GBuffer {
     let verts = project(mesh, camera, width as f32 / height as f32);
@@ -256,24 +258,16 @@ pub fn rasterise(
             let tex = albedo.map_or([0.0; 3], |a| a.at(uv.x, uv.y));
             let f = |v: DVec3| v.to_array().map(|x| x as f32);
             let (t, b, n) = (f(t), f(b), f(n));
-            [
-                t[0],
-                t[1],
-                t[2],
-                tex[0],
-                b[0],
-                b[1],
-                b[2],
-                tex[1],
-                n[0],
-                n[1],
-                n[2],
-                tex[2],
-                wr[0] as f32,
-                wr[1] as f32,
-                wr[2] as f32,
-                0.0,
-            ]
+            let ss = ss.max(1);
+            let (x, y) = (i % width, i / width);
+            let out = (y / ss) * (width / ss) + x / ss;
+            let key = f32::from_bits((out << 4) | ((y % ss) * ss + x % ss));
+            #[rustfmt::skip]
+            let px = [
+                t[0], t[1], t[2], tex[0], b[0], b[1], b[2], tex[1], n[0], n[1], n[2], tex[2],
+                wr[0] as f32, wr[1] as f32, wr[2] as f32, key,
+            ];
+            px
         })
         .collect();
     GBuffer {
@@ -441,7 +435,7 @@ pub fn render_env_scene(
             f64::from(spec.gain) * lighting.mirror_scale,
         )
     });
-    let g = rasterise(req.mesh, &scene.camera, w, h, albedo.as_ref());
+    let g = rasterise(req.mesh, &scene.camera, (w, h, ss), albedo.as_ref());
     let raster_ms = start.elapsed().as_secs_f64() * 1e3;
     let black;
     let env = match req.env {
