@@ -320,3 +320,35 @@ fn scene_pixels_under_the_sky_match_the_f64_reference() {
     }
     assert_eq!(dev.validation_messages(), 0);
 }
+
+#[test]
+fn the_g_buffer_covers_the_pixels_the_graphics_pipeline_draws() {
+    let Some(mut r) = gpu_util::renderer() else {
+        return;
+    };
+    let size = 48;
+    let mut scene = small_scene(size);
+    // A background no shaded pixel has: what is not it was drawn.
+    let sentinel = [0.123f32, 0.456, 0.789];
+    scene.output.background = sentinel;
+    let prepared = gpu_util::as_render_defaults(&mut r, &scene.material, "env-scene-coverage");
+    let frame = r.render_scene(&scene, &prepared).expect("scene");
+    assert_eq!(r.validation_messages(), 0);
+    let drawn: std::collections::HashSet<u32> = (0..size * size)
+        .filter(|&i| frame.rgb[i as usize] != sentinel)
+        .collect();
+    let mesh = scene.mesh.load().expect("mesh");
+    let g = rasterise(&mesh, &scene.camera, (size, size, 1), None);
+    let ours: std::collections::HashSet<u32> = g.covered.iter().copied().collect();
+    let differ = drawn.symmetric_difference(&ours).count();
+    eprintln!(
+        "coverage: graphics pipeline {} pixels, G-buffer {}, {differ} differ",
+        drawn.len(),
+        ours.len()
+    );
+    // Only pixels whose centre lies on a triangle's edge may go either way.
+    assert!(
+        drawn.len() > 500 && differ * 200 <= drawn.len(),
+        "{differ} differ"
+    );
+}
