@@ -167,7 +167,7 @@ make_figure() {
             d validity --lambda-nm 550 --theta-i 0 --plot "$scratch/$name.png"
             mv "$scratch/$name.png" "$out/$name.png" ;;
         stability_matrix)
-            DIFFRACT_VALIDATION=1 d stability --out "$scratch/stability"
+            DIFFRACT_VALIDATION=1 d stability --full --out "$scratch/stability"
             mv "$scratch/stability/stability.png" "$out/$name.png" ;;
         default_closeup)
             d render -o "$scratch/$name.png"

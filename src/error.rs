@@ -65,6 +65,10 @@ pub enum Error {
     /// The validation layer reported messages (tests treat this as failure).
     #[error("Vulkan validation reported {0} message(s)")]
     Validation(usize),
+    /// Code read a value before the step that computes it ran: a bug in diffract, not
+    /// in the input (the message names what was read and what should have come first).
+    #[error("internal error: {0}")]
+    Internal(&'static str),
 }
 
 /// Crate-wide result alias.

@@ -100,12 +100,13 @@ pub fn grating_equation(
     let thetas: Vec<f64> = (0..=n).map(|k| -89.9 + k as f64 * step_deg).collect();
     let mut samples = Vec::new();
     let mut rho_map = Vec::with_capacity(lambdas_nm.len());
+    let stack = p.stack.get()?;
     for &l in lambdas_nm {
         let rho: Vec<f64> = thetas
             .par_iter()
             .map(|&t| {
                 let wr = signed_direction(t, azimuth_deg);
-                model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, l)
+                model::rho(stack, p.terms(), &p.window, &p.shading, wi, wr, l)
             })
             .collect();
         if let Some(k) = rho.iter().position(|r| !r.is_finite()) {

@@ -102,7 +102,7 @@ pub struct PreparedMaterial {
 
 /// A material's DFT-term stack, computed when the material is prepared or, for a draw that
 /// may never read it (the table variants build from the height field), on first
-/// [`PreparedMaterial::load_terms`]. Reads it as a [`TermStack`].
+/// [`PreparedMaterial::load_terms`]. [`TermCell::get`] reads it.
 #[derive(Debug, Clone, Default)]
 pub struct TermCell {
     stack: std::sync::OnceLock<TermStack>,
@@ -115,18 +115,14 @@ impl TermCell {
     pub fn is_loaded(&self) -> bool {
         self.stack.get().is_some()
     }
-}
-
-impl std::ops::Deref for TermCell {
-    type Target = TermStack;
 
     /// The stack. Code that prepares with deferred terms calls
-    /// [`PreparedMaterial::load_terms`] before reading them; reading them unloaded is a
-    /// bug in that code, not an input error.
-    fn deref(&self) -> &TermStack {
-        self.stack
-            .get()
-            .expect("the term stack is read before PreparedMaterial::load_terms")
+    /// [`PreparedMaterial::load_terms`] before reading them; reading them unloaded is an
+    /// [`Error::Internal`] (a bug in that code, not in the input), never a panic.
+    pub fn get(&self) -> Result<&TermStack> {
+        self.stack.get().ok_or(Error::Internal(
+            "the DFT terms were read before PreparedMaterial::load_terms computed them",
+        ))
     }
 }
 

@@ -95,22 +95,44 @@ fn log_tick(v: f64) -> String {
     }
 }
 
+/// A series of points drawn as one curve beside the Pareto front, outside it (its errors
+/// are against another reference), in the order given, each point labelled.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SideCurve {
+    /// The legend's entry.
+    pub label: String,
+    pub points: Vec<Point>,
+}
+
 /// Writes a log–log plot of `error` against `time_ms`, the Pareto front joined by a line
 /// and its points filled, every point labelled. Non-positive values are clamped to the
 /// smallest positive one (log axes).
 pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) -> Result<()> {
+    error_vs_time_with(path, title, y_label, points, None)
+}
+
+/// [`error_vs_time`] with a `curve` drawn beside the front (green, joined in its order).
+pub fn error_vs_time_with(
+    path: &Path,
+    title: &str,
+    y_label: &str,
+    points: &[Point],
+    curve: Option<&SideCurve>,
+) -> Result<()> {
     register_font();
-    if points.is_empty() {
+    let curve_points: &[Point] = curve.map_or(&[], |c| &c.points);
+    let all: Vec<Point> = points.iter().chain(curve_points).cloned().collect();
+    if all.is_empty() {
         return Err(Error::invalid("plot", "no points"));
     }
     let positive = |f: fn(&Point) -> f64| {
-        let min = points
+        let min = all
             .iter()
             .map(f)
             .filter(|v| v.is_finite() && *v > 0.0)
             .fold(f64::INFINITY, f64::min);
         let min = if min.is_finite() { min } else { 1e-9 };
-        let max = points
+        let max = all
             .iter()
             .map(f)
             .filter(|v| v.is_finite())
@@ -120,6 +142,7 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
     let (t0, t1) = positive(|p| p.time_ms);
     let (e0, e1) = positive(|p| p.error);
     let clamp = |v: f64, lo: f64| if v.is_finite() && v > 0.0 { v } else { lo };
+    let at_of = |p: &Point| (clamp(p.time_ms, t0), clamp(p.error, e0));
     let (width, height) = (1000u32, 700u32);
     let mut buf = vec![0u8; (width * height * 3) as usize];
     {
@@ -149,23 +172,34 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
             .map(|i| &points[i])
             .collect();
         front.sort_by(|a, b| a.time_ms.total_cmp(&b.time_ms));
-        chart
-            .draw_series(LineSeries::new(
-                front
-                    .iter()
-                    .map(|p| (clamp(p.time_ms, t0), clamp(p.error, e0))),
-                RED.stroke_width(2),
-            ))
-            .map_err(plot_error)?
-            .label("Pareto front")
-            .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
-        let at: Vec<(f64, f64)> = points
-            .iter()
-            .map(|p| (clamp(p.time_ms, t0), clamp(p.error, e0)))
-            .collect();
-        for (p, &at) in points.iter().zip(&at) {
-            let on_front = front.iter().any(|f| std::ptr::eq(*f, p));
-            let style = if on_front {
+        if !front.is_empty() {
+            chart
+                .draw_series(LineSeries::new(
+                    front.iter().map(|p| at_of(p)),
+                    RED.stroke_width(2),
+                ))
+                .map_err(plot_error)?
+                .label("Pareto front")
+                .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
+        }
+        let green = RGBColor(0, 140, 60);
+        if let Some(c) = curve.filter(|c| !c.points.is_empty()) {
+            chart
+                .draw_series(LineSeries::new(
+                    c.points.iter().map(at_of),
+                    green.stroke_width(2),
+                ))
+                .map_err(plot_error)?
+                .label(c.label.clone())
+                .legend(move |(x, y)| {
+                    PathElement::new(vec![(x, y), (x + 20, y)], green.stroke_width(2))
+                });
+        }
+        let at: Vec<(f64, f64)> = all.iter().map(at_of).collect();
+        for (k, &at) in at.iter().enumerate() {
+            let style = if k >= points.len() {
+                green.filled()
+            } else if front.iter().any(|f| std::ptr::eq(*f, &points[k])) {
                 RED.filled()
             } else {
                 BLUE.filled()
@@ -174,35 +208,9 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
                 .draw_series(std::iter::once(Circle::new(at, 5, style)))
                 .map_err(plot_error)?;
         }
-        // Labels where they overlap neither another label nor a point; one moved away from
-        // its point is joined to it by a thin grey line.
-        let font = ("sans-serif", 14).into_font();
-        let style = TextStyle::from(font.clone());
         let marks: Vec<(i32, i32)> = at.iter().map(|a| chart.backend_coord(a)).collect();
-        let sizes = points
-            .iter()
-            .map(|p| {
-                root.estimate_text_size(&p.label, &style)
-                    .map_err(plot_error)
-            })
-            .collect::<Result<Vec<_>>>()?;
         let (xr, yr) = chart.plotting_area().get_pixel_range();
-        let placed = place_labels(&marks, &sizes, [xr.start, yr.start, xr.end, yr.end]);
-        for ((p, &mark), (&corner, &size)) in
-            points.iter().zip(&marks).zip(placed.iter().zip(&sizes))
-        {
-            if p.label.is_empty() {
-                continue;
-            }
-            let near = nearest_on_box(mark, corner, size);
-            let (dx, dy) = (near.0 - mark.0, near.1 - mark.1);
-            if dx * dx + dy * dy > 12 * 12 {
-                root.draw(&PathElement::new(vec![mark, near], RGBColor(140, 140, 140)))
-                    .map_err(plot_error)?;
-            }
-            root.draw(&Text::new(p.label.clone(), corner, font.clone()))
-                .map_err(plot_error)?;
-        }
+        draw_labels(&root, &all, &marks, [xr.start, yr.start, xr.end, yr.end])?;
         // The legend goes to the lower left, fast and accurate: that corner holds points only
         // where one variant is about the fastest and the most accurate at once.
         chart
@@ -216,6 +224,40 @@ pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) 
         root.present().map_err(plot_error)?;
     }
     write_png(path, &buf, width, height)
+}
+
+/// The points' labels where they overlap neither another label nor a point; one moved
+/// away from its point is joined to it by a thin grey line.
+fn draw_labels(
+    root: &DrawingArea<BitMapBackend<'_>, Shift>,
+    points: &[Point],
+    marks: &[(i32, i32)],
+    area: [i32; 4],
+) -> Result<()> {
+    let font = ("sans-serif", 14).into_font();
+    let style = TextStyle::from(font.clone());
+    let sizes = points
+        .iter()
+        .map(|p| {
+            root.estimate_text_size(&p.label, &style)
+                .map_err(plot_error)
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let placed = place_labels(marks, &sizes, area);
+    for ((p, &mark), (&corner, &size)) in points.iter().zip(marks).zip(placed.iter().zip(&sizes)) {
+        if p.label.is_empty() {
+            continue;
+        }
+        let near = nearest_on_box(mark, corner, size);
+        let (dx, dy) = (near.0 - mark.0, near.1 - mark.1);
+        if dx * dx + dy * dy > 12 * 12 {
+            root.draw(&PathElement::new(vec![mark, near], RGBColor(140, 140, 140)))
+                .map_err(plot_error)?;
+        }
+        root.draw(&Text::new(p.label.clone(), corner, font.clone()))
+            .map_err(plot_error)?;
+    }
+    Ok(())
 }
 
 /// Top-left corners (pixels) for labels of `sizes` beside the marks at `marks`, inside
@@ -1025,8 +1067,11 @@ mod heat_tests {
         assert_eq!(ramp(f64::NAN), ramp(0.0));
     }
 
+    /// `name` in a directory of its own: the tests run in parallel and each removes its
+    /// directory.
     fn scratch(name: &str) -> std::path::PathBuf {
-        let dir = std::env::temp_dir().join(format!("diffract-plot-{}", std::process::id()));
+        let dir =
+            std::env::temp_dir().join(format!("diffract-plot-{}-{name}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         dir.join(name)
     }
@@ -1143,7 +1188,9 @@ mod heat_tests {
         // Grey cells for the missing values, and the legend's swatch.
         let grey = img.pixels().filter(|p| p.0 == [150, 150, 150]).count();
         assert!(grey > 100, "{grey} grey pixels");
-        std::fs::remove_dir_all(scratch("x").parent().unwrap()).ok();
+        for name in ["labelled.png", "bare.png"] {
+            std::fs::remove_dir_all(scratch(name).parent().unwrap()).ok();
+        }
     }
 
     #[test]
@@ -1199,6 +1246,40 @@ mod heat_tests {
         assert!(ink(&img, (0, 1000), (0, 40)) > 50, "title");
         assert!(ink(&img, (0, 95), (80, 620)) > 50, "y ticks and label");
         assert!(ink(&img, (100, 1000), (640, 700)) > 50, "x ticks and label");
+    }
+
+    #[test]
+    fn a_side_curve_is_drawn_in_green_beside_the_front() {
+        let p = scratch("curve.png");
+        let point = |label: &str, t, e| Point {
+            label: label.into(),
+            time_ms: t,
+            error: e,
+        };
+        let green = |img: &image::RgbImage| {
+            img.pixels()
+                .filter(|q| q[1] > 100 && q[0] < 60 && q[2] < 100)
+                .count()
+        };
+        let front = [point("a", 3.0, 0.1), point("b", 30.0, 0.01)];
+        error_vs_time(&p, "title", "error", &front).unwrap();
+        assert_eq!(green(&image::open(&p).unwrap().to_rgb8()), 0);
+        let curve = SideCurve {
+            label: "by samples".into(),
+            points: vec![
+                point("1", 1.0, 1.0),
+                point("16", 10.0, 0.3),
+                point("256", 200.0, 0.05),
+            ],
+        };
+        error_vs_time_with(&p, "title", "error", &front, Some(&curve)).unwrap();
+        assert!(
+            green(&image::open(&p).unwrap().to_rgb8()) > 500,
+            "the curve"
+        );
+        // The curve alone is a plot too.
+        error_vs_time_with(&p, "title", "error", &[], Some(&curve)).unwrap();
+        assert!(error_vs_time_with(&p, "title", "error", &[], None).is_err());
     }
 
     #[test]

@@ -27,7 +27,10 @@ use crate::material::Material;
 use crate::render::variant::{Mirrored, SpectralModel, Stability, TableMirror};
 use crate::render::{Renderer, TableOptions, VariantKind};
 use crate::spectrum::Expansion;
-use crate::{Error, Result};
+use crate::{validity, Error, Result};
+
+pub mod lighting;
+pub mod model_axis;
 
 /// Which evaluator a cell measures.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -60,6 +63,8 @@ pub enum Status {
     /// Silently wrong: above the tolerance without a warning, or the GPU off its f64 model
     /// by more than the stated float32 bound. Never expected.
     Fail,
+    /// Not run: its estimated cost did not fit the time budget (the message gives it).
+    Skipped,
 }
 
 impl std::fmt::Display for Status {
@@ -69,6 +74,7 @@ impl std::fmt::Display for Status {
             Status::Warned => "warned",
             Status::Refused => "refused",
             Status::Fail => "FAIL",
+            Status::Skipped => "skipped",
         })
     }
 }
@@ -122,12 +128,25 @@ pub struct MatrixSpec {
     pub map_size: u32,
     /// Renderer validation layer on.
     pub validation: bool,
+    /// Time budget of the matrix (s): a cell whose estimated cost does not fit what is left
+    /// is reported as skipped. `None` runs every cell.
+    pub budget_s: Option<f64>,
 }
 
-/// The full matrix's axes.
+/// The full matrix's axes (`--full`).
 pub const H_MAX_UM: [f64; 6] = [0.05, 0.25, 0.5, 1.0, 2.0, 5.0];
 pub const THETA_I_DEG: [f64; 5] = [0.0, 45.0, 80.0, 89.0, 89.99];
 pub const LAMBDAS_NM: [f64; 3] = [380.0, 580.0, 780.0];
+
+/// The default matrix's axes: the shallowest, a middle and the tallest field; normal,
+/// oblique and grazing light; both ends of the visible range. The extremes of the full
+/// matrix, where the stiff cases live, in a fifth of its cells.
+pub const QUICK_H_MAX_UM: [f64; 3] = [0.05, 1.0, 5.0];
+pub const QUICK_THETA_I_DEG: [f64; 3] = [0.0, 80.0, 89.99];
+pub const QUICK_LAMBDAS_NM: [f64; 2] = [380.0, 780.0];
+
+/// Default time budget of `diffract stability` (s) without `--full`.
+pub const DEFAULT_BUDGET_S: f64 = 60.0;
 
 /// The default field: a 128² sinusoid of period 1.6 µm (4 periods over 6.4 µm, dH = 50
 /// nm), where the direct-sum reference is cheap.
@@ -163,6 +182,7 @@ impl MatrixSpec {
             coherence_um: crate::material::DEFAULT_COHERENCE_UM,
             map_size: 15,
             validation: crate::cli::gpu::validation_requested(),
+            budget_s: None,
         }
     }
 }
@@ -219,25 +239,25 @@ fn max_error(
     dirs: &[(String, [f64; 3])],
     wi: [f64; 3],
     shading: &crate::brdf::Shading,
-    eval: impl Fn([f64; 3]) -> f64 + Sync,
-    refer: impl Fn([f64; 3]) -> f64 + Sync,
+    eval: impl Fn([f64; 3]) -> Result<f64> + Sync,
+    refer: impl Fn([f64; 3]) -> Result<f64> + Sync,
 ) -> Result<(f64, String)> {
     let errs: Vec<(f64, String)> = dirs
         .par_iter()
         .map(|(name, wr)| {
             let c = gain(wi, *wr, shading);
             if c == 0.0 {
-                return (0.0, name.clone());
+                return Ok((0.0, name.clone()));
             }
-            let (a, b) = (eval(*wr), refer(*wr));
+            let (a, b) = (eval(*wr)?, refer(*wr)?);
             let e = if a.is_finite() && b.is_finite() {
                 (a - b).abs() / c
             } else {
                 f64::INFINITY
             };
-            (e, name.clone())
+            Ok((e, name.clone()))
         })
-        .collect();
+        .collect::<Result<_>>()?;
     let worst = errs
         .into_iter()
         .max_by(|a, b| a.0.total_cmp(&b.0))
@@ -338,7 +358,11 @@ fn points(spec: &MatrixSpec) -> Vec<Point> {
 
 /// Runs the matrix over every variant that declares a spectral model. `renderer` is
 /// needed when `spec.evaluators` holds [`Evaluator::Gpu`]; `progress` is called after each
-/// cell.
+/// cell. With a budget the cells run round-robin over the variants (so a budget that runs
+/// out leaves every variant's tail, not the last variants), and a cell whose estimated cost
+/// (the mean of the cells run so far with its variant and evaluator, else of all cells)
+/// does not fit the time left is [`Status::Skipped`]. The cells come back in
+/// [`points`]' order either way.
 pub fn run_matrix(
     spec: &MatrixSpec,
     mut renderer: Option<&mut Renderer>,
@@ -350,29 +374,93 @@ pub fn run_matrix(
         .iter()
         .map(|&h| scaled(&spec.field, h))
         .collect::<Result<Vec<_>>>()?;
-    let mut cells = Vec::new();
-    for p in points(spec) {
-        let cell = run_cell(spec, &p, &fields[p.h], renderer.as_deref_mut(), &shading)?;
+    let all = points(spec);
+    let order = match spec.budget_s {
+        Some(_) => round_robin(&all),
+        None => (0..all.len()).collect(),
+    };
+    let start = Instant::now();
+    let mut costs = CellCosts::default();
+    let mut cells: Vec<Option<Cell>> = vec![None; all.len()];
+    for i in order {
+        let p = &all[i];
+        let key = (p.variant, p.evaluator);
+        let cell = match spec
+            .budget_s
+            .map(|b| (b - start.elapsed().as_secs_f64(), costs.estimate(key)))
+        {
+            Some((left, Some(est))) if est > left => skipped_cell(spec, p, est),
+            Some((left, None)) if left <= 0.0 => skipped_cell(spec, p, 0.0),
+            _ => {
+                let t = Instant::now();
+                let c = run_cell(spec, p, &fields[p.h], renderer.as_deref_mut(), &shading)?;
+                costs.add(key, t.elapsed().as_secs_f64());
+                c
+            }
+        };
         progress(&cell);
-        cells.push(cell);
+        cells[i] = Some(cell);
     }
-    Ok(cells)
+    Ok(cells.into_iter().flatten().collect())
 }
 
-/// One cell: the plan (or its refusal), the evaluation, and the verdict.
-fn run_cell(
-    spec: &MatrixSpec,
-    p: &Point,
-    hf: &HeightField,
-    renderer: Option<&mut Renderer>,
-    shading: &crate::brdf::Shading,
-) -> Result<Cell> {
-    let m = material(spec, p.expansion, p.terms);
-    let precision = match p.evaluator {
-        Evaluator::Model => Precision::F64,
-        Evaluator::Gpu => Precision::F32,
-    };
-    let mut cell = Cell {
+/// Indices of `points` taking one cell of each variant in turn.
+fn round_robin(points: &[Point]) -> Vec<usize> {
+    let mut lanes: Vec<(VariantKind, Vec<usize>)> = Vec::new();
+    for (i, p) in points.iter().enumerate() {
+        match lanes.iter_mut().find(|(v, _)| *v == p.variant) {
+            Some((_, lane)) => lane.push(i),
+            None => lanes.push((p.variant, vec![i])),
+        }
+    }
+    let longest = lanes.iter().map(|(_, l)| l.len()).max().unwrap_or(0);
+    (0..longest)
+        .flat_map(|k| lanes.iter().filter_map(move |(_, l)| l.get(k).copied()))
+        .collect()
+}
+
+/// Measured cell costs (s) per variant and evaluator.
+#[derive(Default)]
+struct CellCosts {
+    by_key: Vec<((VariantKind, Evaluator), f64, usize)>,
+}
+
+impl CellCosts {
+    fn add(&mut self, key: (VariantKind, Evaluator), secs: f64) {
+        match self.by_key.iter_mut().find(|(k, _, _)| *k == key) {
+            Some((_, sum, n)) => {
+                *sum += secs;
+                *n += 1;
+            }
+            None => self.by_key.push((key, secs, 1)),
+        }
+    }
+
+    /// The mean cost of `key`'s cells, else of every cell; `None` before any.
+    fn estimate(&self, key: (VariantKind, Evaluator)) -> Option<f64> {
+        if let Some((_, sum, n)) = self.by_key.iter().find(|(k, _, _)| *k == key) {
+            return Some(sum / *n as f64);
+        }
+        let (sum, n) = self
+            .by_key
+            .iter()
+            .fold((0.0, 0), |(s, c), (_, sum, n)| (s + sum, c + n));
+        (n > 0).then(|| sum / n as f64)
+    }
+}
+
+/// A cell the budget left out, with its estimated cost.
+fn skipped_cell(spec: &MatrixSpec, p: &Point, est_s: f64) -> Cell {
+    Cell {
+        status: Status::Skipped,
+        message: format!("over the time budget: estimated {est_s:.1} s"),
+        ..blank_cell(spec, p)
+    }
+}
+
+/// A cell of `p` with nothing evaluated yet (refused until judged).
+fn blank_cell(spec: &MatrixSpec, p: &Point) -> Cell {
+    Cell {
         variant: p.variant,
         h_max_um: spec.h_max_um[p.h],
         theta_i_deg: p.theta_i,
@@ -388,7 +476,23 @@ fn run_cell(
         f32_bound: None,
         worst_probe: String::new(),
         message: String::new(),
+    }
+}
+
+/// One cell: the plan (or its refusal), the evaluation, and the verdict.
+fn run_cell(
+    spec: &MatrixSpec,
+    p: &Point,
+    hf: &HeightField,
+    renderer: Option<&mut Renderer>,
+    shading: &crate::brdf::Shading,
+) -> Result<Cell> {
+    let m = material(spec, p.expansion, p.terms);
+    let precision = match p.evaluator {
+        Evaluator::Model => Precision::F64,
+        Evaluator::Gpu => Precision::F32,
     };
+    let mut cell = blank_cell(spec, p);
     let reach = Reach::at(1.0 + p.theta_i.to_radians().cos(), p.lambda);
     let plan = match m.plan(hf, &reach, precision) {
         Ok(plan) => plan,
@@ -459,7 +563,16 @@ fn model_cell(
         wi,
         shading,
         |wr| (p.rho)(prepared, shading, wi, wr, p.lambda),
-        |wr| reference::rho(hf, spec.coherence_um, shading, wi, wr, p.lambda),
+        |wr| {
+            Ok(reference::rho(
+                hf,
+                spec.coherence_um,
+                shading,
+                wi,
+                wr,
+                p.lambda,
+            ))
+        },
     )?;
     Ok((e, worst, None))
 }
@@ -482,14 +595,21 @@ fn gpu_cell(
         .iter()
         .map(|(wr, _)| (format!("pixel ({:.3}, {:.3})", wr[0], wr[1]), *wr))
         .collect();
-    let lookup = |wr: [f64; 3]| -> f64 {
-        pixels
+    let lookup = |wr: [f64; 3]| -> Result<f64> {
+        Ok(pixels
             .iter()
             .find(|(d, _)| *d == wr)
-            .map_or(f64::NAN, |(_, v)| *v)
+            .map_or(f64::NAN, |(_, v)| *v))
     };
     let (e_ref, worst) = max_error(&dirs, wi32, shading, lookup, |wr| {
-        reference::rho(hf, spec.coherence_um, shading, wi32, wr, l32)
+        Ok(reference::rho(
+            hf,
+            spec.coherence_um,
+            shading,
+            wi32,
+            wr,
+            l32,
+        ))
     })?;
     let (e_model, _) = max_error(&dirs, wi32, shading, lookup, |wr| {
         (p.rho)(prepared, shading, wi32, wr, l32)
@@ -514,15 +634,26 @@ pub struct StabilityArgs {
     /// plane,rows for scans, none otherwise].
     #[arg(long, requires = "heightfield")]
     pub level: Option<String>,
-    /// Peak-to-valley heights (µm).
-    #[arg(long, num_args = 1.., default_values_t = H_MAX_UM)]
-    pub hmax_um: Vec<f64>,
-    /// Light polar angles (degrees).
-    #[arg(long, num_args = 1.., default_values_t = THETA_I_DEG)]
+    /// Peak-to-valley heights (µm) [default: 0.05 1 5; with --full: 0.05 0.25 0.5 1 2 5].
+    #[arg(long = "hmax-um", num_args = 1..)]
+    pub h_max_um: Vec<f64>,
+    /// Light polar angles (degrees) [default: 0 80 89.99; with --full: 0 45 80 89 89.99].
+    #[arg(long, num_args = 1..)]
     pub theta_i: Vec<f64>,
-    /// Wavelengths (nm).
-    #[arg(long, num_args = 1.., default_values_t = LAMBDAS_NM)]
+    /// Wavelengths (nm) [default: 380 780; with --full: 380 580 780].
+    #[arg(long, num_args = 1..)]
     pub lambda_nm: Vec<f64>,
+    /// The full matrix (every height, angle and wavelength above), with no time budget
+    /// unless --budget-s is given.
+    #[arg(long)]
+    pub full: bool,
+    /// Time budget (s): cells whose estimated cost does not fit what is left are reported
+    /// as skipped, with that estimate [default: 60; none with --full].
+    #[arg(long)]
+    pub budget_s: Option<f64>,
+    /// Leave out the model axis (the scalar model against the rigorous solver).
+    #[arg(long)]
+    pub no_model: bool,
     /// Fixed term counts to show beside auto.
     #[arg(long, num_args = 0.., default_values_t = [30usize])]
     pub fixed_terms: Vec<usize>,
@@ -550,6 +681,9 @@ fn sci(x: Option<f64>) -> String {
     x.map_or_else(|| "none".to_string(), |v| format!("{v:.2e}"))
 }
 
+/// Share of the time budget the spectral matrix may take when the model axis runs after it.
+const MATRIX_SHARE: f64 = 0.75;
+
 /// Runs `diffract stability`.
 pub fn run(args: &StabilityArgs) -> Result<()> {
     stability_args(args)?;
@@ -564,11 +698,16 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
         .as_ref()
         .map_or("none".to_string(), |r| r.device_name().to_string());
     let start = Instant::now();
+    let budget = spec.budget_s;
+    let matrix = MatrixSpec {
+        budget_s: budget.map(|b| if args.no_model { b } else { b * MATRIX_SHARE }),
+        ..spec.clone()
+    };
     let total = points(&spec).len();
     let mut done = 0;
-    let cells = run_matrix(&spec, renderer.as_mut(), |c| {
+    let cells = run_matrix(&matrix, renderer.as_mut(), |c| {
         done += 1;
-        report_cell(c, done, total);
+        report_cell(c, done, total, start, matrix.budget_s);
     })?;
     if let Some(r) = &renderer {
         if r.validation_messages() > 0 {
@@ -576,14 +715,64 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
         }
     }
     let table_cells = run_table_cases(&spec)?;
+    let lighting_cells = match &renderer {
+        Some(r) => {
+            let cells = lighting::run(r.device())?;
+            if r.validation_messages() > 0 {
+                return Err(Error::Validation(r.validation_messages()));
+            }
+            cells
+        }
+        None => Vec::new(),
+    };
+    let model_cells = if args.no_model {
+        Vec::new()
+    } else {
+        let deadline = budget.map(|b| start + std::time::Duration::from_secs_f64(b));
+        let model = validity::ScalarModel::of(&material(&spec, Expansion::Taylor, Terms::Auto));
+        model_axis::run(&spec, &model, deadline, |_| ())?
+    };
     let secs = start.elapsed().as_secs_f64();
+    let skipped = cells.iter().filter(|c| c.status == Status::Skipped).count();
     let header = format!(
         "Field: {}; tolerance {:.0e} on ρ/C; window R = {}, coherence {} µm; GPU: {device}, \
-         {}² spectral maps; {total} cells in {secs:.0} s.",
-        spec.field_name, spec.tolerance, spec.window_radius, spec.coherence_um, spec.map_size
+         {}² spectral maps; {total} cells in {secs:.0} s{}.",
+        spec.field_name,
+        spec.tolerance,
+        spec.window_radius,
+        spec.coherence_um,
+        spec.map_size,
+        match (skipped, budget) {
+            (0, _) | (_, None) => String::new(),
+            (n, Some(b)) => format!(
+                ", {n} skipped by the {b:.0} s budget (--full or a larger --budget-s runs them)"
+            ),
+        }
     );
-    write_reports(&args.out, &spec, &cells, &table_cells, &header)?;
-    for c in table_cells.iter().filter(|c| c.status == Status::Fail) {
+    let reports = Reports {
+        cells: &cells,
+        table_cells: &table_cells,
+        lighting_cells: &lighting_cells,
+        model_cells: &model_cells,
+        header: &header,
+    };
+    write_reports(&args.out, &spec, &reports)?;
+    print_results(&spec, &reports, &args.out)
+}
+
+/// What a run found, for its files and its stdout.
+struct Reports<'a> {
+    cells: &'a [Cell],
+    table_cells: &'a [TableCell],
+    lighting_cells: &'a [lighting::LightingCell],
+    model_cells: &'a [model_axis::ModelCell],
+    header: &'a str,
+}
+
+/// The results on stdout: table-case failures, the header, the summaries; an error when any
+/// cell is silently wrong.
+fn print_results(spec: &MatrixSpec, r: &Reports, out: &Path) -> Result<()> {
+    for c in r.table_cells.iter().filter(|c| c.status == Status::Fail) {
         println!(
             "FAIL: {} on {}, h_max {} µm: error {}",
             c.variant,
@@ -592,11 +781,21 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
             sci(c.error)
         );
     }
-    println!("{header}");
-    println!("{}", summary(&spec, &cells).join("\n"));
-    println!("→ {}/stability.{{md,csv,png}}", args.out.display());
-    let fails = cells.iter().filter(|c| c.status == Status::Fail).count()
-        + table_cells
+    println!("{}", r.header);
+    println!("{}", summary(spec, r.cells).join("\n"));
+    for line in lighting::summary(r.lighting_cells) {
+        println!("{line}");
+    }
+    if !r.model_cells.is_empty() {
+        println!("{}", model_axis::summary(r.model_cells));
+    }
+    println!("→ {}/stability.{{md,csv,png}}", out.display());
+    let fails = r.cells.iter().filter(|c| c.status == Status::Fail).count()
+        + r.table_cells
+            .iter()
+            .filter(|c| c.status == Status::Fail)
+            .count()
+        + r.lighting_cells
             .iter()
             .filter(|c| c.status == Status::Fail)
             .count();
@@ -634,9 +833,15 @@ fn matrix_spec(args: &StabilityArgs) -> Result<MatrixSpec> {
         }
     };
     let mut spec = MatrixSpec::full(field, &name, period);
-    spec.h_max_um = args.hmax_um.clone();
-    spec.theta_i_deg = args.theta_i.clone();
-    spec.lambdas_nm = args.lambda_nm.clone();
+    let axis = |given: &[f64], quick: &[f64], full: &[f64]| match (given.is_empty(), args.full) {
+        (false, _) => given.to_vec(),
+        (true, true) => full.to_vec(),
+        (true, false) => quick.to_vec(),
+    };
+    spec.h_max_um = axis(&args.h_max_um, &QUICK_H_MAX_UM, &H_MAX_UM);
+    spec.theta_i_deg = axis(&args.theta_i, &QUICK_THETA_I_DEG, &THETA_I_DEG);
+    spec.lambdas_nm = axis(&args.lambda_nm, &QUICK_LAMBDAS_NM, &LAMBDAS_NM);
+    spec.budget_s = args.budget_s.or((!args.full).then_some(DEFAULT_BUDGET_S));
     spec.tolerance = args.tolerance;
     spec.map_size = args.map_size;
     spec.terms_modes = std::iter::once(Terms::Auto)
@@ -646,8 +851,9 @@ fn matrix_spec(args: &StabilityArgs) -> Result<MatrixSpec> {
 }
 
 /// A failing cell at once on stdout (a result, for people), and progress on stderr: a
-/// count every 20 cells.
-fn report_cell(c: &Cell, done: usize, total: usize) {
+/// line every 20 cells with the time taken and an estimate of the time left (the pace so
+/// far, at most the budget left).
+fn report_cell(c: &Cell, done: usize, total: usize, start: Instant, budget_s: Option<f64>) {
     if c.status == Status::Fail {
         println!(
             "FAIL: {}, h_max {} µm, θi {}°, λ {} nm, {} {} {}: error {}, float32 error {} (bound {})",
@@ -664,25 +870,32 @@ fn report_cell(c: &Cell, done: usize, total: usize) {
         );
     }
     if done.is_multiple_of(20) || done == total {
-        eprintln!("{done}/{total} cells");
+        let secs = start.elapsed().as_secs_f64();
+        let mut left = secs / done as f64 * (total - done) as f64;
+        if let Some(b) = budget_s {
+            left = left.min((b - secs).max(0.0));
+        }
+        eprintln!("stability: {done}/{total} cells, {secs:.0} s, about {left:.0} s left");
     }
 }
 
 /// Writes [`STABILITY_FILES`] into `dir` (created with its parents).
-fn write_reports(
-    dir: &Path,
-    spec: &MatrixSpec,
-    cells: &[Cell],
-    table_cells: &[TableCell],
-    header: &str,
-) -> Result<()> {
+fn write_reports(dir: &Path, spec: &MatrixSpec, r: &Reports) -> Result<()> {
     std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
-    crate::fsutil::write_atomic(&dir.join("stability.csv"), to_csv(cells).as_bytes())?;
-    crate::fsutil::write_atomic(
-        &dir.join("stability.md"),
-        (to_markdown(spec, cells, header) + &table_cases_markdown(spec, table_cells)).as_bytes(),
-    )?;
-    write_png(spec, cells, &dir.join("stability.png"))
+    crate::fsutil::write_atomic(&dir.join("stability.csv"), to_csv(r.cells).as_bytes())?;
+    let mut md = to_markdown(spec, r.cells, r.header) + &table_cases_markdown(spec, r.table_cells);
+    if !r.lighting_cells.is_empty() {
+        md += &lighting::to_markdown(r.lighting_cells);
+    }
+    if !r.model_cells.is_empty() {
+        md += &model_axis::to_markdown(spec, r.model_cells);
+        crate::fsutil::write_atomic(
+            &dir.join("stability-model.csv"),
+            model_axis::to_csv(r.model_cells).as_bytes(),
+        )?;
+    }
+    crate::fsutil::write_atomic(&dir.join("stability.md"), md.as_bytes())?;
+    write_png(spec, r.cells, &dir.join("stability.png"))
 }
 
 fn opt(x: Option<f64>) -> String {
@@ -788,13 +1001,17 @@ pub fn summary(spec: &MatrixSpec, cells: &[Cell]) -> Vec<String> {
             evaluator: ev,
         } = cfg;
         out.push(format!(
-            "{variant} {e} T={t} {ev}: pass {}, warned {} (worst error {:.1e}), refused {}, FAIL {}; \
+            "{variant} {e} T={t} {ev}: pass {}, warned {} (worst error {:.1e}), refused {}, FAIL {}{}; \
              every cell passes up to h_max = {} µm; worst passing error {:.1e}",
             count(Status::Pass),
             count(Status::Warned),
             worst(Status::Warned),
             count(Status::Refused),
             count(Status::Fail),
+            match count(Status::Skipped) {
+                0 => String::new(),
+                n => format!(", skipped by the budget {n}"),
+            },
             trusted_up_to.map_or("none".to_string(), |h| h.to_string()),
             worst(Status::Pass)
         ));
@@ -809,7 +1026,7 @@ pub fn to_markdown(spec: &MatrixSpec, cells: &[Cell], header: &str) -> String {
         "# Stability matrix\n\n{header}\n\nEach entry: the worst over λ ∈ {:?} nm of \
          max |ρ − ρ_ref|/C (error relative to a mirror's specular value), then T and the \
          expansion used (T = Taylor, C = Chebyshev), `!` = warned, `refused` = refused, \
-         `FAIL` = silently wrong.\n\n",
+         `skipped` = left out by the time budget, `FAIL` = silently wrong.\n\n",
         spec.lambdas_nm
     );
     for line in summary(spec, cells) {
@@ -861,6 +1078,9 @@ fn entry(group: &[&Cell]) -> String {
     if group.iter().all(|c| c.status == Status::Refused) {
         return "refused".into();
     }
+    if group.iter().all(|c| c.status == Status::Skipped) {
+        return "skipped".into();
+    }
     let worst = group
         .iter()
         .filter(|c| c.error.is_some())
@@ -873,23 +1093,28 @@ fn entry(group: &[&Cell]) -> String {
         Expansion::Taylor => "T",
         Expansion::Chebyshev => "C",
     };
-    let refused = group.iter().filter(|c| c.status == Status::Refused).count();
+    let count = |s: Status| group.iter().filter(|c| c.status == s).count();
     let warned = group.iter().any(|c| c.status == Status::Warned);
-    format!(
-        "{:.1e} ({t}{letter}){}{}",
+    let mut out = format!(
+        "{:.1e} ({t}{letter}){}",
         w.error.unwrap_or(0.0),
-        if warned { "!" } else { "" },
-        if refused > 0 {
-            format!(" +{refused} refused")
-        } else {
-            String::new()
+        if warned { "!" } else { "" }
+    );
+    for (n, what) in [
+        (count(Status::Refused), "refused"),
+        (count(Status::Skipped), "skipped"),
+    ] {
+        if n > 0 {
+            out += &format!(" +{n} {what}");
         }
-    )
+    }
+    out
 }
 
 /// The heat map: one row per (h_max, θi) — h_max rising upwards, θi rising within each —
 /// one column per (configuration, λ) in the markdown's order, labelled in groups
-/// (variant and evaluator, terms, expansion, λ); colour = log10 error, grey = refused.
+/// (variant and evaluator, terms, expansion, λ); colour = log10 error, grey = refused or
+/// skipped by the budget.
 pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
     let cfg = configs(spec);
     let cols = cfg.len() * spec.lambdas_nm.len();
@@ -946,7 +1171,7 @@ pub fn write_png(spec: &MatrixSpec, cells: &[Cell], path: &Path) -> Result<()> {
             // Errors of the size of the mirror's peak and beyond are all simply wrong.
             scale_limits: (None, Some(0.0)),
             scale_marks: vec![(spec.tolerance.log10(), "tolerance".into())],
-            missing_label: Some("refused".into()),
+            missing_label: Some("refused or skipped".into()),
             curves: Vec::new(),
             size: (
                 (cols as u32 * 30 + 330).clamp(700, 1400),
@@ -1224,7 +1449,12 @@ pub fn table_cases_markdown(spec: &MatrixSpec, cells: &[TableCell]) -> String {
 }
 
 /// Files `diffract stability -o DIR` writes into `DIR`.
-pub const STABILITY_FILES: [&str; 3] = ["stability.csv", "stability.md", "stability.png"];
+pub const STABILITY_FILES: [&str; 4] = [
+    "stability.csv",
+    "stability.md",
+    "stability.png",
+    "stability-model.csv",
+];
 
 /// `diffract stability`: every number of the matrix (heights, angles, wavelengths, term
 /// counts, the tolerance, the map size) and the output directory, whose files must not be
@@ -1270,7 +1500,10 @@ fn check_axes(args: &StabilityArgs) -> Result<()> {
             ),
         ));
     }
-    for &h in &args.hmax_um {
+    if let Some(b) = args.budget_s {
+        crate::guard::in_range("budget-s", b, 1.0..=1e6, " s")?;
+    }
+    for &h in &args.h_max_um {
         if !(h.is_finite() && h >= 0.0) {
             return Err(Error::invalid(
                 "hmax-um",

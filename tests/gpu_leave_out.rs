@@ -81,7 +81,7 @@ fn map_both_ways(kind: VariantKind, heightfield: &str, theta: f64, table: Option
     // The texels are the band of the map's (u, v) at the kept wavelengths.
     let wi = uploaded_direction(theta, 0.0);
     if let Some(t) = &rec.texels {
-        let s = &p.stack;
+        let s = p.stack.get().unwrap();
         let (lo, hi) = w.kept_range_nm();
         let region = Region::brdf_map(wi).widened(1e-5);
         let band = intersect(
@@ -256,7 +256,7 @@ fn render_reports_what_it_left_out_on_one_line() {
     let sel = wavelengths_needed(&p.colour, m.tolerance);
     let kept = |i: usize| p.colour.lambdas_nm[sel.keep[i]];
     let (lo, hi) = (kept(0), kept(sel.keep.len() - 1));
-    let s = &p.stack;
+    let s = p.stack.get().unwrap();
     let region = Region::brdf_map(uploaded_direction(60.0, 0.0)).widened(1e-5);
     let band = intersect(
         &UvBox::of_region(&region).band(s.nx, s.ny, s.dh_um, lo * 1e-3, hi * 1e-3, 1),

@@ -49,7 +49,7 @@ fn pq_map_matches_its_own_f64_model() {
                 continue;
             };
             let m = pq::xyz(
-                &prepared.stack,
+                prepared.stack.get().unwrap(),
                 prepared.terms(),
                 &g,
                 &prepared.shading,

@@ -168,7 +168,7 @@ fn plane_pixels_match_cpu_model() {
         let mut expected = [0.0f64; 3];
         for &(wi, weight) in &disk {
             let xyz = brdf::model::xyz(
-                &p.stack,
+                p.stack.get().unwrap(),
                 p.terms(),
                 &p.window,
                 &p.shading,

@@ -47,7 +47,15 @@ fn spectral_map_error(path: &str, expansion: Expansion, terms: usize) -> (f64, b
             let Some(wr) = map_direction(i, j, SIZE) else {
                 continue;
             };
-            let cpu = brdf::model::rho(&p.stack, terms, &p.window, &p.shading, wi, wr, LAMBDA_NM);
+            let cpu = brdf::model::rho(
+                p.stack.get().unwrap(),
+                terms,
+                &p.window,
+                &p.shading,
+                wi,
+                wr,
+                LAMBDA_NM,
+            );
             max_cpu = max_cpu.max(cpu);
             worst = worst.max((frame.at(i, j)[0] as f64 - cpu).abs());
         }

@@ -84,6 +84,7 @@ fn every_variant_matches_its_own_f64_model() {
             r.model()
                 .unwrap_or_else(|| panic!("{kind} has a model"))
                 .xyz(&prepared, &prepared.colour, wi, wr)
+                .unwrap()
         };
         let mut peak = 0.0f64;
         let mut worst = 0.0f64;

@@ -46,13 +46,32 @@ fn errors(p: &PreparedMaterial, wi: [f64; 3], wrs: &[[f64; 3]]) -> Errors {
         .iter()
         .map(|&wr| {
             nmm::xyz(
-                &p.stack, t, &p.window, &shading, &five, &g, &density, wi, wr, true,
+                p.stack.get().unwrap(),
+                t,
+                &p.window,
+                &shading,
+                &five,
+                &g,
+                &density,
+                wi,
+                wr,
+                true,
             )
         })
         .collect();
     let flss5: Vec<[f64; 3]> = wrs
         .iter()
-        .map(|&wr| model::xyz(&p.stack, t, &p.window, &shading, &five, wi, wr))
+        .map(|&wr| {
+            model::xyz(
+                p.stack.get().unwrap(),
+                t,
+                &p.window,
+                &shading,
+                &five,
+                wi,
+                wr,
+            )
+        })
         .collect();
     Errors {
         nmm: rel_l2(&nmm, &reference),

@@ -62,9 +62,17 @@ fn pq_matches_flss_at_1nm_on_a_grating_whose_period_divides_the_patch() {
     let (mut e2, mut r2, mut thesis_e2, mut ratio_sum, mut ratio_n) = (0.0, 0.0, 0.0, 0.0, 0);
     for k in 0..40 {
         let wr = direction(5.0 + 2.0 * k as f64, 180.0);
-        let flss = model::xyz(&p.stack, t, &p.window, &shading, &p.colour, wi, wr);
+        let flss = model::xyz(
+            p.stack.get().unwrap(),
+            t,
+            &p.window,
+            &shading,
+            &p.colour,
+            wi,
+            wr,
+        );
         let fixed = pq::xyz(
-            &p.stack,
+            p.stack.get().unwrap(),
             t,
             &g,
             &shading,
@@ -73,7 +81,16 @@ fn pq_matches_flss_at_1nm_on_a_grating_whose_period_divides_the_patch() {
             wr,
             Form::Intensity,
         );
-        let thesis = pq::xyz(&p.stack, t, &g, &shading, &p.colour, wi, wr, Form::Thesis);
+        let thesis = pq::xyz(
+            p.stack.get().unwrap(),
+            t,
+            &g,
+            &shading,
+            &p.colour,
+            wi,
+            wr,
+            Form::Thesis,
+        );
         assert!(fixed.iter().all(|c| c.is_finite() && *c >= -1e-12));
         for c in 0..3 {
             e2 += (fixed[c] - flss[c]).powi(2);

@@ -419,7 +419,15 @@ fn order_rhos(m: &Material, hf: HeightField) -> Vec<f64> {
                 x.abs().asin().to_degrees(),
                 if x < 0.0 { 180.0 } else { 0.0 },
             );
-            model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, lambda)
+            model::rho(
+                p.stack.get().unwrap(),
+                p.terms(),
+                &p.window,
+                &p.shading,
+                wi,
+                wr,
+                lambda,
+            )
         })
         .collect()
 }
@@ -766,7 +774,7 @@ fn tile_modes_measured_on_the_orders() {
                     if x < 0.0 { 180.0 } else { 0.0 },
                 );
                 model::rho(
-                    &prep.stack,
+                    prep.stack.get().unwrap(),
                     prep.terms(),
                     &prep.window,
                     &prep.shading,

@@ -44,7 +44,15 @@ fn model_error(p: &diffract::material::PreparedMaterial, theta_i: f64, lambda: f
         if c == 0.0 {
             continue;
         }
-        let m = model::rho(&p.stack, p.terms(), &p.window, &s, wi, wr, lambda);
+        let m = model::rho(
+            p.stack.get().unwrap(),
+            p.terms(),
+            &p.window,
+            &s,
+            wi,
+            wr,
+            lambda,
+        );
         let r = reference::rho(&p.heightfield, p.material.coherence_um, &s, wi, wr, lambda);
         assert!(m.is_finite() && r.is_finite());
         worst = worst.max((m - r).abs() / c);
@@ -60,7 +68,7 @@ fn why_tall_taylor_default_now_switches_to_chebyshev_and_is_right() {
         let m = material(src, Some(2.0), Expansion::Taylor, Terms::Auto);
         let p = m.prepare(None, &diffract::report::Stderr).unwrap();
         assert_eq!(p.plan.expansion, Expansion::Chebyshev, "{src}");
-        assert_eq!(p.stack.expansion, Expansion::Chebyshev);
+        assert_eq!(p.stack.get().unwrap().expansion, Expansion::Chebyshev);
         assert!(
             p.plan
                 .warnings
@@ -202,12 +210,20 @@ fn why_smallest_pixel_size_gives_zero_off_specular_in_model_and_reference() {
     let wi = direction(30.0, 0.0);
     for t in [0.0, 10.0, 50.0] {
         let wr = direction(t, 180.0);
-        let a = model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, 500.0);
+        let a = model::rho(
+            p.stack.get().unwrap(),
+            p.terms(),
+            &p.window,
+            &p.shading,
+            wi,
+            wr,
+            500.0,
+        );
         let b = reference::rho(&hf, m.coherence_um, &p.shading, wi, wr, 500.0);
         assert!(a.abs() < 1e-12 && b.abs() < 1e-12, "θr = {t}: {a} {b}");
     }
     let spec = model::rho(
-        &p.stack,
+        p.stack.get().unwrap(),
         p.terms(),
         &p.window,
         &p.shading,
@@ -264,7 +280,15 @@ fn why_grazing_limit_is_continuous_at_exactly_90_degrees() {
         .prepare_planned(hf.clone(), plan, None, &diffract::report::Stderr)
         .unwrap();
     let (wi, wr) = (direction(90.0, 0.0), direction(90.0, 180.0));
-    let a = model::rho(&p.stack, p.terms(), &p.window, &p.shading, wi, wr, 500.0);
+    let a = model::rho(
+        p.stack.get().unwrap(),
+        p.terms(),
+        &p.window,
+        &p.shading,
+        wi,
+        wr,
+        500.0,
+    );
     let b = reference::rho(&hf, m.coherence_um, &p.shading, wi, wr, 500.0);
     assert!((a - 1.0).abs() < 1e-9 && (b - 1.0).abs() < 1e-9, "{a} {b}");
 }
@@ -602,4 +626,105 @@ fn table_variants_on_narrow_regions_are_right_or_refused() {
         .iter()
         .filter(|c| c.case == "narrow w" && c.variant.name() == "dhillon")
         .all(|c| c.status == Status::Pass));
+}
+
+/// `diffract stability` on the command line: the axes it is given, a time budget whose
+/// left-out cells are reported (each with its estimated cost, none dropped), and the model
+/// axis (the scalar model against the rigorous solver) in its own CSV and section.
+#[test]
+fn the_command_reports_skipped_cells_and_the_model_axis() {
+    let dir = std::env::temp_dir().join(format!("diffract-stab-budget-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let run = |out: &str, extra: &[&str]| {
+        let out = dir.join(out);
+        let mut args = vec!["stability", "--no-gpu", "-o", out.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+            .args(&args)
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&o.stderr).to_string();
+        assert!(o.status.success(), "{err}");
+        assert!(!err.contains("panicked"), "{err}");
+        let read = |f: &str| std::fs::read_to_string(out.join(f)).unwrap();
+        (
+            read("stability.csv"),
+            read("stability-model.csv"),
+            read("stability.md"),
+            err,
+        )
+    };
+
+    // Every axis given, no budget pressure: the model axis solves the normal-incidence cells
+    // of a shallow sinusoid (period 2.8 wavelengths: scalar theory holds) and refuses the
+    // grazing one, which is beyond the rigorous solver.
+    let axes = [
+        "--hmax-um",
+        "0.05",
+        "--theta-i",
+        "0",
+        "89.99",
+        "--lambda-nm",
+        "580",
+    ];
+    let (csv, model, md, err) = run("axes", &axes);
+    assert_eq!(csv.lines().count() - 1, 8, "{csv}");
+    assert!(!csv.contains(",skipped,"), "{csv}");
+    let rows: Vec<&str> = model.lines().skip(1).collect();
+    assert_eq!(rows.len(), 2, "{model}");
+    let normal: Vec<&str> = rows[0].split(',').collect();
+    let e: f64 = normal[3].parse().unwrap();
+    assert!(normal[..3] == ["0.05", "0", "580"] && e < 0.1, "{model}");
+    assert!(rows[1].contains("beyond the rigorous solver"), "{model}");
+    assert!(
+        md.contains("## The model against Maxwell's equations"),
+        "{md}"
+    );
+    assert!(
+        err.contains("stability: model h_max 0.05 µm, θi 0°, λ 580 nm"),
+        "{err}"
+    );
+
+    // The default axes on a budget of one second: the cells past it are in the CSV as
+    // skipped, with their estimate, and the header counts them.
+    let (csv, model, md, err) = run("budget", &["--budget-s", "1"]);
+    let cells = 3 * 3 * 2 * 2 * 2;
+    assert_eq!(csv.lines().count() - 1, cells, "{csv}");
+    let skipped = csv.lines().filter(|l| l.contains(",skipped,")).count();
+    assert!(skipped > 0, "{csv}");
+    assert!(
+        csv.lines()
+            .filter(|l| l.contains(",skipped,"))
+            .all(|l| l.contains("over the time budget: estimated")),
+        "{csv}"
+    );
+    assert!(
+        md.contains(&format!("{skipped} skipped by the 1 s budget")),
+        "{md}"
+    );
+    assert_eq!(model.lines().count() - 1, 18, "{model}");
+    assert!(model.contains("over the time budget"), "{model}");
+    assert!(
+        err.contains(&format!("stability: {cells}/{cells} cells")),
+        "{err}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// The lighting cases on the device: a sun hidden in an HDR sky, a grazing environment and
+/// a black map with one pixel, each against the f64 quadrature (MIS at the default 256
+/// samples within 5 % of every lit pixel's Y).
+#[test]
+fn lighting_cases_meet_their_bound_on_the_device() {
+    let Some(renderer) = gpu_util::renderer() else {
+        return;
+    };
+    let cells = stability::lighting::run(renderer.device()).unwrap();
+    assert_eq!(cells.len(), 3);
+    for c in &cells {
+        eprintln!("{c:?}");
+        assert_eq!(c.status, Status::Pass, "{c:?}");
+        assert!(c.lit > 0 && c.quadrature < 0.02, "{c:?}");
+    }
+    assert_eq!(renderer.validation_messages(), 0);
 }

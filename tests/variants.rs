@@ -228,12 +228,38 @@ fn nmm_matches_flss_at_1nm_on_a_grating_and_needs_its_jacobian() {
     let (mut e2, mut r2, mut thesis_e2) = (0.0, 0.0, 0.0);
     for k in 0..40 {
         let wr = direction(5.0 + 2.0 * k as f64, 180.0);
-        let flss = diffract::brdf::model::xyz(&p.stack, t, &p.window, &shading, &p.colour, wi, wr);
+        let flss = diffract::brdf::model::xyz(
+            p.stack.get().unwrap(),
+            t,
+            &p.window,
+            &shading,
+            &p.colour,
+            wi,
+            wr,
+        );
         let with = nmm::xyz(
-            &p.stack, t, &p.window, &shading, &p.colour, &g, &density, wi, wr, true,
+            p.stack.get().unwrap(),
+            t,
+            &p.window,
+            &shading,
+            &p.colour,
+            &g,
+            &density,
+            wi,
+            wr,
+            true,
         );
         let without = nmm::xyz(
-            &p.stack, t, &p.window, &shading, &p.colour, &g, &density, wi, wr, false,
+            p.stack.get().unwrap(),
+            t,
+            &p.window,
+            &shading,
+            &p.colour,
+            &g,
+            &density,
+            wi,
+            wr,
+            false,
         );
         for c in 0..3 {
             e2 += (with[c] - flss[c]).powi(2);

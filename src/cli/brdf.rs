@@ -62,11 +62,11 @@ pub fn run(args: &BrdfArgs) -> Result<()> {
                 crate::brdf::truncation::Precision::F64,
                 &crate::report::Stderr,
             )?;
-            let t = p.terms();
+            let (t, stack) = (p.terms(), p.stack.get()?);
             answer_all(
                 &queries,
-                |wi, wr, l| model::rho(&p.stack, t, &p.window, &p.shading, wi, wr, l),
-                |wi, wr| model::xyz(&p.stack, t, &p.window, &p.shading, &p.colour, wi, wr),
+                |wi, wr, l| model::rho(stack, t, &p.window, &p.shading, wi, wr, l),
+                |wi, wr| model::xyz(stack, t, &p.window, &p.shading, &p.colour, wi, wr),
             )
         }
     };

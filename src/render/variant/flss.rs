@@ -21,7 +21,7 @@ use crate::gpu::{Device, StorageFormat};
 use crate::leave_out::{crop, intersect, LeftOut, TexelsLeft, UvBox, WavelengthsLeft};
 use crate::material::PreparedMaterial;
 use crate::render::{OutputMode, ParamsUbo, MAX_TERMS};
-use crate::spectrum::{Band, Expansion};
+use crate::spectrum::{Band, Expansion, TermStack};
 use crate::{Error, Result};
 
 pub(crate) struct Flss;
@@ -109,7 +109,16 @@ impl Variant for Flss {
 
     fn stability(&self) -> Stability {
         Stability::Spectral(|p, shading, wi, wr, lambda_nm| {
-            crate::brdf::model::rho(&p.stack, p.terms(), &p.window, shading, wi, wr, lambda_nm)
+            let stack = p.stack.get()?;
+            Ok(crate::brdf::model::rho(
+                stack,
+                p.terms(),
+                &p.window,
+                shading,
+                wi,
+                wr,
+                lambda_nm,
+            ))
         })
     }
 
@@ -132,8 +141,17 @@ impl CpuModel for FlssModel {
         colour: &crate::colour::ColourTable,
         wi: [f64; 3],
         wr: [f64; 3],
-    ) -> [f64; 3] {
-        crate::brdf::model::xyz(&p.stack, p.terms(), &p.window, &p.shading, colour, wi, wr)
+    ) -> Result<[f64; 3]> {
+        let stack = p.stack.get()?;
+        Ok(crate::brdf::model::xyz(
+            stack,
+            p.terms(),
+            &p.window,
+            &p.shading,
+            colour,
+            wi,
+            wr,
+        ))
     }
 }
 
@@ -167,7 +185,7 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
     } else {
         stack.band
     };
-    let (terms, decode) = upload_terms(dev, prepared, setup.storage, &band)?;
+    let (terms, decode) = upload_terms(dev, stack, setup.storage, &band)?;
     let t = prepared.terms().min(stack.term_count().saturating_sub(1));
     let name = format!(
         "flss T={t} R={} dλ={} {} {}",
@@ -208,7 +226,7 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
             ),
             (SpecConstant::Storage, setup.storage.spec_value()),
         ],
-        params: lookup_params(prepared, &band, &decode),
+        params: lookup_params(prepared, stack, &band, &decode),
         sampler: Sampler::new(
             dev,
             "dft terms (nearest)",
@@ -283,10 +301,10 @@ impl PreparedVariant for FlssGpu {
 /// The spectrum geometry, window and Chebyshev range of the uniform block.
 fn lookup_params(
     prepared: &PreparedMaterial,
+    s: &TermStack,
     band: &Band,
     decode: &[[f32; 4]],
 ) -> ([i32; 4], [i32; 4], [f32; 4], Vec<[f32; 4]>) {
-    let s = &prepared.stack;
     let sigma = prepared.window.sigma_texels;
     let inv2 = |s: f64| (1.0 / (2.0 * s * s)) as f32;
     (
@@ -316,11 +334,10 @@ fn lookup_params(
 /// storage format); also returns the per-term decode rows of thesis eq. 1.1.
 fn upload_terms(
     dev: &Arc<Device>,
-    prepared: &PreparedMaterial,
+    stack: &TermStack,
     storage: StorageFormat,
     band: &Band,
 ) -> Result<(Image, Vec<[f32; 4]>)> {
-    let stack = &prepared.stack;
     let layers = stack.term_count();
     if layers == 0 || layers > MAX_TERMS {
         return Err(Error::invalid(

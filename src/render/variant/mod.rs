@@ -662,14 +662,15 @@ pub(crate) trait PreparedVariant: Send + Sync {
 /// variant's approximation.
 pub trait CpuModel: Send + Sync {
     /// XYZ at `wr` under light from `wi` for `prepared`, summing `colour`'s weights (the
-    /// material's colour table with the wavelengths the draw left out at weight 0).
+    /// material's colour table with the wavelengths the draw left out at weight 0). An
+    /// error where the model reads what `prepared` has not loaded (its DFT terms).
     fn xyz(
         &self,
         prepared: &PreparedMaterial,
         colour: &crate::colour::ColourTable,
         wi: [f64; 3],
         wr: [f64; 3],
-    ) -> [f64; 3];
+    ) -> Result<[f64; 3]>;
     /// Table variants: the f64 table itself (its conditioning, its overshoot below zero).
     fn table(&self) -> Option<&dyn crate::brdf::table::GTable> {
         None
@@ -682,9 +683,10 @@ pub(crate) type TableMirror =
     fn(&crate::heightfield::HeightField, f64, &TableSpec, f64) -> Result<Mirrored>;
 
 /// A spectral variant's f64 model at one wavelength, `ρ(ωi, ωr, λ)`: the stability
-/// matrix's model cells and the reference of its GPU cells.
+/// matrix's model cells and the reference of its GPU cells (an error where `prepared` has
+/// not loaded what the model reads).
 pub(crate) type SpectralModel =
-    fn(&PreparedMaterial, &crate::brdf::Shading, [f64; 3], [f64; 3], f64) -> f64;
+    fn(&PreparedMaterial, &crate::brdf::Shading, [f64; 3], [f64; 3], f64) -> Result<f64>;
 
 /// A representation built for the stability matrix, or the variant's refusal of it.
 pub(crate) enum Mirrored {
@@ -985,6 +987,55 @@ mod tests {
         };
         assert_eq!(fixed.w_nodes_for_field(VariantKind::ChebyshevW, 2.0, w), 9);
         assert_eq!(t.w_nodes_for_field(VariantKind::Volume, 2.0, w), 32);
+    }
+
+    /// Terms deferred and read before `load_terms` are an error from the cell and from
+    /// every spectral model, not a panic; once loaded, the same calls give numbers.
+    #[test]
+    fn unloaded_terms_are_an_error_not_a_panic() {
+        let material = Material {
+            heightfield: "a 32² sinusoid".into(),
+            terms: crate::material::Terms::Fixed(4),
+            ..Material::default()
+        };
+        let heights = (0..32 * 32)
+            .map(|k| 0.1 * (std::f64::consts::TAU * (k % 32) as f64 / 32.0).sin())
+            .collect();
+        let hf = crate::heightfield::HeightField::new(32, 32, 0.05, heights).unwrap();
+        let plan = material
+            .plan(
+                &hf,
+                &crate::brdf::truncation::Reach::ALL,
+                crate::brdf::truncation::Precision::F64,
+            )
+            .unwrap();
+        let p = material.prepare_planned_deferred(hf, plan, None).unwrap();
+        let (wi, wr) = (
+            crate::brdf::direction(30.0, 0.0),
+            crate::brdf::direction(10.0, 180.0),
+        );
+        let models: Vec<SpectralModel> = VariantKind::ALL
+            .into_iter()
+            .filter_map(|k| match k.implementation().stability() {
+                Stability::Spectral(rho) => Some(rho),
+                _ => None,
+            })
+            .collect();
+        assert!(!models.is_empty());
+        let unloaded = p.stack.get().unwrap_err();
+        assert!(matches!(unloaded, Error::Internal(_)), "{unloaded}");
+        assert!(unloaded.to_string().contains("load_terms"), "{unloaded}");
+        for rho in &models {
+            assert!(matches!(
+                rho(&p, &p.shading, wi, wr, 550.0),
+                Err(Error::Internal(_))
+            ));
+        }
+        p.load_terms(&crate::report::Collect::default()).unwrap();
+        assert_eq!(p.stack.get().unwrap().term_count(), 5);
+        for rho in &models {
+            assert!(rho(&p, &p.shading, wi, wr, 550.0).unwrap().is_finite());
+        }
     }
 
     #[test]

@@ -215,9 +215,9 @@ impl CpuModel for NmmModel {
         colour: &crate::colour::ColourTable,
         wi: [f64; 3],
         wr: [f64; 3],
-    ) -> [f64; 3] {
-        crate::brdf::nmm::xyz(
-            &p.stack,
+    ) -> Result<[f64; 3]> {
+        Ok(crate::brdf::nmm::xyz(
+            p.stack.get()?,
             p.terms(),
             &p.window,
             &p.shading,
@@ -227,7 +227,7 @@ impl CpuModel for NmmModel {
             wi,
             wr,
             true,
-        )
+        ))
     }
 }
 

@@ -184,9 +184,9 @@ impl CpuModel for PqModel {
         colour: &crate::colour::ColourTable,
         wi: [f64; 3],
         wr: [f64; 3],
-    ) -> [f64; 3] {
-        crate::brdf::pq::xyz(
-            &p.stack,
+    ) -> Result<[f64; 3]> {
+        Ok(crate::brdf::pq::xyz(
+            p.stack.get()?,
             p.terms(),
             &self.0,
             &p.shading,
@@ -194,7 +194,7 @@ impl CpuModel for PqModel {
             wi,
             wr,
             crate::brdf::pq::Form::Intensity,
-        )
+        ))
     }
 }
 

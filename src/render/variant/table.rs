@@ -193,16 +193,26 @@ pub(crate) fn prepare<T: GTable + 'static>(
         None => *setup.table,
     };
     let (spec, coarsened) = options.spec(kind, material, hi - lo, setup.region)?;
+    let smoothed = spec.texel_uv > TableSpec::default_texel(material.coherence_um) * SMOOTH_ABOVE;
     if let Some(asked) = coarsened {
+        let cost = if smoothed {
+            format!(
+                "smoothed, never above its samples; the narrowest lobes' peaks (380 nm) come out {:.0} % low on a node, more between nodes",
+                100.0 * smoothing_loss(spec.texel_uv, material.coherence_um)
+            )
+        } else {
+            format!(
+                "still within {SMOOTH_ABOVE} times the lobe-resolving spacing, so interpolated as is: the narrowest lobes (380 nm) within about 5 % of their peaks"
+            )
+        };
         setup.report.warn(&format!(
-            "{kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB and the build's limits: smoothed, never above its samples; the narrowest lobes' peaks (380 nm) come out {:.0} % low on a node, more between nodes",
+            "{kind} table over u ∈ [{:.2}, {:.2}], v ∈ [{:.2}, {:.2}] coarsened from texel {asked:.4} to {:.4} to fit {} MB and the build's limits: {cost}",
             spec.region.lo[0],
             spec.region.hi[0],
             spec.region.lo[1],
             spec.region.hi[1],
             spec.texel_uv,
             setup.table.budget_bytes >> 20,
-            100.0 * smoothing_loss(spec.texel_uv, material.coherence_um)
         ));
     }
     // Leaving out: the build integrates only the wavelengths whose weight matters.
@@ -248,7 +258,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     // gradually instead. Up to SMOOTH_ABOVE times the spacing the spline still follows the
     // lobes (within 5 % of the peak at 0.004, tests/gpu_variants.rs) and smoothing would
     // only cost height.
-    if spec.texel_uv > TableSpec::default_texel(material.coherence_um) * SMOOTH_ABOVE {
+    if smoothed {
         smooth_slices(&mut samples);
     }
     let table = assemble(spec.region, samples)?;
@@ -282,8 +292,8 @@ impl CpuModel for TableModel {
         _colour: &ColourTable,
         wi: [f64; 3],
         wr: [f64; 3],
-    ) -> [f64; 3] {
-        self.0.xyz(&p.shading, wi, wr)
+    ) -> Result<[f64; 3]> {
+        Ok(self.0.xyz(&p.shading, wi, wr))
     }
 
     fn table(&self) -> Option<&dyn GTable> {

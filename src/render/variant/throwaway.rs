@@ -116,11 +116,11 @@ impl CpuModel for ThrowawayGpu {
         colour: &crate::colour::ColourTable,
         wi: [f64; 3],
         wr: [f64; 3],
-    ) -> [f64; 3] {
+    ) -> Result<[f64; 3]> {
         MODEL_CALLS.fetch_add(1, Ordering::Relaxed);
         self.0
             .model()
-            .map_or([f64::NAN; 3], |m| m.xyz(prepared, colour, wi, wr))
+            .map_or(Ok([f64::NAN; 3]), |m| m.xyz(prepared, colour, wi, wr))
     }
 
     fn table(&self) -> Option<&dyn table::GTable> {

@@ -1,0 +1,211 @@
+//! Time: the frames a row draws (fixed or by a budget), their statistics, the deadline
+//! that stops a table build the budget cannot afford, and the pace that estimates the cost
+//! of the rows still to measure.
+
+use std::time::Instant;
+
+use indicatif::ProgressBar;
+
+/// The times of a row's timed frames (ms): GPU timestamps where the queue has them, else
+/// wall time.
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct FrameTimes(pub Vec<f64>);
+
+impl FrameTimes {
+    /// The `p`-quantile (nearest rank); `None` without frames.
+    pub fn quantile(&self, p: f64) -> Option<f64> {
+        let mut v = self.0.clone();
+        v.sort_by(f64::total_cmp);
+        let last = v.len().checked_sub(1)?;
+        Some(v[((p * last as f64).round() as usize).min(last)])
+    }
+
+    pub fn median(&self) -> Option<f64> {
+        crate::render::median(self.0.clone())
+    }
+
+    /// The median's relative standard error, `1.2533·σ/(√n·median)` (the asymptotic
+    /// efficiency of the median against the mean); `None` below 3 frames.
+    pub fn relative_error(&self) -> Option<f64> {
+        let n = self.0.len();
+        if n < 3 {
+            return None;
+        }
+        let mean = self.0.iter().sum::<f64>() / n as f64;
+        let var = self.0.iter().map(|t| (t - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+        let median = self.median()?;
+        (median > 0.0).then(|| 1.2533 * var.sqrt() / ((n as f64).sqrt() * median))
+    }
+}
+
+/// How many frames each row draws after its warm-up frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Frames {
+    /// Exactly this many (`--full`, `--frames`).
+    Fixed(usize),
+    /// As many as the budget allows.
+    Budget(Budget),
+}
+
+/// A time budget for the whole profile.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Budget {
+    /// Wall time of the whole profile (s): references, builds, frames and scoring.
+    pub total_s: f64,
+    /// A row stops drawing once its median's relative standard error is below this.
+    pub precision: f64,
+    /// At most this many timed frames a row.
+    pub max_frames: usize,
+}
+
+impl Budget {
+    /// A minute on a 2-core lavapipe machine for the default field and map; 5 % precision.
+    pub const DEFAULT_S: f64 = 60.0;
+
+    pub fn seconds(total_s: f64) -> Self {
+        Self {
+            total_s,
+            precision: 0.05,
+            max_frames: 50,
+        }
+    }
+}
+
+/// The unwinding payload of a table build stopped because it would not fit the budget:
+/// the build's estimated total (s).
+pub(super) struct OverBudget {
+    pub(super) projected_s: f64,
+    pub(super) steps: u64,
+}
+
+/// The renderer's report during a budgeted row: passes lines and bars on to stderr, and
+/// stops a table build (see [`crate::report::Report::checkpoint`]) once the build, at the
+/// pace of its steps so far, would end past `deadline`.
+pub(super) struct Deadline {
+    start: Instant,
+    deadline: Option<Instant>,
+    steps: std::sync::atomic::AtomicU64,
+    total: std::sync::atomic::AtomicU64,
+}
+
+impl Deadline {
+    pub(super) fn new(deadline: Option<Instant>) -> Self {
+        Self {
+            start: Instant::now(),
+            deadline,
+            steps: 0.into(),
+            total: 0.into(),
+        }
+    }
+}
+
+impl crate::report::Report for Deadline {
+    fn warn(&self, line: &str) {
+        crate::report::Stderr.warn(line);
+    }
+
+    fn note(&self, line: &str) {
+        crate::report::Stderr.note(line);
+    }
+
+    fn progress(&self, bar: ProgressBar) -> ProgressBar {
+        use std::sync::atomic::Ordering;
+        self.total
+            .fetch_add(bar.length().unwrap_or(0), Ordering::Relaxed);
+        bar
+    }
+
+    fn checkpoint(&self) {
+        use std::sync::atomic::Ordering;
+        let Some(deadline) = self.deadline else {
+            return;
+        };
+        let done = self.steps.fetch_add(1, Ordering::Relaxed) + 1;
+        let total = self.total.load(Ordering::Relaxed).max(done);
+        let spent = self.start.elapsed().as_secs_f64();
+        // A few steps first, so the pace is not one step's noise.
+        if done < 4 {
+            return;
+        }
+        let projected = spent * total as f64 / done as f64;
+        let end = self.start + std::time::Duration::from_secs_f64(projected);
+        if end > deadline {
+            std::panic::resume_unwind(Box::new(OverBudget {
+                projected_s: projected,
+                steps: total,
+            }));
+        }
+    }
+}
+
+/// What the rows measured so far say about the cost of the next ones.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Pace {
+    /// Map frame time per fetch and pixel (ms).
+    ms_per_fetch: f64,
+    /// Frame time that does not scale with fetches: draw set-up and readback (ms).
+    frame_overhead_ms: f64,
+    /// A warm-up's preparation beyond its frame (loading terms, pipelines) (ms).
+    pub(super) prepare_ms: f64,
+    /// A table build's time per sampled `(w, λ)` plane, from a build this profile made or
+    /// stopped (ms); `None` until then (a table may be in the cache: it is tried).
+    pub(super) table_ms_per_plane: Option<f64>,
+}
+
+impl Pace {
+    /// Before any row: lavapipe's pace on 2 cores (FLSS at 5 nm, 128² map: 1.7 s a frame
+    /// for 48 825 fetches a pixel), so a fast GPU is overestimated only until its first
+    /// row is measured.
+    pub(super) const PRIOR: Pace = Pace {
+        ms_per_fetch: 3e-6,
+        frame_overhead_ms: 20.0,
+        prepare_ms: 300.0,
+        table_ms_per_plane: None,
+    };
+
+    /// A plane's build time assumed only to order the rows before any table was built.
+    pub(super) const PRIOR_TABLE_MS_PER_PLANE: f64 = 5.0;
+
+    /// Estimated map frame time of `fetches` a pixel on a `size`² map (ms).
+    pub(super) fn frame_ms(&self, fetches: usize, size: u32) -> f64 {
+        let pixels = std::f64::consts::FRAC_PI_4 * (size * size) as f64;
+        self.frame_overhead_ms + self.ms_per_fetch * fetches as f64 * pixels
+    }
+
+    /// Learns from a measured row: `frame_ms` a frame for `fetches` a pixel, `warm_ms` for
+    /// its warm-up (preparation included), `built_ms` of that spent building tables.
+    pub(super) fn learn(
+        &mut self,
+        fetches: usize,
+        size: u32,
+        frame_ms: f64,
+        warm_ms: f64,
+        built_ms: f64,
+    ) {
+        let pixels = std::f64::consts::FRAC_PI_4 * (size * size) as f64;
+        if fetches >= 100 {
+            self.ms_per_fetch = ((frame_ms - self.frame_overhead_ms).max(0.0)
+                / (fetches as f64 * pixels))
+                .max(1e-12);
+        } else {
+            self.frame_overhead_ms = frame_ms;
+        }
+        self.prepare_ms = (warm_ms - frame_ms - built_ms).max(0.0);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn frame_statistics() {
+        let t = FrameTimes(vec![10.0, 12.0, 11.0, 30.0, 9.0]);
+        assert_eq!(t.median(), Some(11.0));
+        assert_eq!(t.quantile(0.0), Some(9.0));
+        assert_eq!(t.quantile(1.0), Some(30.0));
+        assert!(FrameTimes(vec![5.0, 5.0]).relative_error().is_none());
+        assert_eq!(FrameTimes(vec![5.0; 4]).relative_error(), Some(0.0));
+        assert!(t.relative_error().unwrap() > 0.3);
+    }
+}

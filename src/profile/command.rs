@@ -1,0 +1,381 @@
+//! The `diffract profile` command: its flags, their checks before any work, and the run
+//! from the flags to the table on stdout and the CSV and plot files.
+
+use std::path::PathBuf;
+
+use super::budget::{Budget, Frames};
+use super::output::{format_csv, format_table, write_plot};
+use super::plan::{
+    flss_variants, table_variants, EnvProfile, ProfileSetup, Variant, DEFAULT_ENV_PIXELS,
+    DEFAULT_ENV_SPP,
+};
+use super::run::profile_with_env;
+use crate::cli::cache::CacheArgs;
+use crate::cli::gpu::TableArgs;
+use crate::cli::material::MaterialArgs;
+use crate::material::Material;
+use crate::render::{map_direction, Renderer};
+use crate::scene::Scene;
+use crate::{Error, Result};
+
+/// `diffract profile` options.
+#[derive(Debug, Clone, clap::Args)]
+pub struct ProfileArgs {
+    #[command(flatten)]
+    pub material: MaterialArgs,
+    /// Taylor terms T of the FLSS variants (Chebyshev gets ⌈2T/3⌉).
+    #[arg(long = "variant-terms", default_value_t = 30)]
+    pub variant_terms: usize,
+    /// Profile only these (comma-separated names from the table; default: all; `env`: the
+    /// environment rows of --env alone).
+    #[arg(long, value_delimiter = ',')]
+    pub only: Vec<String>,
+    /// Polar angle of the light (degrees).
+    #[arg(long, default_value_t = 60.0)]
+    pub theta_i: f64,
+    /// Azimuth of the light (degrees).
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub phi_i: f64,
+    /// Wall-time budget of the whole profile in seconds: rows are measured cheapest first,
+    /// each draws frames until its median is known to 5 % or its share is spent, and a row
+    /// that does not fit is reported as skipped with its estimated cost.
+    #[arg(long, default_value_t = Budget::DEFAULT_S, conflicts_with = "full")]
+    pub budget_s: f64,
+    /// The exhaustive set: no budget, a 128² map, 1024 + 64 scored pixels, 5 frames per
+    /// row, a 128² mesh view (each still overridden by its own flag).
+    #[arg(long)]
+    pub full: bool,
+    /// BRDF map side in pixels [default: 65, or 128 with --full].
+    #[arg(long)]
+    pub size: Option<u32>,
+    /// Pixels scored against the reference, spread over the map (each costs N²·401
+    /// complex multiply-adds) [default: 16, or 1024 with --full].
+    #[arg(long)]
+    pub pixels: Option<usize>,
+    /// Pixels scored among the brightest of the map [default: 8, or 64 with --full].
+    #[arg(long)]
+    pub brightest: Option<usize>,
+    /// Frames per row after the warm-up, instead of the budget's count (the median is
+    /// reported) [default with --full: 5].
+    #[arg(long)]
+    pub frames: Option<usize>,
+    /// Side of the mesh view (the default scene) timed per row; 0: none [default: none,
+    /// or 128 with --full].
+    #[arg(long)]
+    pub mesh_size: Option<u32>,
+    /// Mesh view: quads along each side of a scale of the default scene's `scaly-snake`
+    /// (its resolution; 6 by default).
+    #[arg(long)]
+    pub mesh_quads: Option<u32>,
+    /// Also evaluate flss, nmm and pq per vertex on the mesh view (thesis §1.5.1), and score
+    /// every mesh view against a per-pixel FLSS 1 nm render of it.
+    #[arg(long)]
+    pub per_vertex: bool,
+    /// Also write the table as CSV.
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Also write a PNG plot of error against GPU time (log–log, Pareto front marked).
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+    /// Also profile the environment-lit BRDF map under SOURCE (an equirectangular .hdr or
+    /// .exr, builtin:sky, builtin:studio, builtin:white) at each of --env-spp, lit by the
+    /// environment alone, against the f64 quadrature of the environment. `--only env`:
+    /// these rows alone.
+    #[arg(long, value_name = "SOURCE")]
+    pub env: Option<String>,
+    /// The environment's radiance scale [default: 1].
+    #[arg(long)]
+    pub env_intensity: Option<f64>,
+    /// The environment's rotation about +Y in degrees [default: 0].
+    #[arg(long, allow_negative_numbers = true)]
+    pub env_rotate_deg: Option<f64>,
+    /// Samples per pixel of the environment rows, comma-separated [default: 1,4,16,64,256].
+    #[arg(long, value_delimiter = ',', value_name = "N,...")]
+    pub env_spp: Vec<u32>,
+    /// Pixels of the environment rows scored against the f64 quadrature, spread over the
+    /// map's disk [default: 8].
+    #[arg(long)]
+    pub env_pixels: Option<usize>,
+    #[command(flatten)]
+    pub table: TableArgs,
+    #[command(flatten)]
+    pub cache: CacheArgs,
+}
+
+/// The counts a profile runs with, once `--full` and the explicit flags are applied.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Counts {
+    pub size: u32,
+    pub pixels: usize,
+    pub brightest: usize,
+    pub frames: Frames,
+    pub mesh_size: u32,
+}
+
+impl ProfileArgs {
+    /// The counts: the budgeted defaults, `--full`'s exhaustive ones, or the flags given.
+    pub fn counts(&self) -> Counts {
+        let full = self.full;
+        let frames = match (self.frames, full) {
+            (Some(n), _) => Frames::Fixed(n),
+            (None, true) => Frames::Fixed(5),
+            (None, false) => Frames::Budget(Budget::seconds(self.budget_s)),
+        };
+        Counts {
+            size: self.size.unwrap_or(if full { 128 } else { 65 }),
+            pixels: self.pixels.unwrap_or(if full { 1024 } else { 16 }),
+            brightest: self.brightest.unwrap_or(if full { 64 } else { 8 }),
+            frames,
+            mesh_size: self.mesh_size.unwrap_or(if full { 128 } else { 0 }),
+        }
+    }
+}
+
+/// Runs `diffract profile`.
+pub fn run(args: &ProfileArgs) -> Result<()> {
+    profile_args(args)?;
+    let counts = args.counts();
+    let variants = selected_rows(args)?;
+    let base = args.material.apply(Material::default());
+    let env = env_profile(args, &base)?;
+    // The user's numbers and height field are checked before the device opens (each
+    // variant loads the field again when it prepares; that is cheap next to its terms).
+    base.validate()?;
+    base.load_heightfield(&crate::report::Stderr)?;
+    let mut renderer = Renderer::new(crate::cli::gpu::validation_requested())?;
+    let mesh = (counts.mesh_size > 0).then(|| {
+        let mut s = Scene::default_scene();
+        s.output.width = counts.mesh_size;
+        s.output.height = counts.mesh_size;
+        if args.mesh_quads.is_some() {
+            s.mesh.scale_quads = args.mesh_quads;
+        }
+        s
+    });
+    let setup = ProfileSetup {
+        base,
+        variants,
+        theta_i_deg: args.theta_i,
+        phi_i_deg: args.phi_i,
+        size: counts.size,
+        pixels: counts.pixels,
+        brightest: counts.brightest,
+        frames: counts.frames,
+        mesh,
+        per_vertex: args.per_vertex,
+        cache_dir: args.cache.dir(),
+    };
+    let run = profile_with_env(&mut renderer, &setup, env.as_ref())?;
+    print!("{}", format_table(renderer.device_name(), &setup, &run));
+    if let Some(path) = &args.csv {
+        crate::fsutil::write_atomic(path, format_csv(&run).as_bytes())?;
+    }
+    if let Some(path) = &args.plot {
+        let env = run.env.as_ref();
+        write_plot(path, &setup, &run.reports, env, renderer.device_name())?;
+    }
+    let n = renderer.validation_messages();
+    if n > 0 {
+        return Err(Error::Validation(n));
+    }
+    // Every error above is against the model's own reference; this one is the model's own.
+    eprintln!(
+        "{}",
+        crate::validity::expected_error_line(
+            &setup.base,
+            &[setup.theta_i_deg],
+            setup.cache_dir.as_deref()
+        )
+    );
+    Ok(())
+}
+
+/// The environment rows `--env` asks for, the map loaded and checked (render's flags and
+/// checks: one error line for a bad map, before any device work).
+fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>> {
+    let env_args = crate::cli::env::EnvArgs {
+        env: args.env.clone(),
+        env_samples: None,
+        env_intensity: args.env_intensity,
+        env_rotate_deg: args.env_rotate_deg,
+        no_sun: false,
+    };
+    let Some(map) = env_args.load(true, &Scene::default())? else {
+        return Ok(None);
+    };
+    let t = &args.table;
+    let spec = crate::cli::env::map_table_spec(
+        t.table_texel,
+        t.table_w_nodes,
+        t.table_step_nm,
+        base.coherence_um,
+    )?;
+    let mut samples = if args.env_spp.is_empty() {
+        DEFAULT_ENV_SPP.to_vec()
+    } else {
+        args.env_spp.clone()
+    };
+    samples.sort_unstable();
+    samples.dedup();
+    Ok(Some(EnvProfile {
+        map,
+        samples,
+        spec,
+        pixels: args.env_pixels.unwrap_or(DEFAULT_ENV_PIXELS),
+    }))
+}
+
+/// The rows of every registered variant, or those `--only` names (`env` names the
+/// environment rows, which `--env` adds whatever `--only` says).
+fn selected_rows(args: &ProfileArgs) -> Result<Vec<Variant>> {
+    let mut variants = flss_variants(args.variant_terms);
+    variants.extend(table_variants(&args.table.options()));
+    let only: Vec<&String> = args.only.iter().filter(|n| *n != "env").collect();
+    if args.only.is_empty() {
+        return Ok(variants);
+    }
+    if only.is_empty() {
+        return Ok(Vec::new());
+    }
+    for name in only {
+        if !variants.iter().any(|v| &v.name == name) {
+            let names: Vec<&str> = variants.iter().map(|v| v.name.as_str()).collect();
+            return Err(Error::invalid(
+                "only",
+                format!(
+                    "'{name}' is not a profiled variant; expected one of: {}",
+                    names.join(", ")
+                ),
+            ));
+        }
+    }
+    variants.retain(|v| args.only.contains(&v.name));
+    Ok(variants)
+}
+
+/// `diffract profile`: map size, angles, scored pixels (no more than the map's disk holds),
+/// repeats, the budget, the material's numbers and the output paths.
+pub fn profile_args(args: &ProfileArgs) -> Result<()> {
+    use crate::render::MAX_MAP_SIZE;
+    let c = args.counts();
+    if !(1..=MAX_MAP_SIZE).contains(&c.size) {
+        return Err(Error::invalid(
+            "BRDF map size",
+            format!("{}; expected 1..={MAX_MAP_SIZE} pixels", c.size),
+        ));
+    }
+    crate::guard::in_range("theta-i", args.theta_i, 0.0..=90.0, "°")?;
+    crate::guard::finite("phi-i", args.phi_i)?;
+    crate::guard::positive("budget-s", args.budget_s, " s")?;
+    check_counts(&c, args)?;
+    check_env(&c, args)?;
+    args.table.check()?;
+    if args.variant_terms > 64 {
+        return Err(Error::invalid(
+            "variant-terms",
+            format!("{}; at most 64 terms are supported", args.variant_terms),
+        ));
+    }
+    let material = args.material.apply(crate::material::Material::default());
+    material.validate()?;
+    for p in args.csv.iter().chain(&args.plot) {
+        if p.file_name().is_none() {
+            return Err(Error::invalid(
+                "output",
+                format!("{} is not a file", p.display()),
+            ));
+        }
+    }
+    let outputs: Vec<(&str, PathBuf)> = [("--csv", &args.csv), ("--plot", &args.plot)]
+        .into_iter()
+        .filter_map(|(flag, out)| out.clone().map(|o| (flag, o)))
+        .collect();
+    crate::guard::check_outputs(
+        &crate::guard::heightfield_inputs(&material.heightfield),
+        &outputs,
+    )
+}
+
+/// Scored pixels (no more than the map's disk holds), frames, the mesh view and its quads.
+fn check_counts(c: &Counts, args: &ProfileArgs) -> Result<()> {
+    let inside = (0..c.size)
+        .flat_map(|j| (0..c.size).map(move |i| (i, j)))
+        .filter(|&(i, j)| map_direction(i, j, c.size).is_some())
+        .count();
+    let scored = c.pixels.saturating_add(c.brightest);
+    if scored == 0 || scored > inside {
+        return Err(Error::invalid(
+            "pixels",
+            format!(
+                "{} spread + {} brightest; a {}² map has {inside} pixels inside its disk to score (at least 1)",
+                c.pixels, c.brightest, c.size
+            ),
+        ));
+    }
+    if let Frames::Fixed(n) = c.frames {
+        if !(1..=1000).contains(&n) {
+            return Err(Error::invalid("frames", format!("{n}; expected 1..=1000")));
+        }
+    }
+    if c.mesh_size > 8192 {
+        return Err(Error::invalid(
+            "mesh-size",
+            format!("{}; expected 0 (none) ..=8192", c.mesh_size),
+        ));
+    }
+    if args.per_vertex && c.mesh_size == 0 {
+        return Err(Error::invalid(
+            "per-vertex",
+            "needs the mesh view (--mesh-size > 0): a BRDF map has no vertices",
+        ));
+    }
+    if let Some(q) = args.mesh_quads {
+        if !(1..=32).contains(&q) || c.mesh_size == 0 {
+            return Err(Error::invalid(
+                "mesh-quads",
+                format!("{q}; expected 1..=32 with a mesh view (--mesh-size > 0)"),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The environment rows' flags: each needs `--env` (as `--only env` does); samples per
+/// pixel within what a map draws; scored pixels within the map's disk.
+fn check_env(c: &Counts, args: &ProfileArgs) -> Result<()> {
+    let asks = !args.env_spp.is_empty()
+        || args.env_pixels.is_some()
+        || args.only.iter().any(|n| n == "env");
+    if args.env.is_none() && asks {
+        return Err(Error::invalid(
+            "env",
+            "--env-spp, --env-pixels and --only env need an environment (--env SOURCE)",
+        ));
+    }
+    use crate::render::env::MAX_SAMPLES;
+    if let Some(&n) = args
+        .env_spp
+        .iter()
+        .find(|&&n| !(1..=MAX_SAMPLES).contains(&n))
+    {
+        return Err(Error::invalid(
+            "env-spp",
+            format!("{n}; expected 1 to {MAX_SAMPLES} samples per pixel"),
+        ));
+    }
+    if let Some(n) = args.env_pixels {
+        let inside = (0..c.size * c.size)
+            .filter(|k| map_direction(k % c.size, k / c.size, c.size).is_some())
+            .count();
+        if !(1..=inside).contains(&n) {
+            return Err(Error::invalid(
+                "env-pixels",
+                format!(
+                    "{n}; a {}² map has {inside} pixels inside its disk to score (at least 1)",
+                    c.size
+                ),
+            ));
+        }
+    }
+    Ok(())
+}

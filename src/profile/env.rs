@@ -1,0 +1,306 @@
+//! The environment-lit rows of a profile (`profile --env SOURCE`): the environment-lit BRDF
+//! map ([`crate::render::env`]) at several samples per pixel, each timed like the other rows
+//! and scored at a few pixels against the f64 quadrature of the same environment
+//! ([`env_radiance`], refined until it settles). The radiance table and its sampling density are built once
+//! and shared by every row; so are the scored pixels and their reference. The rows are lit
+//! by the environment alone: the sun adds the same noiseless term at every sample count.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use super::budget::{FrameTimes, Frames};
+use super::output::{row_name, EnvRow, EnvRun, EnvSkipped};
+use super::plan::EnvProfile;
+use super::score::pick_pixels;
+use super::stats::{bootstrap, error_stats};
+use crate::brdf::env_reference::{env_radiance, Frame, Quadrature};
+use crate::brdf::table::{GTable, TableSpec};
+use crate::gpu::Device;
+use crate::heightfield::HeightField;
+use crate::material::Material;
+use crate::render::env::{render_env_brdf_map, EnvLighting, EnvMapRequest, EnvPicture};
+use crate::render::map_direction;
+use crate::{Error, Result};
+
+/// The fewest pixels the reference scores, whatever the budget.
+const REFERENCE_MIN_PIXELS: usize = 4;
+/// Share of the environment rows' time the reference may take (at least its fewest pixels).
+const REFERENCE_SHARE: f64 = 0.4;
+
+/// The pace of the environment rows: a map costs `overhead + samples · per_sample` (ms).
+struct EnvPace {
+    overhead_ms: f64,
+    per_sample_ms: f64,
+}
+
+impl EnvPace {
+    fn estimate_s(&self, samples: u32) -> f64 {
+        (self.overhead_ms + f64::from(samples) * self.per_sample_ms) / 1e3
+    }
+}
+
+/// Draws and scores the environment rows on `dev`: the table, the first map, the
+/// reference, then the rows by ascending samples; with a budget (`end`), a row whose
+/// estimate exceeds the time left is skipped with it (the first row is always measured).
+pub(super) fn env_rows(
+    dev: &Arc<Device>,
+    hf: &HeightField,
+    base: &Material,
+    size: u32,
+    frames: Frames,
+    env: &EnvProfile,
+    end: Option<Instant>,
+) -> Result<EnvRun> {
+    if env.samples.is_empty() || env.pixels == 0 {
+        return Err(Error::invalid(
+            "env",
+            "at least one sample count and one scored pixel are needed",
+        ));
+    }
+    let shading = base.shading();
+    let lighting = EnvLighting::build(hf, base.coherence_um, &shading, &env.spec)?;
+    let table = table_line(&lighting, &env.spec);
+    eprintln!("profile: {table}");
+    let draw = |samples: u32| {
+        let req = EnvMapRequest {
+            env: &env.map,
+            shading,
+            samples,
+            size,
+            sun: None,
+            seed: 0,
+        };
+        let t = Instant::now();
+        render_env_brdf_map(dev, &lighting, &req).map(|p| (p, t.elapsed().as_secs_f64() * 1e3))
+    };
+    let (first, first_wall_ms) = draw(1)?;
+    let pixels = pick_pixels(&first.xyz, size, 0, env.pixels);
+    let ref_end = end.map(|e| {
+        let left = e.saturating_duration_since(Instant::now());
+        Instant::now() + left.mul_f64(REFERENCE_SHARE)
+    });
+    let reference = reference(&lighting, env, &shading, size, &pixels, ref_end);
+    let mut run = EnvRun {
+        source: env.map.name.clone(),
+        table,
+        build_ms: lighting.build_ms,
+        first_wall_ms,
+        first_gpu_ms: first.gpu_ms,
+        reference_ms: reference.ms,
+        reference_h: reference.h,
+        reference_error: reference.error,
+        scored: reference.xyz.len(),
+        asked: pixels.len(),
+        rows: Vec::new(),
+        skipped: Vec::new(),
+    };
+    let pixels = &pixels[..reference.xyz.len()];
+    let mut pace = EnvPace {
+        overhead_ms: (first_wall_ms - first.gpu_ms).max(0.0),
+        per_sample_ms: first.gpu_ms,
+    };
+    for (k, &samples) in env.samples.iter().enumerate() {
+        let left_s = end.map(|e| e.saturating_duration_since(Instant::now()).as_secs_f64());
+        let est = pace.estimate_s(samples);
+        if let Some(left) = left_s.filter(|&l| est > l && k > 0) {
+            let reason = format!("estimated {est:.1} s, over the {left:.1} s left of the budget");
+            eprintln!("profile: {}: skipped, {reason}", row_name(samples));
+            run.skipped.push(EnvSkipped {
+                samples,
+                estimated_s: est,
+                reason,
+            });
+            continue;
+        }
+        let rows_left = (env.samples.len() - k) as f64;
+        let row_end = left_s.map(|l| Instant::now() + Duration::from_secs_f64(l / rows_left));
+        let (times, walls, last) = timed(&draw, samples, frames, row_end)?;
+        let row = score(&last, samples, pixels, &reference.xyz, &times, &walls);
+        pace = EnvPace {
+            overhead_ms: (row.wall_ms - row.gpu_ms).max(0.0),
+            per_sample_ms: row.gpu_ms / f64::from(samples),
+        };
+        eprintln!(
+            "profile: {}: {} frames, median {:.2} ms (wall {:.2} ms), rel L2 {:.2e} [{:.2e}, {:.2e}]",
+            row.name(),
+            row.frames,
+            row.gpu_ms,
+            row.wall_ms,
+            row.vs_reference.rel_l2,
+            row.intervals.rel_l2.lo,
+            row.intervals.rel_l2.hi
+        );
+        run.rows.push(row);
+    }
+    Ok(run)
+}
+
+/// A row's frames: a fixed count, or until the median is known to the budget's precision,
+/// its frames are spent or the next would end past `end`. Returns the dispatch times, the
+/// wall times and the last map.
+fn timed(
+    draw: &dyn Fn(u32) -> Result<(EnvPicture, f64)>,
+    samples: u32,
+    frames: Frames,
+    end: Option<Instant>,
+) -> Result<(FrameTimes, Vec<f64>, EnvPicture)> {
+    let mut times = FrameTimes::default();
+    let mut walls: Vec<f64> = Vec::new();
+    let mut last = None;
+    loop {
+        let n = walls.len();
+        let more = match (frames, end) {
+            (Frames::Fixed(k), _) => n < k,
+            (Frames::Budget(b), Some(end)) => {
+                let next = Duration::from_secs_f64(walls.last().copied().unwrap_or(0.0) / 1e3);
+                n == 0
+                    || (n < b.max_frames
+                        && times.relative_error().is_none_or(|e| e > b.precision)
+                        && Instant::now() + next <= end)
+            }
+            (Frames::Budget(_), None) => n == 0,
+        };
+        if !more {
+            break;
+        }
+        let (pic, wall) = draw(samples)?;
+        times.0.push(pic.gpu_ms);
+        walls.push(wall);
+        last = Some(pic);
+    }
+    let last = last.ok_or_else(|| Error::invalid("profile", "no timed frame"))?;
+    Ok((times, walls, last))
+}
+
+/// The row of `samples` from its last map and its frame times.
+fn score(
+    last: &EnvPicture,
+    samples: u32,
+    pixels: &[(u32, u32)],
+    reference: &[[f64; 3]],
+    times: &FrameTimes,
+    walls: &[f64],
+) -> EnvRow {
+    let got: Vec<[f64; 3]> = pixels
+        .iter()
+        .map(|&(i, j)| last.xyz[(j * last.size + i) as usize].map(f64::from))
+        .collect();
+    EnvRow {
+        samples,
+        gpu_ms: times.median().unwrap_or(0.0),
+        spread_ms: times.quantile(0.1).zip(times.quantile(0.9)),
+        frames: walls.len(),
+        wall_ms: crate::render::median(walls.to_vec()).unwrap_or(0.0),
+        vs_reference: error_stats(&got, reference),
+        intervals: bootstrap(&got, reference),
+    }
+}
+
+/// The reference at the scored pixels.
+struct Reference {
+    xyz: Vec<[f64; 3]>,
+    ms: f64,
+    /// The finest cell side any pixel reached.
+    h: f64,
+    error: f64,
+}
+
+/// A pixel's quadrature is refined (its cell side halved) until two successive values
+/// differ by less than this, relative to the pixel's Y, ...
+const REFERENCE_TOLERANCE: f64 = 2e-3;
+/// ... or the next would take more cells than this (about 3 s on a 2-core VM).
+const REFERENCE_MAX_CELLS: f64 = 8.4e6;
+
+/// The f64 quadrature of the same table and environment at `pixels`, in their order,
+/// over each pixel's reachable disc ([`env_radiance`] at cell sides `h`, `h/2`, ... from
+/// half a table texel, the table being a cubic spline over its texels: the value of the
+/// finest, and the difference from the one before as its error); with `end`, it stops
+/// past it once [`REFERENCE_MIN_PIXELS`] are done.
+fn reference(
+    lighting: &EnvLighting,
+    env: &EnvProfile,
+    shading: &crate::brdf::Shading,
+    size: u32,
+    pixels: &[(u32, u32)],
+    end: Option<Instant>,
+) -> Reference {
+    let start = Instant::now();
+    let g = |d: [f64; 3]| lighting.table.g(d).unwrap_or([0.0; 3]);
+    let (mut xyz, mut diff) = (Vec::with_capacity(pixels.len()), 0.0f64);
+    let mut finest = env.spec.texel_uv;
+    for &(i, j) in pixels {
+        if let Some(end) = end {
+            let per_pixel = start.elapsed().as_secs_f64() / xyz.len().max(1) as f64;
+            let next = Instant::now() + Duration::from_secs_f64(per_pixel);
+            if xyz.len() >= REFERENCE_MIN_PIXELS && next > end {
+                break;
+            }
+        }
+        let wr = map_direction(i, j, size).unwrap_or([0.0, 0.0, 1.0]);
+        let at = |h: f64| {
+            env_radiance(
+                &env.map,
+                &Frame::BRDF_MAP,
+                wr,
+                shading,
+                &g,
+                &Quadrature::reachable(wr, h),
+            )
+        };
+        let mut h = env.spec.texel_uv / 2.0;
+        let mut coarse = at(h);
+        let (fine, d) = loop {
+            h /= 2.0;
+            let fine = at(h);
+            let d = (0..3).fold(0.0f64, |m, k| m.max((fine[k] - coarse[k]).abs()));
+            let cells = 4.0 / (h * h);
+            if d <= REFERENCE_TOLERANCE * fine[1].abs() || cells > REFERENCE_MAX_CELLS {
+                break (fine, d);
+            }
+            coarse = fine;
+        };
+        finest = finest.min(h);
+        xyz.push(fine);
+        diff = diff.max(d);
+    }
+    // Relative to the brightest scored pixel, as the rows' errors are scaled: a dark
+    // pixel's own relative difference says little about the figures.
+    let y_max = xyz.iter().fold(0.0f64, |m, v| m.max(v[1]));
+    let error = if y_max > 0.0 { diff / y_max } else { diff };
+    let ms = start.elapsed().as_secs_f64() * 1e3;
+    eprintln!(
+        "profile: f64 environment quadrature at {} of {} pixels (cells down to {finest:.5}, largest difference between the last two {error:.1e} of the brightest pixel's Y): {:.1} s",
+        xyz.len(),
+        pixels.len(),
+        ms / 1e3
+    );
+    Reference {
+        xyz,
+        ms,
+        h: finest,
+        error,
+    }
+}
+
+/// The table and its density on one line.
+fn table_line(lighting: &EnvLighting, spec: &TableSpec) -> String {
+    let t = &lighting.table;
+    let r = t.region;
+    format!(
+        "environment table: u ∈ [{}, {}], v ∈ [{}, {}], w ∈ [{}, {}], texel {:.4}, K = {}, {}×{} nodes, {} nm, built on the CPU in {:.1} s; BRDF density {}×{} cells",
+        r.lo[0],
+        r.hi[0],
+        r.lo[1],
+        r.hi[1],
+        r.lo[2],
+        r.hi[2],
+        spec.texel_uv,
+        t.coeffs.len(),
+        t.nu,
+        t.nv,
+        spec.step_nm,
+        lighting.build_ms / 1e3,
+        lighting.density.bins[0],
+        lighting.density.bins[1]
+    )
+}
