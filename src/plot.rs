@@ -1070,8 +1070,7 @@ mod heat_tests {
     /// `name` in a directory of its own: the tests run in parallel and each removes its
     /// directory.
     fn scratch(name: &str) -> std::path::PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("diffract-plot-{}-{name}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("diffract-plot-{}-{name}", std::process::id()));
         std::fs::create_dir_all(&dir).unwrap();
         dir.join(name)
     }
