@@ -1,5 +1,6 @@
 //! `render --env`: every bad environment map or flag gets one `error:` line and exit
-//! status 1 before any device work; a small environment-lit BRDF map is drawn and written.
+//! status 1 before any device work; a small environment-lit BRDF map and a small scene lit
+//! by an environment and a disc light are drawn and written.
 
 mod gpu_util;
 
@@ -69,7 +70,27 @@ fn bad_maps_and_flags_get_one_error_line() {
             &["--brdf-map", "--env", "square.exr", "-o", "square.exr"],
             "refusing to overwrite an input",
         ),
-        (&["--env", "builtin:sky"], "not drawn yet"),
+        (&["--no-sun"], "[[disc_light]]"),
+        (&["--env-rotate-deg", "30"], "need an environment"),
+        (&["--env", "builtin:sky", "--variant", "flss"], "--variant"),
+        (&["--env", "builtin:sky", "--per-vertex"], "--per-vertex"),
+        (&["--env", "builtin:sky", "--repeat", "2"], "--repeat"),
+        (&["--env", "builtin:sky", "--size", "8"], "--size"),
+        (
+            &[
+                "--env",
+                "builtin:sky",
+                "--width",
+                "8192",
+                "--height",
+                "8192",
+            ],
+            "G-buffer pixels",
+        ),
+        (
+            &["--env", "builtin:sky", "--env-samples", "70000"],
+            "env samples",
+        ),
     ];
     for (args, want) in cases {
         let o = render(args, &d);
@@ -133,4 +154,112 @@ fn a_small_environment_lit_map_is_drawn() {
     // component); every value is finite.
     assert!(px.iter().flatten().all(|c| c.is_finite()));
     assert!(px.iter().any(|p| p[1] > 0.0), "a black map");
+}
+
+#[test]
+fn a_small_scene_under_an_environment_and_a_disc_light_is_drawn() {
+    if gpu_util::device().is_none() {
+        return;
+    }
+    let d = dir("scene");
+    let scene = d.join("lit.toml");
+    std::fs::write(
+        &scene,
+        "[mesh]\nbuiltin = \"sphere\"\n[material]\nheightfield = \"builtin:blazed\"\n\
+         [output]\nwidth = 12\nheight = 8\nsupersample = 2\n\
+         [environment]\nmap = \"builtin:studio\"\nintensity = 0.5\n\
+         [[disc_light]]\ndirection = [0.0, -1.0, -1.0]\nangular_diameter_deg = 12.0\n\
+         colour = [1.0, 0.8, 0.6]\n",
+    )
+    .unwrap();
+    let out = d.join("lit.exr");
+    let _ = std::fs::remove_file(&out);
+    let o = render(
+        &[
+            "--scene",
+            scene.to_str().unwrap(),
+            "--no-sun",
+            "--env-samples",
+            "8",
+            "--table-texel",
+            "0.02",
+            "--table-w-nodes",
+            "4",
+            "--table-step-nm",
+            "20",
+            "--no-cache",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &d,
+    );
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{}{}",
+        text,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        text.contains("environment table:")
+            && text.contains("8 samples per pixel (2 per G-buffer pixel of 2²)")
+            && text.contains("1 disc light(s), sun off"),
+        "{text}"
+    );
+    let (w, h, px) = diffract::image_io::read_exr(&out).unwrap();
+    assert_eq!((w, h), (12, 8));
+    assert!(px.iter().flatten().all(|c| c.is_finite()));
+    assert!(px.iter().any(|p| p[1] > 0.0), "a black picture");
+}
+
+#[test]
+fn a_second_render_reads_the_environment_table_from_the_cache() {
+    if gpu_util::device().is_none() {
+        return;
+    }
+    let d = dir("cache");
+    let cache = d.join("cache");
+    let _ = std::fs::remove_dir_all(&cache);
+    let run = |out: &str| {
+        let o = render(
+            &[
+                "--brdf-map",
+                "--env",
+                "builtin:sky",
+                "--heightfield",
+                "builtin:blazed",
+                "--size",
+                "8",
+                "--env-samples",
+                "4",
+                "--table-texel",
+                "0.02",
+                "--table-w-nodes",
+                "4",
+                "--table-step-nm",
+                "20",
+                "--cache-dir",
+                cache.to_str().unwrap(),
+                "-o",
+                out,
+            ],
+            &d,
+        );
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8_lossy(&o.stdout).to_string()
+    };
+    let cold = run("cold.exr");
+    let warm = run("warm.exr");
+    assert!(cold.contains("built on the CPU"), "{cold}");
+    assert!(warm.contains("samples read from the cache"), "{warm}");
+    // The cache holds the samples as float32: the pictures agree to that rounding.
+    let read = |f: &str| diffract::image_io::read_exr(&d.join(f)).unwrap().2;
+    let (a, b) = (read("cold.exr"), read("warm.exr"));
+    let peak = a.iter().flatten().fold(0f32, |m, c| m.max(c.abs()));
+    let worst = a
+        .iter()
+        .flatten()
+        .zip(b.iter().flatten())
+        .fold(0f32, |m, (x, y)| m.max((x - y).abs()));
+    assert!(peak > 0.1 && worst < 1e-5 * peak, "{worst} of {peak}");
 }

@@ -139,6 +139,17 @@ pub fn radiance_table(
     shading: &Shading,
     spec: &TableSpec,
 ) -> Result<ChebyshevW> {
+    let slices = radiance_slices(hf, coherence_um, shading, spec)?;
+    Ok(ChebyshevW::from_nodes(spec.region, &slices))
+}
+
+/// The samples of [`radiance_table`] at its Chebyshev nodes in `w`.
+pub fn radiance_slices(
+    hf: &HeightField,
+    coherence_um: f64,
+    shading: &Shading,
+    spec: &TableSpec,
+) -> Result<Slices> {
     let table = ColourTable::new(spec.step_nm)?;
     let scale = radiance_scale(&table, coherence_um, shading);
     let nodes = ChebyshevW::nodes(spec);
@@ -166,8 +177,7 @@ pub fn radiance_table(
             }
         }
     }
-    let slices = sum.expect("a colour table has at least two lines");
-    Ok(ChebyshevW::from_nodes(spec.region, &slices))
+    Ok(sum.expect("a colour table has at least two lines"))
 }
 
 /// A surface's tangent frame in world space.

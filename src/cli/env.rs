@@ -36,20 +36,9 @@ pub struct EnvArgs {
 
 impl EnvArgs {
     /// The environment the command lights with, loaded and checked (before any device
-    /// work): `--env`, else the scene's `[environment]`; `None` without either. Scenes lit
-    /// by environments or disc lights are refused with one line: only BRDF maps draw them.
+    /// work): `--env`, else the scene's `[environment]`; `None` without either. Flags that
+    /// need an environment, and a scene left without any light, get one error line.
     pub fn load(&self, brdf_map: bool, scene: &Scene) -> Result<Option<EnvMap>> {
-        let asks = self.env.is_some()
-            || self.env_samples.is_some()
-            || self.env_intensity.is_some()
-            || self.env_rotate_deg.is_some()
-            || self.no_sun;
-        if !brdf_map && (asks || scene.environment.is_some() || !scene.disc_lights.is_empty()) {
-            return Err(Error::invalid(
-                "lighting",
-                "environments, disc lights and --no-sun light BRDF maps (--brdf-map --env SOURCE); a scene lit by them is not drawn yet",
-            ));
-        }
         if let Some(n) = self.env_samples {
             if !(1..=MAX_SAMPLES).contains(&n) {
                 return Err(Error::invalid(
@@ -60,15 +49,29 @@ impl EnvArgs {
         }
         let spec = scene.environment.as_ref();
         let source = match (&self.env, spec) {
-            (Some(s), _) => EnvSource::parse(s)?,
-            (None, Some(e)) => e.source()?,
-            (None, None) if asks => {
+            (Some(s), _) => Some(EnvSource::parse(s)?),
+            (None, Some(e)) => Some(e.source()?),
+            (None, None) => None,
+        };
+        let discs = !brdf_map && !scene.disc_lights.is_empty();
+        let Some(source) = source else {
+            if self.env_intensity.is_some() || self.env_rotate_deg.is_some() {
                 return Err(Error::invalid(
                     "lighting",
-                    "--env-samples, --env-intensity, --env-rotate-deg and --no-sun need an environment (--env SOURCE)",
-                ))
+                    "--env-intensity and --env-rotate-deg need an environment (--env SOURCE)",
+                ));
             }
-            (None, None) => return Ok(None),
+            if (self.env_samples.is_some() || self.no_sun) && !discs {
+                return Err(Error::invalid(
+                    "lighting",
+                    if brdf_map {
+                        "--env-samples and --no-sun need an environment (--env SOURCE)"
+                    } else {
+                        "--env-samples and --no-sun need an environment (--env SOURCE) or [[disc_light]] tables in the scene"
+                    },
+                ));
+            }
+            return Ok(None);
         };
         let intensity = self
             .env_intensity
@@ -77,6 +80,12 @@ impl EnvArgs {
             .env_rotate_deg
             .unwrap_or_else(|| spec.map_or(0.0, |e| e.rotate_deg));
         EnvMap::load(&source, intensity, rotate).map(Some)
+    }
+
+    /// Whether a scene render takes the environment-lit path (radiance units): an
+    /// environment, disc lights or `--no-sun`.
+    pub fn lights_scene(&self, env: Option<&EnvMap>, scene: &Scene) -> bool {
+        env.is_some() || !scene.disc_lights.is_empty() || self.no_sun
     }
 }
 
@@ -123,9 +132,10 @@ pub fn draw_map(
     args: &EnvArgs,
     size: u32,
     sun_deg: (f64, f64),
+    cache: &crate::cli::cache::CacheArgs,
 ) -> Result<EnvMapOutput> {
     let shading = material.shading();
-    let lighting = EnvLighting::build(hf, material.coherence_um, &shading, spec)?;
+    let (lighting, built) = lighting_for(hf, material, spec, cache)?;
     let samples = args.env_samples.unwrap_or(DEFAULT_SAMPLES);
     let sun = (!args.no_sun).then(|| (crate::brdf::direction(sun_deg.0, sun_deg.1), 1.0));
     let req = EnvMapRequest {
@@ -137,20 +147,7 @@ pub fn draw_map(
         seed: 0,
     };
     let pic = render_env_brdf_map(dev, &lighting, &req)?;
-    let t = &lighting.table;
-    let mb = (t.nu + 2) * (t.nv + 2) * t.coeffs.len() * 12;
-    let table_line = format!(
-        "environment table: u, v ∈ [−2, 2], w ∈ [−2, 0], texel {:.4}, K = {}, {}×{} nodes, {:.1} MB float32, {} nm, built on the CPU in {:.1} s; BRDF density {}×{} cells",
-        spec.texel_uv,
-        t.coeffs.len(),
-        t.nu,
-        t.nv,
-        mb as f64 / 1e6,
-        spec.step_nm,
-        lighting.build_ms / 1e3,
-        lighting.density.bins[0],
-        lighting.density.bins[1]
-    );
+    let table_line = table_line(&lighting, spec, built);
     let rgb = pic
         .xyz
         .iter()
@@ -163,4 +160,157 @@ pub fn draw_map(
         table_line,
         samples,
     })
+}
+
+/// `render` of a scene lit by an environment, disc lights or `--no-sun`: the scene in
+/// radiance units ([`crate::render::env_scene`]), written as `render` writes scenes
+/// (supersampled, exposed, tone-mapped for a PNG).
+pub fn run_env_scene(
+    args: &crate::cli::render::RenderArgs,
+    scene: &Scene,
+    env: Option<&EnvMap>,
+) -> Result<()> {
+    use crate::render::variant::VariantKind;
+    crate::guard::refuse_flags(
+        &[
+            ("--variant", args.gpu.variant != VariantKind::Default),
+            ("--per-vertex", args.gpu.per_vertex),
+            ("--repeat", args.repeat > 0),
+        ],
+        "a scene lit by an environment, disc lights or --no-sun (it draws the chebyshev-w radiance table)",
+    )?;
+    crate::render::env_scene::check_size(None, scene)?;
+    let start = std::time::Instant::now();
+    let material = args.material.apply(scene.material.clone());
+    let (hf, _) = material.load_planned(
+        &crate::brdf::truncation::Reach::ALL,
+        crate::brdf::truncation::Precision::F32,
+        &crate::report::Stderr,
+    )?;
+    let inputs = crate::render::SceneInputs::load(scene, true)?;
+    for line in &inputs.mesh.repairs {
+        crate::report::Report::warn(&crate::report::Stderr, line);
+    }
+    let t = &args.gpu.table;
+    let spec = map_table_spec(
+        t.table_texel,
+        t.table_w_nodes,
+        t.table_step_nm,
+        material.coherence_um,
+    )?;
+    let dev = crate::gpu::Device::new(crate::cli::gpu::validation_requested())?;
+    crate::render::env_scene::check_size(Some(&dev), scene)?;
+    let shading = material.shading();
+    let (lighting, built) = lighting_for(&hf, &material, &spec, &args.cache)?;
+    let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);
+    let samples = args.env.env_samples.unwrap_or(DEFAULT_SAMPLES);
+    let frame = crate::render::env_scene::render_env_scene(
+        &dev,
+        &lighting,
+        &crate::render::env_scene::EnvScene {
+            scene,
+            mesh: &inputs.mesh,
+            texture: inputs.texture.as_ref(),
+            env,
+            lights: &lights,
+            shading,
+            samples,
+            seed: 0,
+        },
+    )?;
+    let out = &scene.output;
+    let rgb = match crate::image_io::output_format(&args.out)? {
+        crate::image_io::OutputFormat::Exr => {
+            let (_, _, px) = crate::image_io::box_downsample(
+                frame.width,
+                frame.height,
+                &frame.rgb,
+                out.supersample.max(1),
+            )?;
+            px.into_iter()
+                .map(|p| p.map(|c| c * out.exposure))
+                .collect()
+        }
+        _ => out.resolve(&frame.rgb)?,
+    };
+    if rgb.iter().flatten().any(|c| !c.is_finite()) {
+        return Err(Error::invalid(
+            "render",
+            format!(
+                "a pixel is not a finite number; nothing written to {}",
+                args.out.display()
+            ),
+        ));
+    }
+    crate::image_io::write_image(&args.out, out.width, out.height, &rgb, 1.0)?;
+    println!("{}", table_line(&lighting, &spec, built));
+    println!(
+        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: {} samples per pixel ({} per G-buffer pixel of {}²), {} pixels covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s",
+        dev.info.name,
+        out.width,
+        out.height,
+        args.out.display(),
+        out.exposure,
+        lighting.mirror_scale,
+        env.map_or("no environment".to_string(), |e| e.name.clone()),
+        scene.disc_lights.len(),
+        if args.env.no_sun { "off" } else { "on" },
+        samples,
+        frame.samples_per_pixel,
+        out.supersample.max(1),
+        frame.covered,
+        frame.raster_ms,
+        frame.gpu_ms,
+        start.elapsed().as_secs_f64()
+    );
+    let n = dev.validation_messages();
+    if n > 0 {
+        return Err(Error::Validation(n));
+    }
+    Ok(())
+}
+
+/// The radiance table of `spec` and its density, through the cache unless `--no-cache`;
+/// and whether it was built (not read from the cache).
+fn lighting_for(
+    hf: &crate::heightfield::HeightField,
+    material: &crate::material::Material,
+    spec: &TableSpec,
+    cache: &crate::cli::cache::CacheArgs,
+) -> Result<(EnvLighting, bool)> {
+    let dir = cache.dir();
+    let (l, cached) = EnvLighting::build_cached(
+        hf,
+        material.coherence_um,
+        &material.shading(),
+        spec,
+        dir.as_deref(),
+        &crate::report::Stderr,
+    )?;
+    Ok((l, !cached))
+}
+
+/// The one line that says what the environment table holds and where it came from.
+fn table_line(lighting: &EnvLighting, spec: &TableSpec, built: bool) -> String {
+    let t = &lighting.table;
+    let mb = (t.nu + 2) * (t.nv + 2) * t.coeffs.len() * 12;
+    let origin = if built {
+        format!("built on the CPU in {:.1} s", lighting.build_ms / 1e3)
+    } else {
+        format!(
+            "samples read from the cache, prepared in {:.1} s",
+            lighting.build_ms / 1e3
+        )
+    };
+    format!(
+        "environment table: u, v ∈ [−2, 2], w ∈ [−2, 0], texel {:.4}, K = {}, {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",
+        spec.texel_uv,
+        t.coeffs.len(),
+        t.nu,
+        t.nv,
+        mb as f64 / 1e6,
+        spec.step_nm,
+        lighting.density.bins[0],
+        lighting.density.bins[1]
+    )
 }

@@ -72,8 +72,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let scene = args.scene.load()?;
     crate::image_io::output_format(&args.out)?;
     render_args(args, &scene)?;
-    if let Some(env) = args.env.load(args.brdf_map, &scene)? {
-        return run_env_map(args, &scene, &env);
+    let env = args.env.load(args.brdf_map, &scene)?;
+    match env {
+        Some(env) if args.brdf_map => return run_env_map(args, &scene, &env),
+        env if !args.brdf_map && args.env.lights_scene(env.as_ref(), &scene) => {
+            return crate::cli::env::run_env_scene(args, &scene, env.as_ref());
+        }
+        _ => {}
     }
     // `default` means the best variant that can draw the request: one wavelength needs
     // flss (the table variants integrate the spectrum offline). Explicit choices stand.
@@ -225,7 +230,17 @@ fn run_env_map(args: &RenderArgs, scene: &Scene, env: &crate::light::env::EnvMap
         args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I),
         args.phi_i.unwrap_or(0.0),
     );
-    let out = crate::cli::env::draw_map(&dev, &hf, &material, &spec, env, &args.env, size, sun)?;
+    let out = crate::cli::env::draw_map(
+        &dev,
+        &hf,
+        &material,
+        &spec,
+        env,
+        &args.env,
+        size,
+        sun,
+        &args.cache,
+    )?;
     if out.rgb.iter().flatten().any(|c| !c.is_finite()) {
         return Err(Error::invalid(
             "render",

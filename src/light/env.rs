@@ -217,6 +217,15 @@ impl EnvMap {
         (c, r)
     }
 
+    /// The world direction of the middle of pixel `(col, row)`: its centre column, at the
+    /// height (`cos θ`) halfway between its edges, so that half its solid angle lies each side.
+    pub fn pixel_direction(&self, col: u32, row: u32) -> [f64; 3] {
+        let h = f64::from(self.height);
+        let ct = 0.5 * ((f64::from(row) / h * PI).cos() + (f64::from(row + 1) / h * PI).cos());
+        let x = (f64::from(col) + 0.5) / f64::from(self.width);
+        rotate_y(map_to_direction(x, ct.acos() / PI), self.rotate_rad)
+    }
+
     /// Radiance (linear sRGB) arriving from world direction `d` (unit), nearest pixel.
     pub fn radiance(&self, d_world: [f64; 3]) -> [f64; 3] {
         let (c, r) = self.pixel_of(d_world);

@@ -1,0 +1,388 @@
+// Shared by the environment-lit compute stages (env_map.comp: a BRDF map; env_scene.comp:
+// the pixels of a scene's G-buffer): the parameters and buffers, the BRDF C·G of the
+// radiance-weighted chebyshev-w table, the samplers (the BRDF's density over (u, v), the
+// environment by luminance, disc lights uniform in their cone) and the estimator of one
+// surface point, L_o = ∫ L(ωi)·f·cos θi dωi, that both stages call (MODEL §10). Mirrors
+// brdf::env_reference and src/render/env.rs.
+//
+// Per direction the integrand is that of thesis Algorithm 4 with absolute units:
+//   L(ωi)·cos θi·[(1 − w_d)·f_r + ((1 − α) + w_d)·t],   f_r = C·G (per du dv: cos θi dωi
+//   = du dv), α = min(1, |F|) at the half vector, t the texture's albedo (linear sRGB);
+// without a texture w_d = 0 and t = 0. The diffraction part is summed per XYZ channel (the
+// dispersion is in G, not in the light), the texture part per linear-sRGB channel.
+#ifndef ENV_COMMON_GLSL
+#define ENV_COMMON_GLSL
+
+layout(local_size_x = 64) in;
+
+layout(std430, set = 0, binding = 0) readonly buffer Params {
+    vec4 regionLo;   // xyz: lower corner (u0, v0, w0) of the table
+    vec4 regionHi;   // xyz: upper corner
+    vec4 blend;      // x: w_diffuse (0 without a texture), y: probability of the environment among the light samples
+    vec4 white;      // xyz: D65's white XYZ, w: Schlick R0
+    vec4 cdfLo;      // xy: (u, v) of the G density's first bin corner, z: first CDF node w, w: node step
+    vec4 cdfStep;    // xy: bin size in u and v
+    ivec4 tableDims; // x: nu, y: nv, z: K (Chebyshev terms)
+    ivec4 cdfDims;   // x: bins along u, y: along v, z: CDF nodes in w
+    ivec4 envDims;   // x: W, y: H, z: samples per pixel, w: pixels (map side S, or G-buffer pixels)
+    ivec4 flags;     // x: Fresnel, y: shadowing, z: the environment can be sampled, w: seed
+    vec4 envRot;     // x: cos, y: sin of the map's rotation about +Y
+    ivec4 lightDims; // x: point lights, y: disc lights, z: texture blending, w: a BRDF map's side
+} P;
+layout(std430, set = 0, binding = 1) readonly buffer Coeff { float coeff[]; };
+layout(std430, set = 0, binding = 2) readonly buffer EnvXyz { float envXyz[]; };
+// Marginal CDF over rows (H + 1), conditional CDFs over columns (H·(W + 1)), then the
+// density in solid angle of each pixel (W·H).
+layout(std430, set = 0, binding = 3) readonly buffer EnvCdf { float envCdf[]; };
+// Per CDF node: marginal over v bins (nbv + 1), conditionals over u bins (nbv·(nbu + 1)),
+// then the density in (u, v) of each bin (nbu·nbv).
+layout(std430, set = 0, binding = 4) readonly buffer GCdf { float gCdf[]; };
+// The sums over the samples so far (the CPU divides by their number): each dispatch adds
+// samples [base, base + count); the first also adds the point lights, times the total.
+// Per pixel: XYZ of the diffraction part, then linear sRGB of the texture part.
+layout(std430, set = 0, binding = 5) buffer Out { vec4 outSum[]; };
+// Point lights (2 vec4 each: towards the light in world space; irradiance XYZ), then disc
+// lights (3 vec4 each: towards the centre, w: cos of the angular radius; radiance XYZ,
+// w: solid angle; x: probability among the light samples), then the environment's
+// irradiance E(n) = ∫ L cos dω (linear sRGB) at IRR_W×IRR_H normals placed like the map's
+// pixel centres (world frame).
+layout(std430, set = 0, binding = 6) readonly buffer Lights { vec4 lights[]; };
+layout(push_constant) uniform Chunk { int base; int count; } chunk;
+
+const float PI = 3.14159265358979;
+const int IRR_W = 128;
+const int IRR_H = 64;
+
+// XYZ → linear sRGB (MODEL §5, colour.glsl; columns listed).
+const mat3 XYZ_TO_SRGB = mat3(
+    3.2406, -0.9689, 0.0557,
+    -1.5372, 1.8758, -0.2040,
+    -0.4986, 0.0415, 1.0570);
+
+// --- the BRDF: C(ωi, ωr)·G(u, v, w) -------------------------------------------------------
+
+float gain(vec3 wi, vec3 wr) {
+    float ci = wi.z, cr = wr.z;
+    if (ci <= 0.0 || cr <= 0.0) return 0.0;
+    float w = ci + cr;
+    vec3 h = wi + wr;
+    float onePlus = 0.5 * dot(h, h);
+    float c = onePlus * onePlus / (w * w * ci * cr);
+    h /= length(h);
+    float cosRH = clamp(dot(wr, h), 0.0, 1.0);
+    if (P.flags.x != 0) {
+        float r0 = P.white.w;
+        float m = 1.0 - cosRH;
+        c *= (r0 + (1.0 - r0) * m * m * m * m * m) / r0;
+    }
+    if (P.flags.y != 0) {
+        float k = cosRH > 0.0 ? 2.0 * h.z / cosRH : 0.0;
+        c *= min(1.0, min(k * cr, k * ci));
+    }
+    return (isnan(c) || isinf(c)) ? 0.0 : c;
+}
+
+vec4 splineWeights(float f) {
+    float f2 = f * f, f3 = f2 * f;
+    return vec4((1.0 - f) * (1.0 - f) * (1.0 - f), 3.0 * f3 - 6.0 * f2 + 4.0,
+                -3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0, f3) / 6.0;
+}
+
+// G(u, v, w) ≥ 0 of the chebyshev-w model (cubic B-spline planes, Clenshaw in w); 0 outside.
+vec3 tableG(vec3 uvw) {
+    vec3 f = (uvw - P.regionLo.xyz) / (P.regionHi.xyz - P.regionLo.xyz);
+    if (any(lessThan(f, vec3(0.0))) || any(greaterThan(f, vec3(1.0)))) return vec3(0.0);
+    int nu = P.tableDims.x, nv = P.tableDims.y, k = P.tableDims.z;
+    vec2 t = f.xy * vec2(nu - 1, nv - 1);
+    ivec2 i = clamp(ivec2(floor(t)), ivec2(0), ivec2(nu - 2, nv - 2));
+    vec2 x = t - vec2(i);
+    vec4 wx = splineWeights(x.x), wy = splineWeights(x.y);
+    int su = nu + 2, plane = su * (nv + 2);
+    float xw = 2.0 * f.z - 1.0;
+    vec3 b1 = vec3(0.0), b2 = vec3(0.0), c0 = vec3(0.0);
+    for (int j = k - 1; j >= 0; --j) {
+        vec3 c = vec3(0.0);
+        for (int b = 0; b < 4; ++b) {
+            for (int a = 0; a < 4; ++a) {
+                int o = 3 * (j * plane + (i.y + b) * su + i.x + a);
+                c += wx[a] * wy[b] * vec3(coeff[o], coeff[o + 1], coeff[o + 2]);
+            }
+        }
+        if (j == 0) { c0 = c; break; }
+        vec3 b0 = c + 2.0 * xw * b1 - b2;
+        b2 = b1;
+        b1 = b0;
+    }
+    return max(c0 + xw * b1 - b2, vec3(0.0));
+}
+
+// --- CDF inversion --------------------------------------------------------------------------
+
+// The interval i of the CDF at base[0..n] holding xi, and the fraction through it.
+int invertCdf(bool env, int base, int n, float xi, out float frac) {
+    int lo = 0, hi = n - 1;
+    while (lo < hi) {
+        int mid = (lo + hi) / 2;
+        float c = env ? envCdf[base + mid + 1] : gCdf[base + mid + 1];
+        if (c <= xi) lo = mid + 1; else hi = mid;
+    }
+    float a = env ? envCdf[base + lo] : gCdf[base + lo];
+    float b = env ? envCdf[base + lo + 1] : gCdf[base + lo + 1];
+    frac = b > a ? clamp((xi - a) / (b - a), 0.0, 1.0) : 0.5;
+    return lo;
+}
+
+// --- the environment ------------------------------------------------------------------------
+
+// World → the map's own frame (rotated back about +Y) → pixel index.
+int envPixel(vec3 d) {
+    float c = P.envRot.x, s = P.envRot.y;
+    vec3 m = vec3(c * d.x - s * d.z, d.y, s * d.x + c * d.z);
+    int W = P.envDims.x, H = P.envDims.y;
+    float x = fract(0.5 + atan(m.x, -m.z) / (2.0 * PI));
+    float y = acos(clamp(m.y, -1.0, 1.0)) / PI;
+    int col = min(int(x * float(W)), W - 1);
+    int row = min(int(y * float(H)), H - 1);
+    return row * W + col;
+}
+
+vec3 envRadiance(int p) { return vec3(envXyz[3 * p], envXyz[3 * p + 1], envXyz[3 * p + 2]); }
+
+float envPdf(int p) {
+    int W = P.envDims.x, H = P.envDims.y;
+    return envCdf[(H + 1) + H * (W + 1) + p];
+}
+
+// A world direction drawn by luminance; its pixel in p.
+vec3 sampleEnv(vec2 xi, out int p) {
+    int W = P.envDims.x, H = P.envDims.y;
+    float fr, fc;
+    int row = invertCdf(true, 0, H, xi.x, fr);
+    int col = invertCdf(true, (H + 1) + row * (W + 1), W, xi.y, fc);
+    p = row * W + col;
+    float x = (float(col) + fc) / float(W);
+    float top = cos(float(row) / float(H) * PI), bottom = cos(float(row + 1) / float(H) * PI);
+    float ct = mix(top, bottom, fr);
+    float st = sqrt(max(0.0, 1.0 - ct * ct));
+    float phi = (x - 0.5) * 2.0 * PI;
+    vec3 m = vec3(st * sin(phi), ct, -st * cos(phi));
+    float c = P.envRot.x, s = P.envRot.y;
+    return vec3(c * m.x + s * m.z, m.y, -s * m.x + c * m.z);
+}
+
+// --- the BRDF's density over (u, v) ---------------------------------------------------------
+
+int nodeBase(int m) {
+    int nbu = P.cdfDims.x, nbv = P.cdfDims.y;
+    return m * ((nbv + 1) + nbv * (nbu + 1) + nbu * nbv);
+}
+
+float nodeDensity(int m, vec2 uv) {
+    int nbu = P.cdfDims.x, nbv = P.cdfDims.y;
+    vec2 b = (uv - P.cdfLo.xy) / P.cdfStep.xy;
+    if (any(lessThan(b, vec2(0.0))) || b.x >= float(nbu) || b.y >= float(nbv)) return 0.0;
+    int base = nodeBase(m) + (nbv + 1) + nbv * (nbu + 1);
+    return gCdf[base + int(b.y) * nbu + int(b.x)];
+}
+
+// The two CDF nodes around the pixel's specular w and the weight of the second.
+void nodesOf(float wSpec, out int m0, out int m1, out float t) {
+    float x = clamp((wSpec - P.cdfLo.z) / P.cdfLo.w, 0.0, float(P.cdfDims.z - 1));
+    m0 = int(floor(x));
+    m1 = min(m0 + 1, P.cdfDims.z - 1);
+    t = x - float(m0);
+}
+
+float brdfDensity(vec2 uv, int m0, int m1, float t) {
+    return (1.0 - t) * nodeDensity(m0, uv) + t * nodeDensity(m1, uv);
+}
+
+vec2 sampleBrdf(vec3 xi, int m0, int m1, float t) {
+    int m = xi.z < t ? m1 : m0;
+    int nbu = P.cdfDims.x, nbv = P.cdfDims.y;
+    int base = nodeBase(m);
+    float fr, fc;
+    int row = invertCdf(false, base, nbv, xi.x, fr);
+    int col = invertCdf(false, base + (nbv + 1) + row * (nbu + 1), nbu, xi.y, fc);
+    return P.cdfLo.xy + (vec2(col, row) + vec2(fc, fr)) * P.cdfStep.xy;
+}
+
+// --- sequences ------------------------------------------------------------------------------
+
+uint hash(uint x) {
+    x ^= x >> 16; x *= 0x7feb352du; x ^= x >> 15; x *= 0x846ca68bu; x ^= x >> 16;
+    return x;
+}
+
+float unitFloat(uint x) { return float(x >> 8) * (1.0 / 16777216.0); }
+
+// --- disc lights ----------------------------------------------------------------------------
+
+// Radiance XYZ of every light at world direction d (the environment's pixel penv, or its
+// own pixel when penv < 0) and the density in solid angle of the light sampler there.
+// lDisc: the disc lights' part of it.
+vec3 radianceAt(vec3 d, int penv, out float pLight, out vec3 lDisc) {
+    int p = penv >= 0 ? penv : envPixel(d);
+    lDisc = vec3(0.0);
+    pLight = P.flags.z != 0 ? P.blend.y * envPdf(p) : 0.0;
+    int base = 2 * P.lightDims.x;
+    for (int j = 0; j < P.lightDims.y; ++j) {
+        vec4 axis = lights[base + 3 * j];
+        if (dot(d, axis.xyz) >= axis.w) {
+            vec4 rad = lights[base + 3 * j + 1];
+            lDisc += rad.xyz;
+            pLight += lights[base + 3 * j + 2].x / rad.w;
+        }
+    }
+    return envRadiance(p) + lDisc;
+}
+
+// The environment's irradiance at the world normal n: bilinear between the table's
+// normals (wrapping in azimuth).
+vec3 irradianceAt(vec3 n) {
+    int base = 2 * P.lightDims.x + 3 * P.lightDims.y;
+    float x = fract(0.5 + atan(n.x, -n.z) / (2.0 * PI)) * float(IRR_W) - 0.5;
+    float y = clamp(acos(clamp(n.y, -1.0, 1.0)) / PI * float(IRR_H) - 0.5, 0.0, float(IRR_H - 1));
+    int i0 = int(floor(x)), j0 = min(int(floor(y)), IRR_H - 2);
+    float fx = x - float(i0), fy = y - float(j0);
+    int ia = (i0 + IRR_W) % IRR_W, ib = (i0 + 1 + IRR_W) % IRR_W;
+    vec3 a = lights[base + j0 * IRR_W + ia].xyz, b = lights[base + j0 * IRR_W + ib].xyz;
+    vec3 c = lights[base + (j0 + 1) * IRR_W + ia].xyz, d = lights[base + (j0 + 1) * IRR_W + ib].xyz;
+    return mix(mix(a, b, fx), mix(c, d, fx), fy);
+}
+
+// A direction uniform in the cone of half-angle acos(cosA) around the unit vector a.
+vec3 sampleCone(vec3 a, float cosA, vec2 xi) {
+    float ct = 1.0 - xi.x * (1.0 - cosA);
+    float st = sqrt(max(0.0, 1.0 - ct * ct));
+    float phi = 2.0 * PI * xi.y;
+    vec3 e1 = normalize(cross(a, abs(a.x) < 0.9 ? vec3(1.0, 0.0, 0.0) : vec3(0.0, 1.0, 0.0)));
+    vec3 e2 = cross(a, e1);
+    return ct * a + st * (cos(phi) * e1 + sin(phi) * e2);
+}
+
+// A world direction from the light sampler: the environment (probability blend.y) or a
+// disc light (its probability); penv is the environment's pixel, or −1.
+vec3 sampleLight(vec2 xi, out int penv) {
+    penv = -1;
+    float q0 = P.blend.y;
+    if (xi.x < q0 || P.lightDims.y == 0) {
+        return sampleEnv(vec2(clamp(xi.x / max(q0, 1e-30), 0.0, 1.0), xi.y), penv);
+    }
+    int base = 2 * P.lightDims.x;
+    float acc = q0;
+    int last = P.lightDims.y - 1;
+    for (int j = 0; j <= last; ++j) {
+        float q = lights[base + 3 * j + 2].x;
+        if (xi.x < acc + q || j == last) {
+            vec4 axis = lights[base + 3 * j];
+            float u = clamp((xi.x - acc) / max(q, 1e-30), 0.0, 1.0);
+            return sampleCone(axis.xyz, axis.w, vec2(u, xi.y));
+        }
+        acc += q;
+    }
+    return vec3(0.0, 1.0, 0.0);
+}
+
+// --- one surface point ----------------------------------------------------------------------
+
+// A shaded point: its orthonormal tangent frame in world space, ωr in it, and the texture's
+// albedo (linear sRGB; unused without texture blending).
+struct Surface {
+    vec3 t;
+    vec3 b;
+    vec3 n;
+    vec3 wr;
+    vec3 tex;
+};
+
+vec3 toWorld(Surface s, vec3 v) { return v.x * s.t + v.y * s.b + v.z * s.n; }
+vec3 toTangent(Surface s, vec3 d) { return vec3(dot(d, s.t), dot(d, s.b), dot(d, s.n)); }
+
+// Adds scale·L·[(1 − w_d)·C·G] to xyz and the texture part to rgb (header): of the lights
+// outside the irradiance table (lOwn) scale·L·((1 − α) + w_d)·t; of the environment only
+// −scale·L·α·t, its (1 + w_d)·t·E(n) being added once from the table (a control variate:
+// the Monte Carlo part is the small Fresnel term alone).
+void addDirection(Surface s, vec3 wi, vec3 l, vec3 lOwn, float scale, inout vec3 xyz,
+                  inout vec3 rgb) {
+    float c = gain(wi, s.wr);
+    if (c > 0.0) {
+        vec3 g = tableG(vec3(-wi.xy - s.wr.xy, -wi.z - s.wr.z));
+        xyz += scale * (1.0 - P.blend.x) * c * l * g;
+    }
+    if (P.lightDims.z != 0 && wi.z > 0.0) {
+        vec3 h = wi + s.wr;
+        float lh = length(h);
+        float cosRH = lh > 1e-20 ? clamp(dot(s.wr, h / lh), 0.0, 1.0) : 0.0;
+        float r0 = P.white.w;
+        float m = 1.0 - cosRH;
+        float alpha = min(1.0, abs(r0 + (1.0 - r0) * m * m * m * m * m));
+        vec3 k = ((1.0 - alpha) + P.blend.x) * lOwn - alpha * (l - lOwn);
+        rgb += scale * (XYZ_TO_SRGB * k) * s.tex;
+    }
+}
+
+// The sums of this dispatch's samples at a pixel (XYZ of the diffraction part, linear
+// sRGB of the texture part); the first dispatch adds the point lights times the total.
+// key scrambles the sequence; offset is where in it the pixel's samples start (pixels that
+// share a key take consecutive stretches of one low-discrepancy sequence).
+void integrate(Surface s, uint key, uint offset, out vec3 xyz, out vec3 rgb) {
+    xyz = vec3(0.0);
+    rgb = vec3(0.0);
+    int n = P.envDims.z;
+    if (chunk.base == 0) {
+        for (int j = 0; j < P.lightDims.x; ++j) {
+            vec3 wi = toTangent(s, lights[2 * j].xyz);
+            vec3 e = lights[2 * j + 1].xyz;
+            if (wi.z > 0.0) addDirection(s, wi, e, e, float(n) * wi.z, xyz, rgb);
+        }
+        if (P.lightDims.z != 0) rgb += float(n) * (1.0 + P.blend.x) * irradianceAt(s.n) * s.tex;
+    }
+    // R5: α_k = φ^−k, φ the real root of x⁶ = x + 1, as 32-bit fixed-point fractions so
+    // that the n-th point is exact for every n (x_n = rot + n·α mod 1, wrapping).
+    const uint alpha[5] = uint[5](3785032106u, 3335640776u, 2939605022u, 2590590015u,
+                                  2283013049u);
+    uint h = hash(key * 9781u + uint(P.flags.w) * 6271u + 1u);
+    uint rot[5];
+    for (int d = 0; d < 5; ++d) { h = hash(h + uint(d)); rot[d] = h; }
+    int m0, m1;
+    float tw;
+    nodesOf(-2.0 * s.wr.z, m0, m1, tw);
+    bool lightSampling = P.flags.z != 0 || P.lightDims.y > 0;
+    for (int k = chunk.base; k < chunk.base + chunk.count; ++k) {
+        float xi[5];
+        for (int d = 0; d < 5; ++d) xi[d] = unitFloat(rot[d] + (uint(k + 1) + offset) * alpha[d]);
+        // The BRDF's sample: (u, v), then ωi; the integrand per du dv over p_uv.
+        vec2 uv = sampleBrdf(vec3(xi[0], xi[1], xi[2]), m0, m1, tw);
+        vec2 ixy = -uv - s.wr.xy;
+        float s2 = dot(ixy, ixy);
+        float pUv = brdfDensity(uv, m0, m1, tw);
+        if (s2 < 1.0 && pUv > 0.0) {
+            vec3 wi = vec3(ixy, sqrt(1.0 - s2));
+            float pl;
+            vec3 own;
+            vec3 l = radianceAt(toWorld(s, wi), -1, pl, own);
+            float pb = pUv * wi.z;
+            float mis = pb * pb / (pb * pb + pl * pl);
+            addDirection(s, wi, l, own, mis / pUv, xyz, rgb);
+        }
+        // The lights' sample: the integrand per dωi (times cos θi) over p_ω.
+        if (lightSampling) {
+            int p;
+            vec3 d = sampleLight(vec2(xi[3], xi[4]), p);
+            vec3 wi = toTangent(s, d);
+            float pl;
+            vec3 own;
+            vec3 l = radianceAt(d, p, pl, own);
+            if (wi.z > 0.0 && pl > 0.0) {
+                float pb = brdfDensity(-wi.xy - s.wr.xy, m0, m1, tw) * wi.z;
+                float mis = pl * pl / (pb * pb + pl * pl);
+                addDirection(s, wi, l, own, wi.z * mis / pl, xyz, rgb);
+            }
+        }
+    }
+    if (any(isnan(xyz)) || any(isinf(xyz))) xyz = vec3(0.0);
+    if (any(isnan(rgb)) || any(isinf(rgb))) rgb = vec3(0.0);
+}
+
+#endif
