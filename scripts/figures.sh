@@ -35,6 +35,9 @@ registry=(
     "brdf_map_measured_tiled_60deg|slow|BRDF map, measured AFM crop tiled, φi = 90°, 128² (~10 min)"
     "brdf_map_measured_grown_60deg|slow|BRDF map, measured crop grown to 960², φi = 90°, 128² (~10 min)"
     "default_closeup|slow|default scene, 512² (cold table build ~90 s, up to 8 min under load)"
+    "lit_sun|cheap|default scene in the sun, 256² (~10 s)"
+    "lit_sky|slow|default scene under builtin:sky and the sun, 256², 64 samples (~1-2 min)"
+    "lit_studio|slow|default scene under builtin:studio, no sun, 256², 64 samples (~15 s after lit_sky)"
     "closeup_scales|slow|default scene through a 10° lens, 384² (~3-8 min)"
     "default_snake|slow|flat-scales example scene, 512² (table build, ~2-5 min)"
     "profile_elaphe|slow|profiler: error against GPU time, Elaphe-like, 128² (~30-60 min)"
@@ -171,6 +174,17 @@ make_figure() {
             mv "$scratch/stability/stability.png" "$out/$name.png" ;;
         default_closeup)
             d render -o "$scratch/$name.png"
+            mv "$scratch/$name.png" "$out/$name.png" ;;
+        lit_sun)
+            d render --width 256 --height 256 -o "$scratch/$name.png"
+            mv "$scratch/$name.png" "$out/$name.png" ;;
+        lit_sky)
+            d render --width 256 --height 256 --env builtin:sky --env-samples 64 \
+                -o "$scratch/$name.png"
+            mv "$scratch/$name.png" "$out/$name.png" ;;
+        lit_studio)
+            d render --width 256 --height 256 --env builtin:studio --no-sun --env-samples 64 \
+                -o "$scratch/$name.png"
             mv "$scratch/$name.png" "$out/$name.png" ;;
         closeup_scales)
             sed 's/^fov_y_deg = 30.0 .*/fov_y_deg = 10.0/' assets/default_scene.toml \

@@ -16,8 +16,9 @@ pub const DEFAULT_ENV_W_NODES: usize = 16;
 /// `render`'s environment flags.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct EnvArgs {
-    /// Light a BRDF map (--brdf-map) with an environment: an equirectangular .hdr or .exr,
-    /// or builtin:white, builtin:sky, builtin:studio. A scene's [environment] is the default.
+    /// Light the scene (or the BRDF map, with --brdf-map) with an environment: an
+    /// equirectangular .hdr or .exr, or builtin:white, builtin:sky, builtin:studio. A scene's
+    /// [environment] is the default.
     #[arg(long, value_name = "SOURCE")]
     pub env: Option<String>,
     /// Samples per pixel of the environment [default: 256].
