@@ -1021,3 +1021,37 @@ fn closing_during_a_build_stops_it_cleanly() {
     );
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// A scene lit by an environment or disc lights is shown in the sun, with a line that says
+/// so (the environment is drawn by `render`).
+#[test]
+fn an_environment_scene_warns_that_the_viewer_lights_with_the_sun() {
+    let dir = std::env::temp_dir().join(format!("diffract-view-env-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let scene = dir.join("env.toml");
+    let base = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("assets/default_scene.toml"),
+    )
+    .unwrap();
+    std::fs::write(&scene, base + "\n[environment]\nmap = \"builtin:sky\"\n").unwrap();
+    let out = diffract()
+        .args(["view", "--scene", scene.to_str().unwrap(), "--frames", "1"])
+        .env_remove("DISPLAY")
+        .env_remove("WAYLAND_DISPLAY")
+        .env_remove("WAYLAND_SOCKET")
+        .output()
+        .expect("run diffract view");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    let lines: Vec<&str> = stderr.lines().collect();
+    assert_eq!(out.status.code(), Some(1), "{stderr}");
+    assert_eq!(lines.len(), 2, "{stderr}");
+    assert!(
+        lines[0].starts_with("warning: the viewer lights with the sun only"),
+        "{stderr}"
+    );
+    assert!(
+        lines[1].starts_with("error: cannot show a window:"),
+        "{stderr}"
+    );
+    std::fs::remove_dir_all(&dir).ok();
+}

@@ -133,6 +133,11 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         }
     }
     view_args(args, &scene)?;
+    if scene.environment.is_some() || !scene.disc_lights.is_empty() {
+        eprintln!(
+            "warning: the viewer lights with the sun only; the scene's [environment] and [[disc_light]] tables are drawn by `diffract render` (docs/lighting.md)"
+        );
+    }
     if args.frames == Some(0) {
         return Err(Error::invalid("frames", "0; expected at least 1"));
     }
