@@ -1042,12 +1042,7 @@ pub fn to_markdown(spec: &MatrixSpec, cells: &[Cell], header: &str) -> String {
             "\n### {}: {}, preferred {}, T = {}\n\n| h_max (µm) |",
             cfg.variant, cfg.evaluator, cfg.expansion, cfg.terms
         );
-        for th in &spec.theta_i_deg {
-            s += &format!(" θi = {th}° |");
-        }
-        s += "\n|---|";
-        s += &"---|".repeat(spec.theta_i_deg.len());
-        s += "\n";
+        s += &theta_columns(spec);
         for &h in &spec.h_max_um {
             s += &format!("| {h} |");
             for &th in &spec.theta_i_deg {
@@ -1061,6 +1056,16 @@ pub fn to_markdown(spec: &MatrixSpec, cells: &[Cell], header: &str) -> String {
         }
     }
     s
+}
+
+/// The rest of a table's header after its `| h_max (µm) |` cell: a column per `θi`, and
+/// the rule under it.
+fn theta_columns(spec: &MatrixSpec) -> String {
+    let mut s = String::new();
+    for th in &spec.theta_i_deg {
+        s += &format!(" θi = {th}° |");
+    }
+    s + "\n|---|" + &"---|".repeat(spec.theta_i_deg.len()) + "\n"
 }
 
 fn entry(group: &[&Cell]) -> String {

@@ -155,8 +155,8 @@ impl EnvMap {
         check_placement(intensity, rotate_deg)?;
         let (w, h, px) = match source {
             EnvSource::White => (8, 4, vec![[1.0f32; 3]; 32]),
-            EnvSource::Sky => builtin(256, 128, sky),
-            EnvSource::Studio => builtin(256, 128, studio),
+            EnvSource::Sky => (256, 128, tabulate(256, 128, sky)),
+            EnvSource::Studio => (256, 128, tabulate(256, 128, studio)),
             EnvSource::File(p) => read_map(p)?,
         };
         let mut map = EnvMap::from_pixels(w, h, px, &source.name())?;
@@ -347,7 +347,9 @@ fn bytemuck_cast(v: &mut [f32]) -> &mut [u8] {
     unsafe { std::slice::from_raw_parts_mut(v.as_mut_ptr().cast::<u8>(), len) }
 }
 
-fn builtin(w: u32, h: u32, f: fn([f64; 3]) -> [f64; 3]) -> (u32, u32, Vec<[f32; 3]>) {
+/// A `w`×`h` map's pixels (row-major, top row first) of the radiance `f` gives at each
+/// pixel's centre direction (map frame).
+pub(crate) fn tabulate(w: u32, h: u32, f: impl Fn([f64; 3]) -> [f64; 3]) -> Vec<[f32; 3]> {
     let mut px = Vec::with_capacity((w * h) as usize);
     for r in 0..h {
         for c in 0..w {
@@ -358,7 +360,7 @@ fn builtin(w: u32, h: u32, f: fn([f64; 3]) -> [f64; 3]) -> (u32, u32, Vec<[f32; 
             px.push(f(d).map(|x| x as f32));
         }
     }
-    (w, h, px)
+    px
 }
 
 /// `builtin:sky`: a clear sky without the sun. Above the horizon the radiance runs from a

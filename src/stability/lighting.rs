@@ -23,7 +23,7 @@ use crate::brdf::Shading;
 use crate::colour::ColourTable;
 use crate::gpu::Device;
 use crate::heightfield::HeightField;
-use crate::light::env::{map_to_direction, sky, EnvMap};
+use crate::light::env::{map_to_direction, sky, tabulate, EnvMap};
 use crate::render::env::{map_direction, render_env_brdf_map, EnvLighting, EnvMapRequest};
 use crate::Result;
 
@@ -67,25 +67,12 @@ fn cases() -> Vec<(&'static str, EnvMap, Judged)> {
     ]
 }
 
-fn pixels(w: u32, h: u32, f: impl Fn([f64; 3]) -> [f64; 3]) -> Vec<[f32; 3]> {
-    (0..w * h)
-        .map(|i| {
-            let (c, r) = (i % w, i / w);
-            let d = map_to_direction(
-                (f64::from(c) + 0.5) / f64::from(w),
-                (f64::from(r) + 0.5) / f64::from(h),
-            );
-            f(d).map(|x| x as f32)
-        })
-        .collect()
-}
-
 /// The built-in sky with a sun of 1° diameter and irradiance 5, 40° above the horizon.
 fn sun_in_sky() -> EnvMap {
     let sun = map_to_direction(0.55, 50.0 / 180.0);
     let radius = 0.5f64.to_radians();
     let radiance = 5.0 / (2.0 * PI * (1.0 - radius.cos()));
-    let px = pixels(1024, 512, |d| {
+    let px = tabulate(1024, 512, |d| {
         let c = d[0] * sun[0] + d[1] * sun[1] + d[2] * sun[2];
         if c >= radius.cos() {
             [radiance; 3]
@@ -98,7 +85,7 @@ fn sun_in_sky() -> EnvMap {
 
 /// Radiance 1 within 20° above the horizon, black elsewhere.
 fn horizon_band() -> EnvMap {
-    let px = pixels(512, 256, |d| {
+    let px = tabulate(512, 256, |d| {
         if d[1] >= 0.0 && d[1] < 20f64.to_radians().sin() {
             [1.0; 3]
         } else {
@@ -296,7 +283,7 @@ mod tests {
         assert!(map.radiance(d)[1] == 100.0);
         // The sun's pixels hold 5 of its map's power, more than the whole sky.
         let total = sun_in_sky().integral()[1];
-        let sky = EnvMap::from_pixels(1024, 512, pixels(1024, 512, sky), "sky").unwrap();
+        let sky = EnvMap::from_pixels(1024, 512, tabulate(1024, 512, sky), "sky").unwrap();
         let sun = total - sky.integral()[1];
         assert!(
             (sun - 5.0).abs() < 0.5 && sun > 0.5 * total,

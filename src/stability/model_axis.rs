@@ -107,12 +107,7 @@ pub fn to_markdown(spec: &MatrixSpec, cells: &[ModelCell]) -> String {
          strengths hold, beyond 25 % only the colours' angles do (`diffract validity`, \
          docs/accuracy.md).\n\n| h_max (µm) |",
     );
-    for th in &spec.theta_i_deg {
-        let _ = write!(s, " θi = {th}° |");
-    }
-    s += "\n|---|";
-    s += &"---|".repeat(spec.theta_i_deg.len());
-    s += "\n";
+    s += &super::theta_columns(spec);
     for &h in &spec.h_max_um {
         let _ = write!(s, "| {h} |");
         for &th in &spec.theta_i_deg {
