@@ -18,13 +18,13 @@ layout(local_size_x = 64) in;
 layout(std430, set = 0, binding = 0) readonly buffer Params {
     vec4 regionLo;   // xyz: lower corner (u0, v0, w0) of the table
     vec4 regionHi;   // xyz: upper corner
-    vec4 blend;      // x: w_diffuse (0 without a texture), y: probability of the environment among the light samples
+    vec4 blend;      // x: w_diffuse (0 without a texture), y: probability of the environment among the light samples, z: m, a light sample every m-th sample
     vec4 white;      // xyz: D65's white XYZ, w: Schlick R0
     vec4 cdfLo;      // xy: (u, v) of the G density's first bin corner, z: first CDF node w, w: node step
     vec4 cdfStep;    // xy: bin size in u and v
-    ivec4 tableDims; // x: nu, y: nv, z: K (Chebyshev terms)
-    ivec4 cdfDims;   // x: bins along u, y: along v, z: CDF nodes in w
-    ivec4 envDims;   // x: W, y: H, z: samples per pixel, w: pixels (map side S, or G-buffer pixels)
+    ivec4 tableDims; // x: nu, y: nv, z: K (Chebyshev terms), w: pixels that share a sequence
+    ivec4 cdfDims;   // x: bins along u, y: along v, z: CDF nodes in w, w: samples per noise batch
+    ivec4 envDims;   // x: W, y: H, z: samples per pixel, w: invocations (map side², or the G-buffer pixels of this pass)
     ivec4 flags;     // x: Fresnel, y: shadowing, z: the environment can be sampled, w: seed
     vec4 envRot;     // x: cos, y: sin of the map's rotation about +Y
     ivec4 lightDims; // x: point lights, y: disc lights, z: texture blending, w: a BRDF map's side
@@ -38,8 +38,8 @@ layout(std430, set = 0, binding = 3) readonly buffer EnvCdf { float envCdf[]; };
 // then the density in (u, v) of each bin (nbu·nbv).
 layout(std430, set = 0, binding = 4) readonly buffer GCdf { float gCdf[]; };
 // The sums over the samples so far (the CPU divides by their number): each dispatch adds
-// samples [base, base + count); the first also adds the point lights, times the total.
-// Per pixel: XYZ of the diffraction part, then linear sRGB of the texture part.
+// samples [base, base + count); the first also adds the point lights. The stage decides
+// what a pixel holds (env_map.comp, env_scene.comp).
 layout(std430, set = 0, binding = 5) buffer Out { vec4 outSum[]; };
 // Point lights (2 vec4 each: towards the light in world space; irradiance XYZ), then disc
 // lights (3 vec4 each: towards the centre, w: cos of the angular radius; radiance XYZ,
@@ -322,22 +322,34 @@ void addDirection(Surface s, vec3 wi, vec3 l, vec3 lOwn, float scale, inout vec3
     }
 }
 
-// The sums of this dispatch's samples at a pixel (XYZ of the diffraction part, linear
-// sRGB of the texture part); the first dispatch adds the point lights times the total.
-// key scrambles the sequence; offset is where in it the pixel's samples start (pixels that
-// share a key take consecutive stretches of one low-discrepancy sequence).
-void integrate(Surface s, uint key, uint offset, out vec3 xyz, out vec3 rgb) {
+// The lights evaluated in full once per pixel (not sampled): every point light, and the
+// texture's environment term (1 + w_d)·t·E(n) from the irradiance table. XYZ of the
+// diffraction part in xyz, linear sRGB of the texture part in rgb.
+void pointLights(Surface s, out vec3 xyz, out vec3 rgb) {
     xyz = vec3(0.0);
     rgb = vec3(0.0);
-    int n = P.envDims.z;
-    if (chunk.base == 0) {
-        for (int j = 0; j < P.lightDims.x; ++j) {
-            vec3 wi = toTangent(s, lights[2 * j].xyz);
-            vec3 e = lights[2 * j + 1].xyz;
-            if (wi.z > 0.0) addDirection(s, wi, e, e, float(n) * wi.z, xyz, rgb);
-        }
-        if (P.lightDims.z != 0) rgb += float(n) * (1.0 + P.blend.x) * irradianceAt(s.n) * s.tex;
+    for (int j = 0; j < P.lightDims.x; ++j) {
+        vec3 wi = toTangent(s, lights[2 * j].xyz);
+        vec3 e = lights[2 * j + 1].xyz;
+        if (wi.z > 0.0) addDirection(s, wi, e, e, wi.z, xyz, rgb);
     }
+    if (P.lightDims.z != 0) rgb += (1.0 + P.blend.x) * irradianceAt(s.n) * s.tex;
+    if (any(isnan(xyz)) || any(isinf(xyz))) xyz = vec3(0.0);
+    if (any(isnan(rgb)) || any(isinf(rgb))) rgb = vec3(0.0);
+}
+
+// The sums of this dispatch's samples k ∈ [base, base + count) at a pixel: XYZ of the
+// diffraction part, linear sRGB of the texture part, and in sq, per linear-sRGB channel,
+// the sum of the squares of the pixel's colour summed over each batch of `batch`
+// consecutive samples (batches start at multiples of `batch`; the host estimates the
+// pixel's noise from them). key scrambles the sequence; the pixel takes its point
+// k·stride + place of it (pixels that share a key interleave one low-discrepancy sequence,
+// so that the first n samples of each make the first stride·n points of it).
+void integrate(Surface s, uint key, uint place, uint stride, int batch, out vec3 xyz,
+               out vec3 rgb, out vec3 sq) {
+    xyz = vec3(0.0);
+    rgb = vec3(0.0);
+    sq = vec3(0.0);
     // R5: α_k = φ^−k, φ the real root of x⁶ = x + 1, as 32-bit fixed-point fractions so
     // that the n-th point is exact for every n (x_n = rot + n·α mod 1, wrapping).
     const uint alpha[5] = uint[5](3785032106u, 3335640776u, 2939605022u, 2590590015u,
@@ -348,12 +360,20 @@ void integrate(Surface s, uint key, uint offset, out vec3 xyz, out vec3 rgb) {
     int m0, m1;
     float tw;
     nodesOf(-2.0 * s.wr.z, m0, m1, tw);
+    // Every sample draws from the BRDF; every m-th also from the lights (m = blend.z, so
+    // n_l = n/m: the host makes n a multiple of m). Each strategy takes the next point of
+    // its own dimensions of the sequence. Power heuristic with the counts:
+    // w_b = p_b²/(p_b² + (p_ω/m)²), w_l = 1 − w_b at the same direction.
     bool lightSampling = P.flags.z != 0 || P.lightDims.y > 0;
+    int m = max(1, int(P.blend.z));
+    float mf = float(m);
+    vec3 bx = vec3(0.0), br = vec3(0.0);
     for (int k = chunk.base; k < chunk.base + chunk.count; ++k) {
-        float xi[5];
-        for (int d = 0; d < 5; ++d) xi[d] = unitFloat(rot[d] + (uint(k + 1) + offset) * alpha[d]);
+        uint ib = uint(k) * stride + place + 1u;
+        vec3 x3 = vec3(unitFloat(rot[0] + ib * alpha[0]), unitFloat(rot[1] + ib * alpha[1]),
+                       unitFloat(rot[2] + ib * alpha[2]));
         // The BRDF's sample: (u, v), then ωi; the integrand per du dv over p_uv.
-        vec2 uv = sampleBrdf(vec3(xi[0], xi[1], xi[2]), m0, m1, tw);
+        vec2 uv = sampleBrdf(x3, m0, m1, tw);
         vec2 ixy = -uv - s.wr.xy;
         float s2 = dot(ixy, ixy);
         float pUv = brdfDensity(uv, m0, m1, tw);
@@ -362,27 +382,36 @@ void integrate(Surface s, uint key, uint offset, out vec3 xyz, out vec3 rgb) {
             float pl;
             vec3 own;
             vec3 l = radianceAt(toWorld(s, wi), -1, pl, own);
-            float pb = pUv * wi.z;
-            float mis = pb * pb / (pb * pb + pl * pl);
-            addDirection(s, wi, l, own, mis / pUv, xyz, rgb);
+            float pb = pUv * wi.z, ql = pl / mf;
+            addDirection(s, wi, l, own, pb * pb / (pb * pb + ql * ql) / pUv, bx, br);
         }
-        // The lights' sample: the integrand per dωi (times cos θi) over p_ω.
-        if (lightSampling) {
+        // The lights' sample: the integrand per dωi (times cos θi) over p_ω, times m.
+        if (lightSampling && k % m == 0) {
+            uint il = uint(k / m) * stride + place + 1u;
+            vec2 x2 = vec2(unitFloat(rot[3] + il * alpha[3]), unitFloat(rot[4] + il * alpha[4]));
             int p;
-            vec3 d = sampleLight(vec2(xi[3], xi[4]), p);
+            vec3 d = sampleLight(x2, p);
             vec3 wi = toTangent(s, d);
             float pl;
             vec3 own;
             vec3 l = radianceAt(d, p, pl, own);
             if (wi.z > 0.0 && pl > 0.0) {
-                float pb = brdfDensity(-wi.xy - s.wr.xy, m0, m1, tw) * wi.z;
-                float mis = pl * pl / (pb * pb + pl * pl);
-                addDirection(s, wi, l, own, wi.z * mis / pl, xyz, rgb);
+                float pb = brdfDensity(-wi.xy - s.wr.xy, m0, m1, tw) * wi.z, ql = pl / mf;
+                float mis = ql * ql / (pb * pb + ql * ql);
+                addDirection(s, wi, l, own, wi.z * mis / ql, bx, br);
             }
         }
+        if ((k + 1) % batch == 0 || k + 1 == chunk.base + chunk.count) {
+            if (any(isnan(bx)) || any(isinf(bx))) bx = vec3(0.0);
+            if (any(isnan(br)) || any(isinf(br))) br = vec3(0.0);
+            vec3 c = XYZ_TO_SRGB * bx + br;
+            sq += c * c;
+            xyz += bx;
+            rgb += br;
+            bx = vec3(0.0);
+            br = vec3(0.0);
+        }
     }
-    if (any(isnan(xyz)) || any(isinf(xyz))) xyz = vec3(0.0);
-    if (any(isnan(rgb)) || any(isinf(rgb))) rgb = vec3(0.0);
 }
 
 #endif

@@ -25,8 +25,14 @@ void main() {
     // The map's patch (MODEL §10): N = +Y, T = +X, B = N × T = −Z.
     Surface s = Surface(vec3(1.0, 0.0, 0.0), vec3(0.0, 0.0, -1.0), vec3(0.0, 1.0, 0.0),
                         vec3(x, y, sqrt(1.0 - r2)), vec3(0.0));
-    vec3 xyz, rgb;
-    integrate(s, idx, 0u, xyz, rgb);
-    vec3 before = chunk.base == 0 ? vec3(0.0) : outSum[idx].xyz;
-    outSum[idx] = vec4(before + xyz, 1.0);
+    // Per pixel: the XYZ sum of the samples, plus the point lights times the samples.
+    vec3 xyz, rgb, sq;
+    integrate(s, idx, 0u, 1u, chunk.count, xyz, rgb, sq);
+    if (chunk.base == 0) {
+        vec3 pxyz, prgb;
+        pointLights(s, pxyz, prgb);
+        outSum[idx] = vec4(xyz + float(P.envDims.z) * pxyz, 1.0);
+    } else {
+        outSum[idx] = vec4(outSum[idx].xyz + xyz, 1.0);
+    }
 }

@@ -8,19 +8,34 @@
 // Per pixel: (T, t_r), (B, t_g), (N, t_b), (ωr in the tangent frame, key): an orthonormal
 // frame in world space, the texture's linear-sRGB albedo, and as the bits of the last float
 // the output pixel × 16 + the G-buffer pixel's place among the output pixel's
-// supersample² (they share one sequence, each taking the next N samples of it).
+// supersample² (they interleave one sequence).
 layout(std430, set = 0, binding = 7) readonly buffer Pixels { vec4 gbuffer[]; };
+// The G-buffer pixels this pass integrates (those whose noise is still above the target).
+layout(std430, set = 0, binding = 8) readonly buffer Active { uint passPixels[]; };
 
+// Per G-buffer pixel, three vec4 of Out: (the samples' linear-sRGB sum, the samples taken),
+// (the sum of the squared batch sums per channel, 0), (the point lights' colour, 0). The
+// first pass (base 0) starts them.
 void main() {
-    uint idx = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 64u;
-    if (idx >= uint(P.envDims.w)) return;
+    uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 64u;
+    if (i >= uint(P.envDims.w)) return;
+    uint idx = passPixels[i];
     vec4 a = gbuffer[4u * idx], b = gbuffer[4u * idx + 1u], c = gbuffer[4u * idx + 2u];
     vec4 d = gbuffer[4u * idx + 3u];
     Surface s = Surface(a.xyz, b.xyz, c.xyz, d.xyz, vec3(a.w, b.w, c.w));
     uint key = floatBitsToUint(d.w);
-    vec3 xyz, rgb;
-    integrate(s, key >> 4, (key & 15u) * uint(P.envDims.z), xyz, rgb);
-    bool first = chunk.base == 0;
-    outSum[2u * idx] = vec4((first ? vec3(0.0) : outSum[2u * idx].xyz) + xyz, 1.0);
-    outSum[2u * idx + 1u] = vec4((first ? vec3(0.0) : outSum[2u * idx + 1u].xyz) + rgb, 1.0);
+    vec3 xyz, rgb, sq;
+    integrate(s, key >> 4, key & 15u, uint(P.tableDims.w), P.cdfDims.w, xyz, rgb, sq);
+    vec3 sum = XYZ_TO_SRGB * xyz + rgb;
+    float n = float(chunk.base + chunk.count);
+    if (chunk.base == 0) {
+        vec3 pxyz, prgb;
+        pointLights(s, pxyz, prgb);
+        outSum[3u * idx] = vec4(sum, n);
+        outSum[3u * idx + 1u] = vec4(sq, 0.0);
+        outSum[3u * idx + 2u] = vec4(XYZ_TO_SRGB * pxyz + prgb, 0.0);
+    } else {
+        outSum[3u * idx] = vec4(outSum[3u * idx].xyz + sum, n);
+        outSum[3u * idx + 1u] = vec4(outSum[3u * idx + 1u].xyz + sq, 0.0);
+    }
 }

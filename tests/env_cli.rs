@@ -202,7 +202,7 @@ fn a_small_scene_under_an_environment_and_a_disc_light_is_drawn() {
     );
     assert!(
         text.contains("environment table:")
-            && text.contains("8 samples per pixel (2 per G-buffer pixel of 2²)")
+            && text.contains("8 at most (up to 8, until the estimated noise is below ΔE2000 0.3)")
             && text.contains("1 disc light(s), sun off"),
         "{text}"
     );

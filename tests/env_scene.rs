@@ -14,7 +14,7 @@ use diffract::light::env::{map_to_direction, EnvMap, EnvSource};
 use diffract::render::env::{EnvLighting, Lights};
 use diffract::render::env_scene::{
     rasterise, render_env_scene, scene_lights, shade_gbuffer, Albedo, EnvScene, GBuffer,
-    GBufferRequest,
+    GBufferRequest, NoiseTarget,
 };
 use diffract::scene::Scene;
 
@@ -122,6 +122,7 @@ fn the_sun_as_a_map_renders_the_sun_lit_picture() {
                 shading: scene.material.shading(),
                 samples,
                 seed: 0,
+                noise: None,
             },
         )
         .expect("env scene");
@@ -208,6 +209,8 @@ fn a_disc_light_matches_the_f64_reference() {
         samples: 8192,
         seed: 0,
         w_diffuse: None,
+        noise: None,
+        stride: 1,
     };
     let picked = chosen(&g);
     let few = GBuffer {
@@ -219,7 +222,7 @@ fn a_disc_light_matches_the_f64_reference() {
             .flat_map(|p| g.data[16 * p.0..16 * p.0 + 16].to_vec())
             .collect(),
     };
-    let (got, _) = shade_gbuffer(&dev, l, &few, &req).unwrap();
+    let got = shade_gbuffer(&dev, l, &few, &req).unwrap().rgb;
     // The reference: the same disc as a 2048×1024 map (its edge pixels weighted by the
     // part the disc covers), dense quadrature over (u, v) of the f64 model of the table.
     let xyz = linear_srgb_to_xyz(light.colour.map(f64::from)).map(|c| c * 2.0);
@@ -261,11 +264,19 @@ fn scene_pixels_under_the_sky_match_the_f64_reference() {
         env: &env,
         lights: &Lights::default(),
         shading,
-        samples: diffract::render::env::DEFAULT_SAMPLES,
+        // The defaults of a scene render: adaptive, up to the most samples.
+        samples: diffract::render::env_scene::DEFAULT_SAMPLES,
         seed: 0,
         w_diffuse: Some(w_d),
+        noise: Some(NoiseTarget {
+            delta_e: diffract::render::env_scene::DEFAULT_NOISE,
+            scale: f64::from(scene.output.exposure) / l.mirror_scale,
+            tone: scene.output.tone,
+            white: scene.output.white,
+        }),
+        stride: 1,
     };
-    let (got, _) = shade_gbuffer(&dev, l, &g, &req).unwrap();
+    let got = shade_gbuffer(&dev, l, &g, &req).unwrap().rgb;
     let table = |d: [f64; 3]| l.table.g(d).unwrap_or([0.0; 3]);
     let r0 = diffract::brdf::schlick_r0(shading.ior);
     for (k, frame, wr, tex) in chosen(&g) {
@@ -351,4 +362,65 @@ fn the_g_buffer_covers_the_pixels_the_graphics_pipeline_draws() {
         drawn.len() > 500 && differ * 200 <= drawn.len(),
         "{differ} differ"
     );
+}
+
+/// The default samples keep the default scene under `builtin:sky` within ΔE2000 p99 ≤ 1
+/// of a converged render (4096 samples per pixel everywhere), over the covered pixels of
+/// the picture as written (exposed and tone-mapped, before 8-bit rounding), and most
+/// pixels stop well before the most samples.
+#[test]
+fn the_default_samples_keep_the_sky_within_p99_one_of_converged() {
+    let Some(dev) = device() else { return };
+    let l = lighting();
+    let size = 32;
+    let mut scene = Scene::default_scene();
+    scene.output.width = size;
+    scene.output.height = size;
+    let mesh = scene.mesh.load().expect("mesh");
+    let tex = scene.texture.as_ref().expect("skin").load().expect("skin");
+    let env = EnvMap::load(&EnvSource::Sky, 1.0, 0.0).unwrap();
+    let lights = scene_lights(&scene, true, l.white);
+    let draw = |samples: u32, seed: u32, noise: Option<f64>| {
+        let frame = render_env_scene(
+            &dev,
+            l,
+            &EnvScene {
+                scene: &scene,
+                mesh: &mesh,
+                texture: Some(&tex),
+                env: Some(&env),
+                lights: &lights,
+                shading: scene.material.shading(),
+                samples,
+                seed,
+                noise,
+            },
+        )
+        .expect("env scene");
+        let px = scene.output.resolve(&frame.rgb).expect("resolve");
+        (px, frame.samples_mean)
+    };
+    let (converged, _) = draw(4096, 99, None);
+    let (default, mean) = draw(
+        diffract::render::env_scene::DEFAULT_SAMPLES,
+        0,
+        Some(diffract::render::env_scene::DEFAULT_NOISE),
+    );
+    let covered = rasterise(&mesh, &scene.camera, (size, size, 1), None).covered;
+    let mut de = delta_e(&default, &converged, &covered);
+    de.sort_by(f64::total_cmp);
+    let p99 = de[(0.99 * de.len() as f64) as usize];
+    let avg = de.iter().sum::<f64>() / de.len() as f64;
+    eprintln!(
+        "default samples under the sky: {} covered pixels, {mean:.0} samples a pixel on average, ΔE2000 mean {avg:.3}, p99 {p99:.2}, max {:.2}",
+        de.len(),
+        de[de.len() - 1]
+    );
+    assert!(de.len() > 500, "{} pixels", de.len());
+    assert!(p99 <= 1.0, "ΔE2000 p99 {p99}");
+    assert!(
+        mean < 0.5 * f64::from(diffract::render::env_scene::DEFAULT_SAMPLES),
+        "{mean} samples a pixel on average"
+    );
+    assert_eq!(dev.validation_messages(), 0);
 }

@@ -11,7 +11,7 @@ use crate::scene::Scene;
 use crate::{Error, Result};
 
 /// Default `w` nodes of an environment table (its `w` range is the whole `[−2, 0]`).
-pub const DEFAULT_ENV_W_NODES: usize = 16;
+pub const DEFAULT_ENV_W_NODES: usize = 8;
 
 /// `render`'s environment flags.
 #[derive(Debug, Clone, Default, clap::Args)]
@@ -21,9 +21,15 @@ pub struct EnvArgs {
     /// [environment] is the default.
     #[arg(long, value_name = "SOURCE")]
     pub env: Option<String>,
-    /// Samples per pixel of the environment [default: 256].
+    /// Samples per pixel of the environment: a BRDF map's every pixel [default: 256]; the
+    /// most a scene's output pixel takes [default: 1024].
     #[arg(long, value_name = "N")]
     pub env_samples: Option<u32>,
+    /// A scene's output pixel stops taking samples once its estimated noise, as CIEDE2000
+    /// of the picture as written, is below this; 0: every pixel takes --env-samples
+    /// [default: 0.3].
+    #[arg(long, value_name = "DELTA_E")]
+    pub env_noise: Option<f64>,
     /// The environment's radiance scale [default: 1, or the scene's].
     #[arg(long)]
     pub env_intensity: Option<f64>,
@@ -40,6 +46,20 @@ impl EnvArgs {
     /// work): `--env`, else the scene's `[environment]`; `None` without either. Flags that
     /// need an environment, and a scene left without any light, get one error line.
     pub fn load(&self, brdf_map: bool, scene: &Scene) -> Result<Option<EnvMap>> {
+        if let Some(x) = self.env_noise {
+            if !(0.0..=100.0).contains(&x) {
+                return Err(Error::invalid(
+                    "env noise",
+                    format!("{x}; expected a CIEDE2000 difference in 0..=100 (0: off)"),
+                ));
+            }
+            if brdf_map {
+                return Err(Error::invalid(
+                    "env noise",
+                    "--env-noise applies to scenes; a BRDF map takes --env-samples at every pixel",
+                ));
+            }
+        }
         if let Some(n) = self.env_samples {
             if !(1..=MAX_SAMPLES).contains(&n) {
                 return Err(Error::invalid(
@@ -204,7 +224,15 @@ pub fn run_env_scene(
     let shading = material.shading();
     let (lighting, built) = lighting_for(&hf, &material, &spec, &args.cache)?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);
-    let samples = args.env.env_samples.unwrap_or(DEFAULT_SAMPLES);
+    let samples = args
+        .env
+        .env_samples
+        .unwrap_or(crate::render::env_scene::DEFAULT_SAMPLES);
+    let noise = args
+        .env
+        .env_noise
+        .unwrap_or(crate::render::env_scene::DEFAULT_NOISE)
+        .max(0.0);
     let frame = crate::render::env_scene::render_env_scene(
         &dev,
         &lighting,
@@ -217,6 +245,7 @@ pub fn run_env_scene(
             shading,
             samples,
             seed: 0,
+            noise: (noise > 0.0).then_some(noise),
         },
     )?;
     let out = &scene.output;
@@ -246,7 +275,7 @@ pub fn run_env_scene(
     crate::image_io::write_image(&args.out, out.width, out.height, &rgb, 1.0)?;
     println!("{}", table_line(&lighting, &spec, built));
     println!(
-        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: {} samples per pixel ({} per G-buffer pixel of {}²), {} pixels covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s",
+        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s",
         dev.info.name,
         out.width,
         out.height,
@@ -256,10 +285,15 @@ pub fn run_env_scene(
         env.map_or("no environment".to_string(), |e| e.name.clone()),
         scene.disc_lights.len(),
         if args.env.no_sun { "off" } else { "on" },
-        samples,
-        frame.samples_per_pixel,
-        out.supersample.max(1),
+        frame.samples_mean,
+        frame.samples_most,
+        if noise > 0.0 {
+            format!("up to {samples}, until the estimated noise is below ΔE2000 {noise}")
+        } else {
+            format!("{samples} everywhere")
+        },
         frame.covered,
+        out.supersample.max(1),
         frame.raster_ms,
         frame.gpu_ms,
         start.elapsed().as_secs_f64()
@@ -304,9 +338,11 @@ fn table_line(lighting: &EnvLighting, spec: &TableSpec, built: bool) -> String {
         )
     };
     format!(
-        "environment table: u, v ∈ [−2, 2], w ∈ [−2, 0], texel {:.4}, K = {}, {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",
+        "environment table: u, v ∈ [−2, 2], w ∈ [−2, 0], texel {:.4}, K = {} of {} (the rest below {:.0e} of the peak), {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",
         spec.texel_uv,
         t.coeffs.len(),
+        t.coeffs.len() + lighting.dropped,
+        crate::render::env::TERM_TOLERANCE,
         t.nu,
         t.nv,
         mb as f64 / 1e6,

@@ -19,7 +19,7 @@ use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
 use crate::brdf::env_reference::{absolute_factor, radiance_slices};
-use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, TableSpec};
+use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, Region, TableSpec};
 use crate::brdf::Shading;
 use crate::colour::{linear_srgb_to_xyz, ColourTable};
 use crate::gpu::compute::{self, ComputeLayout, ComputePipeline, StorageSet};
@@ -197,8 +197,15 @@ pub struct EnvLighting {
     /// `A_λ·R0` (`A_λ` alone without Fresnel) weighted by D65's luminance `w_Y`:
     /// `Σ A_λ R0 w_Y,λ / Σ w_Y,λ` (about 440 for 65 µm with Fresnel).
     pub mirror_scale: f64,
+    /// Chebyshev terms sampled but left out ([`TERM_TOLERANCE`]).
+    pub dropped: usize,
     pub build_ms: f64,
 }
+
+/// The most the Chebyshev terms left out of an environment table may add to `G`, relative
+/// to its peak ([`ChebyshevW::truncate`]): far below the integration's noise (a sample
+/// reads every term kept, so each term costs a sixteenth of a sample's table reads).
+pub const TERM_TOLERANCE: f64 = 1e-4;
 
 impl EnvLighting {
     /// The radiance-weighted table of `hf` over `spec` and its sampling density.
@@ -248,8 +255,16 @@ impl EnvLighting {
             report,
             &|| radiance_slices(hf, coherence_um, shading, spec),
         )?;
-        let table = ChebyshevW::from_nodes(spec.region, &slices);
+        let mut table = ChebyshevW::from_nodes(spec.region, &slices);
         drop(slices);
+        let dropped = table.truncate(TERM_TOLERANCE);
+        let last = table.decay().last().copied().unwrap_or(0.0);
+        if dropped == 0 && last > TERM_TOLERANCE {
+            report.warn(&format!(
+                "environment table: its last Chebyshev term in w is {last:.1e} of the peak (above {TERM_TOLERANCE:.0e}): more --table-w-nodes than {} resolve w better",
+                spec.w_nodes
+            ));
+        }
         let density = GDensity::new(&table);
         let colours = ColourTable::new(spec.step_nm)?;
         let white = crate::brdf::env_reference::white(&colours);
@@ -265,6 +280,7 @@ impl EnvLighting {
             density,
             white,
             mirror_scale,
+            dropped,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
         };
         Ok((lighting, cached))
@@ -315,6 +331,39 @@ pub struct SampledDisc {
     pub radiance_xyz: [f64; 3],
 }
 
+/// Least and most share of light samples among the BRDF's.
+pub const LIGHT_SHARE: (f64, f64) = (1.0 / 16.0, 1.0);
+
+/// The share of light samples (per BRDF sample) given the lights' luminance integral
+/// `power = ∫ Y dω` and `square = ∫ Y² dω` over the sphere. Their ratio `power²/(4π·square)` is the part of
+/// the sphere the light effectively fills (1 for a uniform sky, `Ω/4π` for one disc of
+/// solid angle `Ω` on black). BRDF samples find light that fills the sphere; only light
+/// samples find a small bright source. The share runs from [`LIGHT_SHARE`]'s least to its
+/// most as `1 − √ratio` runs from 0.2 to 0.8 (smoothly): measured on the default scene,
+/// few light samples serve best under `builtin:sky` (`1 − √ratio` = 0.17), one per BRDF
+/// sample under `builtin:studio` (0.79). It never falls to 0, so every direction that
+/// carries light can be drawn.
+pub fn light_share(power: f64, square: f64) -> f64 {
+    let (lo, hi) = LIGHT_SHARE;
+    if !(power > 0.0 && square > 0.0) {
+        return lo;
+    }
+    let ratio = (power * power / (4.0 * PI * square)).clamp(0.0, 1.0);
+    let x = ((1.0 - ratio.sqrt() - 0.2) / 0.6).clamp(0.0, 1.0);
+    lo + (hi - lo) * x * x * (3.0 - 2.0 * x)
+}
+
+/// One light sample every `m`-th BRDF sample: the largest power of two up to `1/share`
+/// (at most 16) that divides every count in `counts` (the samples at which passes end),
+/// so that the light samples are exactly `1/m` of the BRDF's, as the estimator weighs them.
+pub fn light_every(share: f64, counts: &[u32]) -> u32 {
+    let mut m = 16u32;
+    while m > 1 && (f64::from(m) * share > 1.0 + 1e-9 || counts.iter().any(|c| c % m != 0)) {
+        m /= 2;
+    }
+    m
+}
+
 /// Every light besides the environment.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Lights {
@@ -339,6 +388,25 @@ impl Lights {
             env_power.max(0.0) / total,
             powers.iter().map(|p| p / total).collect(),
         )
+    }
+
+    /// The probability that a sample is drawn from the lights rather than from the BRDF
+    /// ([`light_share`]), from the environment and these discs.
+    pub fn light_share(&self, env: &EnvMap) -> f64 {
+        let mut power = 0.0;
+        let mut square = 0.0;
+        for (p, c) in env.radiance.iter().enumerate() {
+            let omega = env.pixel_solid_angle(p as u32 / env.width);
+            let y = crate::light::env::luminance(*c).max(0.0);
+            power += y * omega;
+            square += y * y * omega;
+        }
+        for d in &self.discs {
+            let y = d.radiance_xyz[1].max(0.0);
+            power += y * d.solid_angle;
+            square += y * y * d.solid_angle;
+        }
+        light_share(power, square)
     }
 
     /// The shader's light buffer (env_common.glsl) with the discs' probabilities and,
@@ -493,6 +561,7 @@ pub(crate) struct Dispatch<'a> {
     pub env: &'a EnvMap,
     pub lights: &'a Lights,
     pub shading: Shading,
+    /// Samples per pixel: every pixel's for a map, the most a pixel takes for a G-buffer.
     pub samples: u32,
     pub seed: u32,
     /// Texture blending's `w_diffuse`, `None` without a texture.
@@ -502,10 +571,23 @@ pub(crate) struct Dispatch<'a> {
     pub map_side: u32,
     /// vec4s each pixel writes.
     pub outputs: u64,
-    /// The stage's own buffer at binding 7 (the G-buffer), if any.
+    /// The stage's own buffer at binding 7 (the G-buffer), if any; with it, binding 8 lists
+    /// the pixels each pass integrates.
     pub extra: Option<&'a [u8]>,
+    /// Pixels that interleave one sequence (a G-buffer's supersample²; 1 for a map).
+    pub stride: u32,
+    /// Samples per noise batch (a G-buffer's; a map ignores it).
+    pub batch: u32,
     pub spirv: &'a [u8],
     pub name: &'a str,
+}
+
+/// A pass of [`dispatch_passes`]: the pixels it integrates (indices into the G-buffer;
+/// empty for every pixel of a map) and the samples each has when it ends (every listed
+/// pixel has taken the same number before it).
+pub(crate) struct Pass {
+    pub pixels: Vec<u32>,
+    pub samples: u32,
 }
 
 /// Runs `d` with `lighting`: the per-pixel sums divided by the samples, and the GPU time.
@@ -514,15 +596,144 @@ pub(crate) fn dispatch(
     lighting: &EnvLighting,
     d: &Dispatch<'_>,
 ) -> Result<(Vec<[f32; 4]>, f64)> {
+    let first = Pass {
+        pixels: Vec::new(),
+        samples: d.samples,
+    };
+    let (raw, gpu_ms) = dispatch_passes(dev, lighting, d, first, &mut |_, _| None)?;
+    let n = d.samples as f32;
+    Ok((
+        raw.iter()
+            .map(|p| [p[0] / n, p[1] / n, p[2] / n, p[3]])
+            .collect(),
+        gpu_ms,
+    ))
+}
+
+/// What decides the next pass from the sums so far and the samples of the last pass.
+pub(crate) type NextPass<'a> = dyn FnMut(&[[f32; 4]], u32) -> Option<Pass> + 'a;
+
+/// Runs `d` with `lighting` in passes: `first`, then whatever `next` asks for after reading
+/// the sums so far (it gets them and the samples of the last pass; `None` ends). Returns
+/// the raw sums (not divided) and the GPU time of all passes.
+pub(crate) fn dispatch_passes(
+    dev: &Arc<Device>,
+    lighting: &EnvLighting,
+    d: &Dispatch<'_>,
+    first: Pass,
+    next: &mut NextPass<'_>,
+) -> Result<(Vec<[f32; 4]>, f64)> {
     if !(1..=MAX_SAMPLES).contains(&d.samples) {
         return Err(Error::invalid(
             "env samples",
             format!("{}; expected 1 to {MAX_SAMPLES}", d.samples),
         ));
     }
+    let b = |name: &str, bytes: &[u8]| {
+        compute::storage_with_data(dev, &format!("{} {name}", d.name), bytes)
+    };
+    let inputs = upload_inputs(dev, lighting, d)?;
+    let extra_buf = d.extra.map(|e| b("G-buffer", e)).transpose()?;
+    let out_bytes = (d.pixels * d.outputs * 16).max(16);
+    let out = compute::storage(dev, &format!("{} output", d.name), out_bytes)?;
+    let readback = Buffer::new(
+        dev,
+        &format!("{} readback", d.name),
+        out_bytes,
+        vk::BufferUsageFlags::TRANSFER_DST,
+        MemoryLocation::GpuToCpu,
+    )?;
+    let every = light_every(inputs.share, &[d.samples, first.samples]);
+    let bindings = if d.extra.is_some() { 9 } else { 7 };
+    let layout = ComputeLayout::new(dev, d.name, bindings, 8)?;
+    let pipeline = ComputePipeline::new(dev, d.name, &layout, d.spirv, &[])?;
+    let start = Instant::now();
+    let mut pass = Some(first);
+    let mut done = 0;
+    let mut sums = Vec::new();
+    while let Some(p) = pass.take() {
+        let invocations = if d.extra.is_some() {
+            p.pixels.len() as u64
+        } else {
+            d.pixels
+        };
+        let list: Vec<u8> = p.pixels.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let active = match d.extra {
+            Some(_) => Some(b(
+                "pixels of the pass",
+                if list.is_empty() { &[0; 4] } else { &list },
+            )?),
+            None => None,
+        };
+        let params = inputs.params(d, invocations, every);
+        let params_buf = b("params", crate::gpu::memory::bytes_of(&[params]))?;
+        let mut buffers = vec![
+            &params_buf,
+            &inputs.coeff,
+            &inputs.env,
+            &inputs.env_cdf,
+            &inputs.density,
+            &out,
+            &inputs.lights,
+        ];
+        buffers.extend(extra_buf.as_ref());
+        buffers.extend(active.as_ref());
+        let set = StorageSet::new(dev, d.name, &layout, &buffers)?;
+        let (from, to) = (done, p.samples.min(d.samples));
+        dev.submit_once(d.name, |cb| {
+            for base in (from..to).step_by(CHUNK as usize) {
+                let count = CHUNK.min(to - base);
+                let push: Vec<u8> = [base, count].iter().flat_map(|v| v.to_le_bytes()).collect();
+                layout.dispatch(cb, &pipeline, &set, &push, invocations.max(1))?;
+                compute::compute_barrier(dev, cb);
+            }
+            compute::copy_to_host(dev, cb, &out, &readback, out_bytes);
+            Ok(())
+        })?;
+        done = to;
+        sums = read_sums(&readback, d.pixels * d.outputs)?;
+        if done < d.samples {
+            pass = next(&sums, done).filter(|q| !q.pixels.is_empty() && q.samples > done);
+        }
+    }
+    Ok((sums, start.elapsed().as_secs_f64() * 1e3))
+}
+
+/// The vec4s of `buf`.
+fn read_sums(buf: &Buffer, count: u64) -> Result<Vec<[f32; 4]>> {
+    let raw = buf.mapped()?;
+    Ok(raw
+        .chunks_exact(16)
+        .take(count as usize)
+        .map(|c| {
+            let f =
+                |i: usize| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]);
+            [f(0), f(1), f(2), f(3)]
+        })
+        .collect())
+}
+
+/// The buffers every pass of a dispatch reads, and what its parameters need.
+struct Inputs {
+    coeff: Buffer,
+    env: Buffer,
+    env_cdf: Buffer,
+    density: Buffer,
+    lights: Buffer,
+    q_env: f64,
+    /// The share of light samples ([`light_share`]).
+    share: f64,
+    region: Region,
+    dims: [i32; 3],
+    white: [f64; 3],
+    density_lo: [f64; 4],
+    density_step: [f64; 2],
+    density_dims: [i32; 3],
+}
+
+fn upload_inputs(dev: &Arc<Device>, lighting: &EnvLighting, d: &Dispatch<'_>) -> Result<Inputs> {
     let env = d.env;
     let t = &lighting.table;
-    let r = t.region;
     let sampler = EnvSampler::new(env);
     let env_pdf = sampler
         .prob
@@ -540,106 +751,86 @@ pub(crate) fn dispatch(
     let coeff = f32_bytes(t.splines.iter().flatten().flatten().map(|&x| x as f32));
     let g = &lighting.density;
     let (q_env, q_discs) = d.lights.probabilities(sampler.total);
-    let params = ParamsSsbo {
-        region_lo: [r.lo[0] as f32, r.lo[1] as f32, r.lo[2] as f32, 0.0],
-        region_hi: [r.hi[0] as f32, r.hi[1] as f32, r.hi[2] as f32, 0.0],
-        blend: [d.w_diffuse.unwrap_or(0.0) as f32, q_env as f32, 0.0, 0.0],
-        white: [
-            lighting.white[0] as f32,
-            lighting.white[1] as f32,
-            lighting.white[2] as f32,
-            crate::brdf::schlick_r0(d.shading.ior) as f32,
-        ],
-        cdf_lo: [g.lo[0] as f32, g.lo[1] as f32, g.w0 as f32, g.dw as f32],
-        cdf_step: [g.step[0] as f32, g.step[1] as f32, 0.0, 0.0],
-        table_dims: [t.nu as i32, t.nv as i32, t.coeffs.len() as i32, 0],
-        cdf_dims: [g.bins[0] as i32, g.bins[1] as i32, g.nodes as i32, 0],
-        env_dims: [
-            env.width as i32,
-            env.height as i32,
-            d.samples as i32,
-            d.pixels as i32,
-        ],
-        flags: [
-            i32::from(d.shading.fresnel),
-            i32::from(d.shading.shadowing),
-            i32::from(q_env > 0.0),
-            d.seed as i32,
-        ],
-        env_rot: [
-            env.rotate_rad.cos() as f32,
-            env.rotate_rad.sin() as f32,
-            0.0,
-            0.0,
-        ],
-        light_dims: [
-            d.lights.points.len() as i32,
-            d.lights.discs.len() as i32,
-            i32::from(d.w_diffuse.is_some()),
-            d.map_side as i32,
-        ],
-    };
-    let b = |name: &str, bytes: &[u8]| {
-        compute::storage_with_data(dev, &format!("{} {name}", d.name), bytes)
-    };
-    let params_buf = b("params", crate::gpu::memory::bytes_of(&[params]))?;
-    let coeff_buf = b("table", &coeff)?;
-    let env_buf = b("radiance", &env_xyz)?;
-    let env_cdf_buf = b("environment CDFs", &env_cdf)?;
-    let g_buf = b("BRDF density", &f32_bytes(g.data.iter().copied()))?;
     let irradiance = if d.w_diffuse.is_some() {
         irradiance_table(env)
     } else {
         Vec::new()
     };
-    let lights_buf = b("lights", &f32_bytes(d.lights.buffer(&q_discs, &irradiance)))?;
-    let extra_buf = d.extra.map(|e| b("G-buffer", e)).transpose()?;
-    let out_bytes = (d.pixels * d.outputs * 16).max(16);
-    let out = compute::storage(dev, &format!("{} output", d.name), out_bytes)?;
-    let readback = Buffer::new(
-        dev,
-        &format!("{} readback", d.name),
-        out_bytes,
-        vk::BufferUsageFlags::TRANSFER_DST,
-        MemoryLocation::GpuToCpu,
-    )?;
-    let mut buffers = vec![
-        &params_buf,
-        &coeff_buf,
-        &env_buf,
-        &env_cdf_buf,
-        &g_buf,
-        &out,
-        &lights_buf,
-    ];
-    buffers.extend(extra_buf.as_ref());
-    let layout = ComputeLayout::new(dev, d.name, buffers.len() as u32, 8)?;
-    let set = StorageSet::new(dev, d.name, &layout, &buffers)?;
-    let pipeline = ComputePipeline::new(dev, d.name, &layout, d.spirv, &[])?;
-    let start = Instant::now();
-    dev.submit_once(d.name, |cb| {
-        for base in (0..d.samples).step_by(CHUNK as usize) {
-            let count = CHUNK.min(d.samples - base);
-            let push: Vec<u8> = [base, count].iter().flat_map(|v| v.to_le_bytes()).collect();
-            layout.dispatch(cb, &pipeline, &set, &push, d.pixels.max(1))?;
-            compute::compute_barrier(dev, cb);
+    let b = |name: &str, bytes: &[u8]| {
+        compute::storage_with_data(dev, &format!("{} {name}", d.name), bytes)
+    };
+    Ok(Inputs {
+        coeff: b("table", &coeff)?,
+        env: b("radiance", &env_xyz)?,
+        env_cdf: b("environment CDFs", &env_cdf)?,
+        density: b("BRDF density", &f32_bytes(g.data.iter().copied()))?,
+        lights: b("lights", &f32_bytes(d.lights.buffer(&q_discs, &irradiance)))?,
+        q_env,
+        share: d.lights.light_share(env),
+        region: t.region,
+        dims: [t.nu as i32, t.nv as i32, t.coeffs.len() as i32],
+        white: lighting.white,
+        density_lo: [g.lo[0], g.lo[1], g.w0, g.dw],
+        density_step: g.step,
+        density_dims: [g.bins[0] as i32, g.bins[1] as i32, g.nodes as i32],
+    })
+}
+
+impl Inputs {
+    /// The parameter block of a pass over `invocations` pixels.
+    fn params(&self, d: &Dispatch<'_>, invocations: u64, light_every: u32) -> ParamsSsbo {
+        let (r, env) = (&self.region, d.env);
+        let f4 = |v: [f64; 4]| v.map(|x| x as f32);
+        ParamsSsbo {
+            region_lo: f4([r.lo[0], r.lo[1], r.lo[2], 0.0]),
+            region_hi: f4([r.hi[0], r.hi[1], r.hi[2], 0.0]),
+            blend: f4([
+                d.w_diffuse.unwrap_or(0.0),
+                self.q_env,
+                f64::from(light_every),
+                0.0,
+            ]),
+            white: f4([
+                self.white[0],
+                self.white[1],
+                self.white[2],
+                crate::brdf::schlick_r0(d.shading.ior),
+            ]),
+            cdf_lo: f4(self.density_lo),
+            cdf_step: f4([self.density_step[0], self.density_step[1], 0.0, 0.0]),
+            table_dims: [
+                self.dims[0],
+                self.dims[1],
+                self.dims[2],
+                d.stride.max(1) as i32,
+            ],
+            cdf_dims: [
+                self.density_dims[0],
+                self.density_dims[1],
+                self.density_dims[2],
+                d.batch.max(1) as i32,
+            ],
+            env_dims: [
+                env.width as i32,
+                env.height as i32,
+                d.samples as i32,
+                invocations as i32,
+            ],
+            flags: [
+                i32::from(d.shading.fresnel),
+                i32::from(d.shading.shadowing),
+                i32::from(self.q_env > 0.0),
+                d.seed as i32,
+            ],
+            env_rot: f4([env.rotate_rad.cos(), env.rotate_rad.sin(), 0.0, 0.0]),
+            light_dims: [
+                d.lights.points.len() as i32,
+                d.lights.discs.len() as i32,
+                i32::from(d.w_diffuse.is_some()),
+                d.map_side as i32,
+            ],
         }
-        compute::copy_to_host(dev, cb, &out, &readback, out_bytes);
-        Ok(())
-    })?;
-    let gpu_ms = start.elapsed().as_secs_f64() * 1e3;
-    let raw = readback.mapped()?;
-    let n = d.samples as f32;
-    let sums = raw
-        .chunks_exact(16)
-        .take((d.pixels * d.outputs) as usize)
-        .map(|c| {
-            let f =
-                |i: usize| f32::from_le_bytes([c[4 * i], c[4 * i + 1], c[4 * i + 2], c[4 * i + 3]]);
-            [f(0) / n, f(1) / n, f(2) / n, f(3)]
-        })
-        .collect();
-    Ok((sums, gpu_ms))
+    }
 }
 
 /// Draws `req` with `lighting` on `dev`.
@@ -676,6 +867,8 @@ pub fn render_env_brdf_map(
             map_side: req.size,
             outputs: 1,
             extra: None,
+            stride: 1,
+            batch: 1,
             spirv: SPIRV,
             name: "env map",
         },
@@ -700,6 +893,48 @@ pub fn map_direction(i: u32, j: u32, size: u32) -> Option<[f64; 3]> {
 mod tests {
     use super::*;
     use crate::light::env::EnvSource;
+
+    #[test]
+    fn the_light_share_follows_how_much_of_the_sphere_the_light_fills() {
+        let white = EnvMap::load(&EnvSource::White, 1.0, 0.0).unwrap();
+        let none = Lights::default();
+        // A uniform sphere: ratio 1, the least share.
+        assert!((none.light_share(&white) - LIGHT_SHARE.0).abs() < 1e-9);
+        // One small disc on black: ratio Ω/4π, the most.
+        let black = EnvMap::from_pixels(2, 1, vec![[0.0; 3]; 2], "black").unwrap();
+        let alpha = 0.5f64.to_radians();
+        let omega = 2.0 * PI * (1.0 - alpha.cos());
+        let disc = Lights {
+            points: Vec::new(),
+            discs: vec![SampledDisc {
+                towards: [0.0, 1.0, 0.0],
+                cos_radius: alpha.cos(),
+                solid_angle: omega,
+                radiance_xyz: [1.0 / omega; 3],
+            }],
+        };
+        assert!((disc.light_share(&black) - LIGHT_SHARE.1).abs() < 1e-9);
+        // The built-in maps in between, in order; nothing lit at all: the least.
+        let sky = EnvMap::load(&EnvSource::Sky, 1.0, 0.0).unwrap();
+        let studio = EnvMap::load(&EnvSource::Studio, 1.0, 0.0).unwrap();
+        let (a, b) = (none.light_share(&sky), none.light_share(&studio));
+        assert!(LIGHT_SHARE.0 <= a && a < b && b <= LIGHT_SHARE.1, "{a} {b}");
+        assert_eq!(light_share(0.0, 0.0), LIGHT_SHARE.0);
+        // The ratio itself: half the sphere at radiance 1, the other half black: 1/2.
+        let x = ((1.0 - 0.5f64.sqrt() - 0.2) / 0.6).clamp(0.0, 1.0);
+        let want = LIGHT_SHARE.0 + (LIGHT_SHARE.1 - LIGHT_SHARE.0) * x * x * (3.0 - 2.0 * x);
+        assert!((light_share(2.0 * PI, 2.0 * PI) - want).abs() < 1e-12);
+    }
+
+    #[test]
+    fn light_samples_come_every_mth_sample_where_m_divides_the_counts() {
+        assert_eq!(light_every(1.0 / 16.0, &[1024, 16]), 16);
+        assert_eq!(light_every(1.0 / 16.0, &[1024, 4]), 4);
+        assert_eq!(light_every(0.3, &[256]), 2);
+        assert_eq!(light_every(1.0, &[256]), 1);
+        assert_eq!(light_every(0.01, &[7]), 1);
+        assert_eq!(light_every(0.01, &[96, 64]), 16);
+    }
 
     #[test]
     fn the_irradiance_table_is_the_cosine_integral_of_the_map() {

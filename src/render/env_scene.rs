@@ -20,9 +20,9 @@ use std::sync::Arc;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use super::env::{dispatch, Dispatch, EnvLighting, Lights, PointLight, SampledDisc};
+use super::env::{dispatch_passes, Dispatch, EnvLighting, Lights, PointLight, SampledDisc};
 use crate::brdf::Shading;
-use crate::colour::{linear_srgb_to_xyz, xyz_to_linear_srgb};
+use crate::colour::linear_srgb_to_xyz;
 use crate::gpu::Device;
 use crate::light::env::EnvMap;
 use crate::mesh::Mesh;
@@ -319,22 +319,149 @@ pub struct GBufferRequest<'a> {
     pub env: &'a EnvMap,
     pub lights: &'a Lights,
     pub shading: Shading,
+    /// The most samples a G-buffer pixel takes.
     pub samples: u32,
     pub seed: u32,
     /// Texture blending's `w_diffuse` (`None`: no texture).
     pub w_diffuse: Option<f64>,
+    /// When an output pixel stops taking samples (`None`: every pixel takes `samples`).
+    pub noise: Option<NoiseTarget>,
+    /// G-buffer pixels per output pixel (supersample²), which interleave one sequence.
+    pub stride: u32,
 }
 
-/// Linear-sRGB radiance of every covered pixel of `g` (in `g.covered`'s order) and the
-/// dispatches' time.
+/// The most samples an output pixel of a scene takes, unless `--env-samples` says otherwise.
+pub const DEFAULT_SAMPLES: u32 = 1024;
+
+/// The noise at which an output pixel stops, unless `--env-noise` says otherwise: CIEDE2000
+/// of one estimated standard error ([`NoiseTarget`]).
+pub const DEFAULT_NOISE: f64 = 0.3;
+
+/// Samples per noise batch of a G-buffer pixel: the noise of a pixel is estimated from the
+/// spread of its batch sums.
+pub const NOISE_BATCH: u32 = 4;
+
+/// Samples per output pixel of the first pass of an adaptive render; each later pass
+/// doubles the samples of the pixels still above the target.
+pub const FIRST_PASS_SAMPLES: u32 = 64;
+
+/// When an output pixel has taken enough samples: when the CIEDE2000 difference between
+/// its picture as written (times `scale`, through the tone curve) and the same plus one
+/// estimated standard error in every channel is below `delta_e`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct NoiseTarget {
+    pub delta_e: f64,
+    /// Radiance to the tone curve's input: the exposure over the mirror scale.
+    pub scale: f64,
+    pub tone: crate::image_io::Tone,
+    pub white: f32,
+}
+
+impl NoiseTarget {
+    /// The estimated CIEDE2000 of a pixel of linear-sRGB mean `m` and standard error `se`.
+    pub fn delta_e_of(&self, m: [f64; 3], se: [f64; 3]) -> f64 {
+        let lab = |c: [f64; 3]| {
+            let t = c.map(|x| {
+                f64::from(crate::image_io::tone_map(
+                    (x * self.scale) as f32,
+                    self.tone,
+                    self.white,
+                ))
+            });
+            crate::colour::xyz_to_lab(linear_srgb_to_xyz(t))
+        };
+        let plus = [0, 1, 2].map(|k| m[k] + se[k]);
+        crate::colour::delta_e2000(lab(m), lab(plus))
+    }
+}
+
+/// What [`shade_gbuffer`] drew.
+pub struct Shaded {
+    /// Linear-sRGB radiance of every covered pixel, in the G-buffer's order.
+    pub rgb: Vec<[f32; 3]>,
+    /// Samples each covered pixel took.
+    pub samples: Vec<u32>,
+    pub gpu_ms: f64,
+}
+
+/// The covered pixels of `g` grouped by their output pixel (indices into `g.covered`).
+fn output_groups(g: &GBuffer) -> Vec<Vec<u32>> {
+    let key = |i: usize| g.data[16 * i + 15].to_bits() >> 4;
+    let mut order: Vec<u32> = (0..g.covered.len() as u32).collect();
+    order.sort_by_key(|&i| key(i as usize));
+    let mut groups: Vec<Vec<u32>> = Vec::new();
+    for i in order {
+        match groups.last_mut() {
+            Some(last) if key(last[0] as usize) == key(i as usize) => last.push(i),
+            _ => groups.push(vec![i]),
+        }
+    }
+    groups
+}
+
+/// The estimated standard error and mean (linear sRGB) of an output pixel from the raw
+/// sums of its covered G-buffer pixels (three vec4 each, glsl/env_scene.comp).
+fn pixel_noise(sums: &[[f32; 4]], members: &[u32]) -> ([f64; 3], [f64; 3]) {
+    let c = members.len() as f64;
+    let (mut mean, mut var) = ([0.0; 3], [0.0; 3]);
+    for &i in members {
+        let i = 3 * i as usize;
+        let (sum, sq, point) = (sums[i], sums[i + 1], sums[i + 2]);
+        let n = f64::from(sum[3]).max(1.0);
+        let batches = (n / f64::from(NOISE_BATCH)).max(1.0);
+        for k in 0..3 {
+            let s1 = f64::from(sum[k]);
+            mean[k] += (f64::from(point[k]) + s1 / n) / c;
+            // The spread of the batch sums, then the variance of the pixel's mean.
+            let vb = if batches > 1.0 {
+                ((f64::from(sq[k]) - s1 * s1 / batches) / (batches - 1.0)).max(0.0)
+            } else {
+                f64::INFINITY
+            };
+            var[k] += vb / (f64::from(NOISE_BATCH) * n) / (c * c);
+        }
+    }
+    (var.map(f64::sqrt), mean)
+}
+
+/// Linear-sRGB radiance of every covered pixel of `g` (in `g.covered`'s order), the
+/// samples each took and the dispatches' time. With a noise target, every pixel takes
+/// [`FIRST_PASS_SAMPLES`] per output pixel (at most `req.samples`), then the output pixels
+/// still above the target double theirs, pass by pass, up to `req.samples`.
 pub fn shade_gbuffer(
     dev: &Arc<Device>,
     lighting: &EnvLighting,
     g: &GBuffer,
     req: &GBufferRequest<'_>,
-) -> Result<(Vec<[f32; 3]>, f64)> {
+) -> Result<Shaded> {
     let bytes: Vec<u8> = g.data.iter().flat_map(|x| x.to_le_bytes()).collect();
-    let (sums, gpu_ms) = dispatch(
+    let stride = req.stride.max(1);
+    let first = match req.noise {
+        Some(_) => FIRST_PASS_SAMPLES
+            .div_ceil(stride)
+            .next_multiple_of(NOISE_BATCH)
+            .min(req.samples),
+        None => req.samples,
+    };
+    let groups = output_groups(g);
+    let mut next = |sums: &[[f32; 4]], done: u32| {
+        let target = req.noise?;
+        let pixels: Vec<u32> = groups
+            .par_iter()
+            .filter(|m| sums[3 * m[0] as usize][3] as u32 >= done)
+            .filter(|m| {
+                let (se, mean) = pixel_noise(sums, m);
+                target.delta_e_of(mean, se) >= target.delta_e
+            })
+            .flatten()
+            .copied()
+            .collect();
+        Some(super::env::Pass {
+            pixels,
+            samples: (2 * done).min(req.samples),
+        })
+    };
+    let (sums, gpu_ms) = dispatch_passes(
         dev,
         lighting,
         &Dispatch {
@@ -346,20 +473,31 @@ pub fn shade_gbuffer(
             w_diffuse: req.w_diffuse,
             pixels: g.covered.len() as u64,
             map_side: 0,
-            outputs: 2,
+            outputs: 3,
             extra: Some(if bytes.is_empty() { &[0; 64] } else { &bytes }),
+            stride,
+            batch: NOISE_BATCH,
             spirv: SPIRV,
             name: "env scene",
         },
+        super::env::Pass {
+            pixels: (0..g.covered.len() as u32).collect(),
+            samples: first,
+        },
+        &mut next,
     )?;
-    let rgb = sums
-        .chunks_exact(2)
+    let (rgb, samples) = sums
+        .chunks_exact(3)
         .map(|p| {
-            let d = xyz_to_linear_srgb([p[0][0], p[0][1], p[0][2]].map(f64::from));
-            [0, 1, 2].map(|c| (d[c] + f64::from(p[1][c])) as f32)
+            let n = p[0][3].max(1.0);
+            ([0, 1, 2].map(|c| p[2][c] + p[0][c] / n), n as u32)
         })
-        .collect();
-    Ok((rgb, gpu_ms))
+        .unzip();
+    Ok(Shaded {
+        rgb,
+        samples,
+        gpu_ms,
+    })
 }
 
 /// A scene drawn in radiance units ([module notes](self)).
@@ -372,9 +510,13 @@ pub struct EnvScene<'a> {
     pub env: Option<&'a EnvMap>,
     pub lights: &'a Lights,
     pub shading: Shading,
-    /// Samples per output pixel, shared among its `supersample²` G-buffer pixels.
+    /// The most samples an output pixel takes, shared among its `supersample²` G-buffer
+    /// pixels.
     pub samples: u32,
     pub seed: u32,
+    /// An output pixel stops once its estimated CIEDE2000 noise (as written) is below
+    /// this ([`NoiseTarget`]); `None`: every pixel takes `samples`.
+    pub noise: Option<f64>,
 }
 
 /// A frame at the scene's render size ([`crate::scene::Output::render_size`]), ready for
@@ -386,8 +528,9 @@ pub struct EnvSceneFrame {
     pub height: u32,
     pub rgb: Vec<[f32; 3]>,
     pub covered: usize,
-    /// Samples each G-buffer pixel took.
-    pub samples_per_pixel: u32,
+    /// The samples its output pixels took: the mean and the most.
+    pub samples_mean: f64,
+    pub samples_most: u32,
     pub gpu_ms: f64,
     pub raster_ms: f64,
 }
@@ -446,7 +589,13 @@ pub fn render_env_scene(
         }
     };
     let per_pixel = req.samples.div_ceil(ss * ss).max(1);
-    let (shaded, gpu_ms) = shade_gbuffer(
+    let noise = req.noise.map(|delta_e| NoiseTarget {
+        delta_e,
+        scale: f64::from(out.exposure) / lighting.mirror_scale,
+        tone: out.tone,
+        white: out.white,
+    });
+    let shaded = shade_gbuffer(
         dev,
         lighting,
         &g,
@@ -457,11 +606,23 @@ pub fn render_env_scene(
             samples: per_pixel,
             seed: req.seed,
             w_diffuse: blend.map(|(spec, _)| f64::from(spec.w_diffuse)),
+            noise,
+            stride: ss * ss,
         },
     )?;
+    // Samples per output pixel: its G-buffer pixels' together.
+    let mut per_output = std::collections::HashMap::<u32, u32>::new();
+    for (k, &n) in shaded.samples.iter().enumerate() {
+        *per_output
+            .entry(g.data[16 * k + 15].to_bits() >> 4)
+            .or_default() += n;
+    }
+    let samples_mean =
+        per_output.values().map(|&n| f64::from(n)).sum::<f64>() / per_output.len().max(1) as f64;
+    let samples_most = per_output.values().copied().max().unwrap_or(0);
     let s = lighting.mirror_scale;
     let mut rgb = background(scene, req.env, w, h, s);
-    for (&i, c) in g.covered.iter().zip(&shaded) {
+    for (&i, c) in g.covered.iter().zip(&shaded.rgb) {
         rgb[i as usize] = c.map(|x| (f64::from(x) / s) as f32);
     }
     Ok(EnvSceneFrame {
@@ -469,8 +630,9 @@ pub fn render_env_scene(
         height: h,
         rgb,
         covered: g.covered.len(),
-        samples_per_pixel: per_pixel,
-        gpu_ms,
+        samples_mean,
+        samples_most,
+        gpu_ms: shaded.gpu_ms,
         raster_ms,
     })
 }
@@ -498,4 +660,87 @@ fn background(scene: &Scene, env: Option<&EnvMap>, w: u32, h: u32, scale: f64) -
             env.radiance(d.to_array()).map(|c| (c / scale) as f32)
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The raw sums a G-buffer pixel holds after `batches` batches of [`NOISE_BATCH`]
+    /// samples whose batch means are `means` (one value for every channel) and point part
+    /// `point`.
+    fn sums(means: &[f64], point: f64) -> [[f32; 4]; 3] {
+        let b = f64::from(NOISE_BATCH);
+        let s1: f64 = means.iter().map(|m| m * b).sum();
+        let sq: f64 = means.iter().map(|m| (m * b).powi(2)).sum();
+        let n = (means.len() as u32 * NOISE_BATCH) as f32;
+        [
+            [s1 as f32, s1 as f32, s1 as f32, n],
+            [sq as f32, sq as f32, sq as f32, 0.0],
+            [point as f32, point as f32, point as f32, 0.0],
+        ]
+    }
+
+    #[test]
+    fn the_noise_of_a_pixel_is_the_standard_error_of_its_batches() {
+        // Batch means 1, 3, 1, 3: mean 2, their variance 4/3, the mean's 4/3/4 = 1/3.
+        let one = sums(&[1.0, 3.0, 1.0, 3.0], 0.5);
+        let (se, mean) = pixel_noise(&one, &[0]);
+        assert!((mean[0] - 2.5).abs() < 1e-6, "{mean:?}");
+        assert!((se[0] - (1.0f64 / 3.0).sqrt()).abs() < 1e-6, "{se:?}");
+        // Two G-buffer pixels of one output pixel: the mean of their means, and the
+        // standard error of that mean (independent: variances add, over 2²).
+        let mut two = one.to_vec();
+        two.extend(sums(&[2.0, 2.0, 2.0, 2.0], 0.0));
+        let (se, mean) = pixel_noise(&two, &[0, 1]);
+        assert!((mean[1] - 2.25).abs() < 1e-6, "{mean:?}");
+        assert!((se[1] - (1.0f64 / 3.0 / 4.0).sqrt()).abs() < 1e-6, "{se:?}");
+        // One batch tells nothing about the spread: infinite, so the pixel goes on.
+        let (se, _) = pixel_noise(&sums(&[1.0], 0.0), &[0]);
+        assert!(se[0].is_infinite());
+    }
+
+    #[test]
+    fn the_noise_target_measures_the_error_as_written() {
+        let target = NoiseTarget {
+            delta_e: 0.3,
+            scale: 1.0,
+            tone: crate::image_io::Tone::Linear,
+            white: 8.0,
+        };
+        let grey = [0.2; 3];
+        assert_eq!(target.delta_e_of(grey, [0.0; 3]), 0.0);
+        let small = target.delta_e_of(grey, [1e-4; 3]);
+        let large = target.delta_e_of(grey, [1e-2; 3]);
+        assert!(
+            small < 0.1 && large > 1.0 && large > small,
+            "{small} {large}"
+        );
+        // The same noise is worth more on a darker pixel, and less once exposed down.
+        assert!(target.delta_e_of([0.02; 3], [1e-3; 3]) > target.delta_e_of(grey, [1e-3; 3]));
+        let dim = NoiseTarget {
+            scale: 0.01,
+            ..target
+        };
+        assert!(dim.delta_e_of(grey, [1e-2; 3]) < large);
+    }
+
+    #[test]
+    fn output_groups_gather_the_pixels_that_share_a_sequence() {
+        // Keys (output pixel << 4 | place) of five covered pixels, out of order.
+        let keys = [(7u32, 0u32), (3, 1), (7, 3), (3, 0), (9, 2)];
+        let mut data = vec![0.0f32; 16 * keys.len()];
+        for (i, (out, place)) in keys.iter().enumerate() {
+            data[16 * i + 15] = f32::from_bits((out << 4) | place);
+        }
+        let g = GBuffer {
+            width: 4,
+            height: 4,
+            covered: (0..keys.len() as u32).collect(),
+            data,
+        };
+        let mut groups = output_groups(&g);
+        groups.iter_mut().for_each(|m| m.sort_unstable());
+        assert_eq!(groups, vec![vec![1, 3], vec![0, 2], vec![4]]);
+    }
 }

@@ -188,6 +188,23 @@ impl ChebyshevW {
         let c0 = max_of(&self.coeffs[0]).max(f64::MIN_POSITIVE);
         self.coeffs.iter().map(|c| max_of(c) / c0).collect()
     }
+
+    /// Drops the highest terms while the sum of their [`Self::decay`] stays within
+    /// `tolerance` (relative to the largest `|c_0|`: a bound on what they add to `G`, since
+    /// `|T_j| ≤ 1`); keeps at least one. Returns the terms dropped.
+    pub fn truncate(&mut self, tolerance: f64) -> usize {
+        let decay = self.decay();
+        let mut keep = decay.len();
+        let mut tail = 0.0;
+        while keep > 1 && tail + decay[keep - 1] <= tolerance {
+            tail += decay[keep - 1];
+            keep -= 1;
+        }
+        let dropped = self.coeffs.len() - keep;
+        self.coeffs.truncate(keep);
+        self.splines.truncate(keep);
+        dropped
+    }
 }
 
 /// Clenshaw's recurrence for `Σ_j c_j T_j(x)`.
@@ -434,6 +451,36 @@ impl GTable for Dhillon {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn truncation_drops_only_the_terms_within_the_tolerance() {
+        // Planes of constant coefficients 1, 0.5, 1e-3, 4e-5, 3e-5, 2e-5 (one texel field).
+        let (nu, nv) = (4, 4);
+        let values = [1.0, 0.5, 1e-3, 4e-5, 3e-5, 2e-5];
+        let coeffs: Vec<Vec<[f64; 3]>> = values.iter().map(|&c| vec![[c; 3]; nu * nv]).collect();
+        let splines = coeffs.iter().map(|c| spline_plane(c, nu, nv)).collect();
+        let region = Region {
+            lo: [-1.0, -1.0, -2.0],
+            hi: [1.0, 1.0, 0.0],
+        };
+        let table = ChebyshevW {
+            region,
+            nu,
+            nv,
+            coeffs,
+            splines,
+        };
+        // The tail 2e-5 + 3e-5 + 4e-5 = 9e-5 fits 1e-4; adding 1e-3 does not.
+        let mut t = table.clone();
+        assert_eq!(t.truncate(1e-4), 3);
+        assert_eq!((t.coeffs.len(), t.splines.len()), (3, 3));
+        let mut t = table.clone();
+        assert_eq!(t.truncate(4e-5), 1);
+        let mut t = table.clone();
+        assert_eq!(t.truncate(10.0), 5, "at least one term stays");
+        let mut t = table;
+        assert_eq!(t.truncate(0.0), 0);
+    }
+
     use super::*;
 
     #[test]
