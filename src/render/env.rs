@@ -30,7 +30,7 @@ use crate::light::env::{map_to_direction, EnvMap, EnvSampler};
 use crate::{Error, Result};
 use std::f64::consts::PI;
 
-const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_map.comp.spv"));
+pub(crate) const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_map.comp.spv"));
 
 /// Cells of the BRDF's density a side of one table cell.
 pub const SUB: usize = 2;
@@ -508,39 +508,191 @@ pub(crate) struct Dispatch<'a> {
     pub name: &'a str,
 }
 
-/// Runs `d` with `lighting`: the per-pixel sums divided by the samples, and the GPU time.
-pub(crate) fn dispatch(
-    dev: &Arc<Device>,
-    lighting: &EnvLighting,
-    d: &Dispatch<'_>,
-) -> Result<(Vec<[f32; 4]>, f64)> {
-    if !(1..=MAX_SAMPLES).contains(&d.samples) {
-        return Err(Error::invalid(
-            "env samples",
-            format!("{}; expected 1 to {MAX_SAMPLES}", d.samples),
-        ));
+/// The device objects of an integration that stay while the environment, the table and
+/// the stage stay: the table's coefficients, the environment's radiance and CDFs, the
+/// BRDF's density, the layout and the pipeline. What changes with the view, the lights or
+/// the rotation is bound per [`EnvTarget`]; [`EnvKernel::record`] adds samples
+/// `[base, base + count)` to a target's running sums, so a progressive picture (the
+/// viewer) dispatches a few samples a frame into the same sums.
+pub(crate) struct EnvKernel {
+    dev: Arc<Device>,
+    pipeline: ComputePipeline,
+    layout: ComputeLayout,
+    coeff: Buffer,
+    radiance: Buffer,
+    env_cdf: Buffer,
+    density: Buffer,
+    /// The environment's luminance integral (the light sampler's share of it).
+    env_power: f64,
+    /// The irradiance table of the rotation it was made for (texture blending reads it).
+    irradiance: Option<(f64, Vec<[f64; 3]>)>,
+    /// Whether the stage reads its own buffer at binding 7 (the G-buffer).
+    extra: bool,
+    name: String,
+}
+
+/// What one picture integrates into: the parameters, the lights, the stage's own buffer
+/// and the running sums (`outputs` vec4s a pixel), with their descriptor set.
+pub(crate) struct EnvTarget {
+    set: StorageSet,
+    _params: Buffer,
+    _lights: Buffer,
+    _extra: Option<Buffer>,
+    pub out: Buffer,
+    pub pixels: u64,
+}
+
+impl EnvKernel {
+    /// The objects of `lighting` and `env` for the stage `spirv` (`extra`: it reads a
+    /// G-buffer at binding 7).
+    pub fn new(
+        dev: &Arc<Device>,
+        lighting: &EnvLighting,
+        env: &EnvMap,
+        spirv: &[u8],
+        extra: bool,
+        name: &str,
+    ) -> Result<Self> {
+        let t = &lighting.table;
+        let sampler = EnvSampler::new(env);
+        let env_pdf = sampler
+            .prob
+            .iter()
+            .enumerate()
+            .map(|(p, pr)| (pr / env.pixel_solid_angle(p as u32 / env.width)) as f32);
+        let mut env_cdf = f32_bytes(sampler.marginal.iter().map(|&x| x as f32));
+        env_cdf.extend(f32_bytes(sampler.conditional.iter().map(|&x| x as f32)));
+        env_cdf.extend(f32_bytes(env_pdf));
+        let env_xyz = f32_bytes(
+            env.radiance
+                .iter()
+                .flat_map(|p| linear_srgb_to_xyz(p.map(f64::from)).map(|x| x as f32)),
+        );
+        let coeff = f32_bytes(t.splines.iter().flatten().flatten().map(|&x| x as f32));
+        let b = |what: &str, bytes: &[u8]| {
+            compute::storage_with_data(dev, &format!("{name} {what}"), bytes)
+        };
+        let layout = ComputeLayout::new(dev, name, 7 + u32::from(extra), 8)?;
+        let pipeline = ComputePipeline::new(dev, name, &layout, spirv, &[])?;
+        Ok(EnvKernel {
+            dev: Arc::clone(dev),
+            coeff: b("table", &coeff)?,
+            radiance: b("radiance", &env_xyz)?,
+            env_cdf: b("environment CDFs", &env_cdf)?,
+            density: b(
+                "BRDF density",
+                &f32_bytes(lighting.density.data.iter().copied()),
+            )?,
+            pipeline,
+            layout,
+            env_power: sampler.total,
+            irradiance: None,
+            extra,
+            name: name.to_string(),
+        })
     }
+
+    /// Binds a picture of `d` (whose `env` is the kernel's map, at any rotation): the
+    /// parameters, the lights and `d.extra` uploaded, the sums allocated (written by the
+    /// first dispatch, at `base = 0`). `mapped`: the small buffers stay host-visible (no
+    /// upload that waits for the queue, for a frame path).
+    pub fn bind(
+        &mut self,
+        lighting: &EnvLighting,
+        d: &Dispatch<'_>,
+        mapped: bool,
+    ) -> Result<EnvTarget> {
+        if !(1..=MAX_SAMPLES).contains(&d.samples) {
+            return Err(Error::invalid(
+                "env samples",
+                format!("{}; expected 1 to {MAX_SAMPLES}", d.samples),
+            ));
+        }
+        let (q_env, q_discs) = d.lights.probabilities(self.env_power);
+        let params = params(lighting, d, q_env);
+        let rotation = d.env.rotate_rad;
+        let irradiance: &[[f64; 3]] = if d.w_diffuse.is_some() {
+            if self.irradiance.as_ref().is_none_or(|(r, _)| *r != rotation) {
+                self.irradiance = Some((rotation, irradiance_table(d.env)));
+            }
+            self.irradiance.as_ref().map_or(&[], |(_, e)| e)
+        } else {
+            &[]
+        };
+        let name = &self.name;
+        let dev = &self.dev;
+        let b = |what: &str, bytes: &[u8]| {
+            let label = format!("{name} {what}");
+            if mapped {
+                Buffer::with_data(dev, &label, vk::BufferUsageFlags::STORAGE_BUFFER, bytes)
+            } else {
+                compute::storage_with_data(dev, &label, bytes)
+            }
+        };
+        let params_buf = b("params", crate::gpu::memory::bytes_of(&[params]))?;
+        let lights_buf = b("lights", &f32_bytes(d.lights.buffer(&q_discs, irradiance)))?;
+        let extra_buf = match (self.extra, d.extra) {
+            (true, Some(e)) => Some(b("G-buffer", e)?),
+            (true, None) => Some(b("G-buffer", &[0; 64])?),
+            (false, _) => None,
+        };
+        let out_bytes = (d.pixels * d.outputs * 16).max(16);
+        let out = compute::storage(dev, &format!("{name} output"), out_bytes)?;
+        let mut buffers = vec![
+            &params_buf,
+            &self.coeff,
+            &self.radiance,
+            &self.env_cdf,
+            &self.density,
+            &out,
+            &lights_buf,
+        ];
+        buffers.extend(extra_buf.as_ref());
+        let set = StorageSet::new(dev, name, &self.layout, &buffers)?;
+        Ok(EnvTarget {
+            set,
+            _params: params_buf,
+            _lights: lights_buf,
+            _extra: extra_buf,
+            out,
+            pixels: d.pixels,
+        })
+    }
+
+    /// Records the dispatches that add samples `[base, base + count)` to `t`'s sums
+    /// (`base = 0` starts them and adds the point lights), each followed by a barrier, so
+    /// what comes after in `cb` reads the sums. `count = 0` at `base = 0` leaves the point
+    /// lights alone in the sums.
+    pub fn record(
+        &self,
+        cb: vk::CommandBuffer,
+        t: &EnvTarget,
+        base: u32,
+        count: u32,
+    ) -> Result<()> {
+        compute::compute_barrier(&self.dev, cb);
+        let mut at = base;
+        loop {
+            let n = CHUNK.min(base + count - at);
+            let push: Vec<u8> = [at, n].iter().flat_map(|v| v.to_le_bytes()).collect();
+            self.layout
+                .dispatch(cb, &self.pipeline, &t.set, &push, t.pixels.max(1))?;
+            compute::compute_barrier(&self.dev, cb);
+            at += n;
+            if at >= base + count {
+                return Ok(());
+            }
+        }
+    }
+}
+
+/// The parameter block of `d` (env_common.glsl's `Params`).
+fn params(lighting: &EnvLighting, d: &Dispatch<'_>, q_env: f64) -> ParamsSsbo {
     let env = d.env;
     let t = &lighting.table;
     let r = t.region;
-    let sampler = EnvSampler::new(env);
-    let env_pdf = sampler
-        .prob
-        .iter()
-        .enumerate()
-        .map(|(p, pr)| (pr / env.pixel_solid_angle(p as u32 / env.width)) as f32);
-    let mut env_cdf = f32_bytes(sampler.marginal.iter().map(|&x| x as f32));
-    env_cdf.extend(f32_bytes(sampler.conditional.iter().map(|&x| x as f32)));
-    env_cdf.extend(f32_bytes(env_pdf));
-    let env_xyz = f32_bytes(
-        env.radiance
-            .iter()
-            .flat_map(|p| linear_srgb_to_xyz(p.map(f64::from)).map(|x| x as f32)),
-    );
-    let coeff = f32_bytes(t.splines.iter().flatten().flatten().map(|&x| x as f32));
     let g = &lighting.density;
-    let (q_env, q_discs) = d.lights.probabilities(sampler.total);
-    let params = ParamsSsbo {
+    ParamsSsbo {
         region_lo: [r.lo[0] as f32, r.lo[1] as f32, r.lo[2] as f32, 0.0],
         region_hi: [r.hi[0] as f32, r.hi[1] as f32, r.hi[2] as f32, 0.0],
         blend: [d.w_diffuse.unwrap_or(0.0) as f32, q_env as f32, 0.0, 0.0],
@@ -578,24 +730,24 @@ pub(crate) fn dispatch(
             i32::from(d.w_diffuse.is_some()),
             d.map_side as i32,
         ],
-    };
-    let b = |name: &str, bytes: &[u8]| {
-        compute::storage_with_data(dev, &format!("{} {name}", d.name), bytes)
-    };
-    let params_buf = b("params", crate::gpu::memory::bytes_of(&[params]))?;
-    let coeff_buf = b("table", &coeff)?;
-    let env_buf = b("radiance", &env_xyz)?;
-    let env_cdf_buf = b("environment CDFs", &env_cdf)?;
-    let g_buf = b("BRDF density", &f32_bytes(g.data.iter().copied()))?;
-    let irradiance = if d.w_diffuse.is_some() {
-        irradiance_table(env)
-    } else {
-        Vec::new()
-    };
-    let lights_buf = b("lights", &f32_bytes(d.lights.buffer(&q_discs, &irradiance)))?;
-    let extra_buf = d.extra.map(|e| b("G-buffer", e)).transpose()?;
+    }
+}
+
+/// Runs `d` with `lighting`: the per-pixel sums divided by the samples, and the GPU time.
+pub(crate) fn dispatch(
+    dev: &Arc<Device>,
+    lighting: &EnvLighting,
+    d: &Dispatch<'_>,
+) -> Result<(Vec<[f32; 4]>, f64)> {
+    if !(1..=MAX_SAMPLES).contains(&d.samples) {
+        return Err(Error::invalid(
+            "env samples",
+            format!("{}; expected 1 to {MAX_SAMPLES}", d.samples),
+        ));
+    }
+    let mut kernel = EnvKernel::new(dev, lighting, d.env, d.spirv, d.extra.is_some(), d.name)?;
+    let target = kernel.bind(lighting, d, false)?;
     let out_bytes = (d.pixels * d.outputs * 16).max(16);
-    let out = compute::storage(dev, &format!("{} output", d.name), out_bytes)?;
     let readback = Buffer::new(
         dev,
         &format!("{} readback", d.name),
@@ -603,28 +755,10 @@ pub(crate) fn dispatch(
         vk::BufferUsageFlags::TRANSFER_DST,
         MemoryLocation::GpuToCpu,
     )?;
-    let mut buffers = vec![
-        &params_buf,
-        &coeff_buf,
-        &env_buf,
-        &env_cdf_buf,
-        &g_buf,
-        &out,
-        &lights_buf,
-    ];
-    buffers.extend(extra_buf.as_ref());
-    let layout = ComputeLayout::new(dev, d.name, buffers.len() as u32, 8)?;
-    let set = StorageSet::new(dev, d.name, &layout, &buffers)?;
-    let pipeline = ComputePipeline::new(dev, d.name, &layout, d.spirv, &[])?;
     let start = Instant::now();
     dev.submit_once(d.name, |cb| {
-        for base in (0..d.samples).step_by(CHUNK as usize) {
-            let count = CHUNK.min(d.samples - base);
-            let push: Vec<u8> = [base, count].iter().flat_map(|v| v.to_le_bytes()).collect();
-            layout.dispatch(cb, &pipeline, &set, &push, d.pixels.max(1))?;
-            compute::compute_barrier(dev, cb);
-        }
-        compute::copy_to_host(dev, cb, &out, &readback, out_bytes);
+        kernel.record(cb, &target, 0, d.samples)?;
+        compute::copy_to_host(dev, cb, &target.out, &readback, out_bytes);
         Ok(())
     })?;
     let gpu_ms = start.elapsed().as_secs_f64() * 1e3;
@@ -642,17 +776,13 @@ pub(crate) fn dispatch(
     Ok((sums, gpu_ms))
 }
 
-/// Draws `req` with `lighting` on `dev`.
-pub fn render_env_brdf_map(
-    dev: &Arc<Device>,
-    lighting: &EnvLighting,
-    req: &EnvMapRequest<'_>,
-) -> Result<EnvPicture> {
+/// The lights of an environment-lit BRDF map: the sun at `sun` (tangent space of the map's
+/// patch, towards it, and its irradiance) as one point light, or none.
+pub fn map_lights(lighting: &EnvLighting, sun: Option<([f64; 3], f64)>) -> Lights {
     // The sun in the world: the map's patch is N = +Y, T = +X, B = −Z (MODEL §10).
     let frame = crate::brdf::env_reference::Frame::BRDF_MAP;
-    let lights = Lights {
-        points: req
-            .sun
+    Lights {
+        points: sun
             .filter(|s| s.1 > 0.0)
             .map(|(wi, e)| PointLight {
                 towards: frame.to_world(wi),
@@ -661,7 +791,16 @@ pub fn render_env_brdf_map(
             .into_iter()
             .collect(),
         discs: Vec::new(),
-    };
+    }
+}
+
+/// Draws `req` with `lighting` on `dev`.
+pub fn render_env_brdf_map(
+    dev: &Arc<Device>,
+    lighting: &EnvLighting,
+    req: &EnvMapRequest<'_>,
+) -> Result<EnvPicture> {
+    let lights = map_lights(lighting, req.sun);
     let (sums, gpu_ms) = dispatch(
         dev,
         lighting,

@@ -29,7 +29,7 @@ use crate::mesh::Mesh;
 use crate::scene::{Camera, Scene};
 use crate::Result;
 
-const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_scene.comp.spv"));
+pub(crate) const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_scene.comp.spv"));
 
 /// A texture as the G-buffer reads it: linear-sRGB albedo, top row first, repeated.
 pub struct Albedo {
@@ -476,7 +476,13 @@ pub fn render_env_scene(
 }
 
 /// What the camera sees where no triangle is ([`EnvSceneFrame`]).
-fn background(scene: &Scene, env: Option<&EnvMap>, w: u32, h: u32, scale: f64) -> Vec<[f32; 3]> {
+pub fn background(
+    scene: &Scene,
+    env: Option<&EnvMap>,
+    w: u32,
+    h: u32,
+    scale: f64,
+) -> Vec<[f32; 3]> {
     let out = &scene.output;
     let Some(env) = env else {
         let c = out.background.map(|c| c / out.exposure);
