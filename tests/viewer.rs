@@ -22,6 +22,8 @@ use diffract::brdf::truncation::{Precision, Reach};
 use diffract::colour::{linear_to_srgb8, xyz_to_linear_srgb};
 use diffract::heightfield::HeightField;
 use diffract::image_io;
+use diffract::light::env::{EnvMap, EnvSource};
+use diffract::render::env::{render_env_brdf_map, EnvLighting, EnvMapRequest};
 use diffract::render::VariantKind;
 use diffract::scene::Scene;
 use diffract::view::input::{
@@ -1148,7 +1150,7 @@ fn environment_lit_view_matches_render() {
     args.extend(["--screenshot", "view.png"]);
     let stdout = run_view_in(&x, &dir, &args);
     assert!(stdout.contains("sky: 1/16 spp"), "{stdout}");
-    assert!(stdout.contains("sky: 16/16 spp"), "{stdout}");
+    assert!(stdout.contains("sky: 16/16 spp in "), "{stdout}");
     let view = read_linear(&dir.join("view.png"));
     let mut render_args = env.to_vec();
     render_args.extend(SMALL_TABLE);
@@ -1192,12 +1194,12 @@ fn e_switches_to_the_environment_and_a_turn_restarts_it() {
             .unwrap_or_else(|| panic!("'{needle}' missing:\n{stdout}"))
     };
     assert!(at("environment → sky") < at("sky: 1/8 spp"), "{stdout}");
-    assert!(at("sky: 1/8 spp") < at("sky: 8/8 spp"), "{stdout}");
+    assert!(at("sky: 1/8 spp") < at("sky: 8/8 spp in "), "{stdout}");
     assert!(
-        at("sky: 8/8 spp") < at("sky: accumulation restarts (was 8/8 spp)"),
+        at("sky: 8/8 spp in ") < at("sky: accumulation restarts (was 8/8 spp)"),
         "{stdout}"
     );
-    assert_eq!(stdout.matches("sky: 8/8 spp").count(), 2, "{stdout}");
+    assert_eq!(stdout.matches("sky: 8/8 spp in ").count(), 2, "{stdout}");
     let sun = read_linear(&dir.join("diffract-view-1.png"));
     let turned = read_linear(&dir.join("turned.png"));
     let mut render_args = vec!["--env", "builtin:sky", "--env-samples", "8"];
@@ -1213,6 +1215,86 @@ fn e_switches_to_the_environment_and_a_turn_restarts_it() {
     let from_sun = image_io::compare_images(&turned, &sun);
     eprintln!("view after E and . vs the sun-lit frame: {from_sun}");
     assert!(from_sun.mean_delta_e > 1.0, "{from_sun}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// With the BRDF map beside the mesh (`--map`) under builtin:sky, the map's square is the
+/// environment-lit map (`render_env_brdf_map` of the viewer's map light, over the mirror
+/// scale, times the map exposure) and the mesh beside it is `render --env builtin:sky`,
+/// both accumulated to the cap.
+#[test]
+fn the_map_beside_the_mesh_is_lit_by_the_environment() {
+    let Some(x) = Xvfb::start() else { return };
+    let dir = temp_dir("env-map");
+    let scene_path = small_default_scene(&dir, "");
+    let scene_arg = scene_path.to_str().unwrap();
+    let env = ["--env", "builtin:sky", "--env-samples", "16"];
+    let mut args = vec!["--scene", scene_arg, "--width", "96", "--vsync", "off"];
+    args.extend(["--frames", "2", "--map", "--screenshot", "map.png"]);
+    args.extend(env);
+    args.extend(SMALL_TABLE);
+    let stdout = run_view_in(&x, &dir, &args);
+    assert!(stdout.contains("sky: 16/16 spp"), "{stdout}");
+    let (w, h, px) = image_io::read_png_rgb8(&dir.join("map.png")).expect("screenshot");
+    assert_eq!((w, h), (96, 48));
+
+    let mut render_args = env.to_vec();
+    render_args.extend(SMALL_TABLE);
+    let render = render_env_png(&dir, &scene_path, &render_args, "render.png");
+    let diff = image_io::compare_images(&crop(&px, w, (48, 0, 48, 48)), &render);
+    eprintln!("mesh beside the map vs render: {diff}");
+    assert!(diff.mean_delta_e <= MAX_ENV_MEAN_DELTA_E, "{diff}");
+
+    let Some(dev) = device() else { return };
+    let scene = Scene::load(&scene_path).expect("scene");
+    let m = &scene.material;
+    let hf = m
+        .load_heightfield(&diffract::report::Stderr)
+        .expect("height field");
+    let spec =
+        diffract::cli::env::map_table_spec(Some(0.02), None, Some(20), m.coherence_um).unwrap();
+    let cache = dir.join("cache");
+    let (lighting, cached) = EnvLighting::build_cached(
+        &hf,
+        m.coherence_um,
+        &m.shading(),
+        &spec,
+        Some(&cache),
+        &diffract::report::Stderr,
+    )
+    .expect("table");
+    assert!(cached, "the viewer's table is in the cache");
+    let mesh = scene.mesh.load().expect("mesh");
+    let frame = tangent_frame_at_view(&mesh, &scene.camera).expect("frame");
+    let (theta, phi) = ViewState::from_scene(&scene).map_light_angles(frame);
+    let sky = EnvMap::load(&EnvSource::Sky, 1.0, 0.0).unwrap();
+    let side = 48;
+    let req = EnvMapRequest {
+        env: &sky,
+        shading: m.shading(),
+        samples: 16,
+        size: side,
+        sun: Some((diffract::brdf::direction(theta, phi), 1.0)),
+        seed: 0,
+    };
+    let pic = render_env_brdf_map(&dev, &lighting, &req).expect("env map");
+    let gain = f64::from(diffract::view::input::DEFAULT_MAP_EXPOSURE) / lighting.mirror_scale;
+    let expected = through_srgb8(
+        &pic.xyz
+            .iter()
+            .map(|p| xyz_to_linear_srgb(p.map(f64::from)).map(|c| (c * gain) as f32))
+            .collect::<Vec<_>>(),
+    );
+    let actual = crop(&px, w, (0, 0, side, side));
+    let lit = actual
+        .iter()
+        .filter(|p| p.iter().any(|&c| c > 0.02))
+        .count();
+    eprintln!("map: {lit} of {} pixels lit", side * side);
+    assert!(lit * 10 > (side * side) as usize, "the map is lit: {lit}");
+    let diff = image_io::compare_images(&actual, &expected);
+    eprintln!("environment-lit map vs render_env_brdf_map: {diff}");
+    assert!(diff.mean_delta_e <= MAX_ENV_MEAN_DELTA_E, "{diff}");
     let _ = std::fs::remove_dir_all(&dir);
 }
 

@@ -459,7 +459,7 @@ impl Viewer {
         self.draw
             .update_passes(scene, &mut self.controls, self.swapchain.as_ref())?;
         if let Some(sc) = &self.swapchain {
-            self.draw.update_env(scene, &self.controls, sc.extent);
+            self.draw.update_env(scene, &self.controls, sc);
         }
         let settled = !(self.draw.settling() || self.loader.loading());
         if !self.draw.has_pass() {

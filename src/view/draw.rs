@@ -261,7 +261,13 @@ impl Draw {
     /// Brings the environment-lit picture up to date for the controls' view in a target of
     /// `extent` (see [`EnvView::update`]). A failure is printed and the environment is
     /// switched off (the sun-lit passes draw).
-    pub fn update_env(&mut self, scene: &Scene, controls: &Controls, extent: vk::Extent2D) {
+    pub fn update_env(&mut self, scene: &Scene, controls: &Controls, sc: &Swapchain) {
+        if self.env.on() && !sc.uploadable() {
+            eprintln!("error: the window's images cannot be copied into (environment off)");
+            self.env.switch_off(&mut self.frames);
+            return;
+        }
+        let extent = sc.extent;
         let (mesh_rect, map_rect) = layout(extent, controls.map);
         let map = map_rect.map(|r| (r, self.map_wi(controls)));
         let dev = Arc::clone(self.renderer.device());
@@ -635,7 +641,7 @@ impl Draw {
             Some(_) => Some(sc.readback_buffer()?),
             None => None,
         };
-        if self.env.drawing() && sc.uploadable() {
+        if self.env.drawing() {
             let dev = Arc::clone(self.renderer.device());
             self.env.record(&dev, frame.cb, sc, index)?;
         } else {

@@ -110,6 +110,10 @@ struct View {
     map: Option<Picture>,
     /// Samples per pixel in the sums.
     done: u32,
+    /// Frames that added samples.
+    frames: u32,
+    /// The cap was reached and said.
+    reported: bool,
     cleared: bool,
     started: Instant,
 }
@@ -551,6 +555,8 @@ impl EnvView {
             mesh: mesh_picture,
             map: map_picture,
             done: 0,
+            frames: 0,
+            reported: false,
             cleared: false,
             started: Instant::now(),
         })
@@ -603,17 +609,28 @@ impl EnvView {
             }
             let before = view.done;
             view.done += n;
-            // Said at each power of two and at the cap (recorded, not yet drawn).
-            if view.done == cap || before.leading_zeros() != view.done.leading_zeros() {
-                let s = view.started.elapsed().as_secs_f64();
+            view.frames += 1;
+            // Said at each power of two below the cap.
+            if view.done < cap && before.leading_zeros() != view.done.leading_zeros() {
                 println!(
-                    "{}: {}/{cap} spp recorded after {:.0} ms ({:.0} spp/s)",
+                    "{}: {}/{cap} spp",
                     self.settings.name(self.current),
-                    view.done,
-                    s * 1e3,
-                    f64::from(view.done) / s.max(1e-9)
+                    view.done
                 );
             }
+        } else if !view.reported {
+            // The frame after the last samples: they have been drawn (but for the frame
+            // in flight).
+            view.reported = true;
+            let s = view.started.elapsed().as_secs_f64();
+            println!(
+                "{}: {cap}/{cap} spp in {} frames, {:.0} ms ({:.1} ms a frame, {:.0} spp/s)",
+                self.settings.name(self.current),
+                view.frames,
+                s * 1e3,
+                s * 1e3 / f64::from(view.frames.max(1)),
+                f64::from(cap) / s.max(1e-9)
+            );
         }
         // The previous frame's copy out of the texels is done before they are written.
         compute::barrier(
