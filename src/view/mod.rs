@@ -4,8 +4,11 @@
 //! [`ScenePass`](crate::render::ScenePass) recorded into swapchain images: the same code as
 //! `diffract render`, so a screenshot matches the offscreen render of the same camera.
 //!
-//! No physics here and no Vulkan beyond frame pacing: the pass and the swapchain own their
-//! objects.
+//! Under an environment map (`env.rs`) the frames are the environment-lit picture of
+//! `diffract render --env`, accumulated over frames by the same compute estimator.
+//!
+//! No physics here and no Vulkan beyond frame pacing and the environment's resolve: the
+//! passes, the kernels and the swapchain own their objects.
 
 mod app;
 mod draw;
