@@ -131,6 +131,8 @@ pub(super) struct EnvView {
     view: Option<View>,
     /// Samples per pixel the next frame adds.
     batch: u32,
+    /// The swapchain's texels are B8G8R8A8 (else R8G8B8A8).
+    bgra: bool,
 }
 
 impl EnvView {
@@ -147,6 +149,7 @@ impl EnvView {
             resolve: None,
             view: None,
             batch: 1,
+            bgra: true,
         }
     }
 
@@ -270,11 +273,7 @@ impl EnvView {
             self.reset_kernels(frames);
             self.kernels = Some(self.make_kernels(dev, &lighting, kernel_key)?);
         }
-        if self.resolve.is_none() {
-            let layout = ComputeLayout::new(dev, "env resolve", 4, RESOLVE_PUSH)?;
-            let pipeline = ComputePipeline::new(dev, "env resolve", &layout, RESOLVE_SPIRV, &[])?;
-            self.resolve = Some((layout, pipeline));
-        }
+        self.make_resolve(dev)?;
         if self.view.is_none() {
             let view = self.bind_view(dev, &lighting, scene, state, mesh, extent, rects)?;
             self.view = Some(view);
@@ -360,6 +359,16 @@ impl EnvView {
         }
         if let Some(m) = &mut self.maps[i] {
             m.rotate_rad = rotate;
+        }
+        Ok(())
+    }
+
+    /// The resolve's layout and pipeline, made once.
+    fn make_resolve(&mut self, dev: &Arc<Device>) -> Result<()> {
+        if self.resolve.is_none() {
+            let layout = ComputeLayout::new(dev, "env resolve", 4, RESOLVE_PUSH)?;
+            let pipeline = ComputePipeline::new(dev, "env resolve", &layout, RESOLVE_SPIRV, &[])?;
+            self.resolve = Some((layout, pipeline));
         }
         Ok(())
     }
@@ -571,6 +580,22 @@ impl EnvView {
         sc: &Swapchain,
         index: u32,
     ) -> Result<()> {
+        self.bgra = sc.format == vk::Format::B8G8R8A8_SRGB;
+        if self.view.as_ref().is_some_and(|v| v.extent != sc.extent) {
+            return Err(Error::invalid(
+                "viewer frame",
+                "the picture is for another window size",
+            ));
+        }
+        let texels = self.record_resolved(dev, cb)?;
+        sc.record_upload(cb, index, texels);
+        Ok(())
+    }
+
+    /// Records this frame's samples and the resolve into the view's texels (4 bytes a
+    /// pixel of the window, the swapchain's order), which it returns.
+    fn record_resolved(&mut self, dev: &Arc<Device>, cb: vk::CommandBuffer) -> Result<&Buffer> {
+        let bgra = self.bgra;
         let (Some(view), Some(kernels), Some((layout, pipeline))) =
             (&mut self.view, &self.kernels, &self.resolve)
         else {
@@ -579,12 +604,6 @@ impl EnvView {
                 "no environment picture to draw",
             ));
         };
-        if view.extent != sc.extent {
-            return Err(Error::invalid(
-                "viewer frame",
-                "the picture is for another window size",
-            ));
-        }
         let raw = dev.raw();
         let pictures: Vec<(&Picture, &EnvKernel)> = std::iter::once((&view.mesh, &kernels.scene))
             .chain(view.map.as_ref().map(|m| (m, &kernels.map)))
@@ -645,7 +664,6 @@ impl EnvView {
                 vk::AccessFlags::SHADER_WRITE,
             ),
         );
-        let bgra = sc.format == vk::Format::B8G8R8A8_SRGB;
         for (p, _) in &pictures {
             let r = p.rect;
             let push: Vec<u8> = [
@@ -675,8 +693,7 @@ impl EnvView {
             let count = u64::from(r.extent.width) * u64::from(r.extent.height);
             layout.dispatch(cb, pipeline, &p.set, &push, count)?;
         }
-        sc.record_upload(cb, index, &view.texels);
-        Ok(())
+        Ok(&view.texels)
     }
 }
 
@@ -758,4 +775,187 @@ fn copy(dev: &Device, cb: vk::CommandBuffer, from: &Buffer, to: &Buffer) {
             vk::AccessFlags::SHADER_READ | vk::AccessFlags::SHADER_WRITE,
         ),
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::table::Region;
+    use crate::colour::{linear_to_srgb8, xyz_to_linear_srgb};
+    use crate::heightfield::HeightField;
+    use crate::light::env::EnvSource;
+    use crate::render::env::{render_env_brdf_map, EnvMapRequest};
+    use crate::render::env_scene::{render_env_scene, EnvScene};
+
+    fn device() -> Option<Arc<Device>> {
+        match Device::new(true) {
+            Ok(d) => Some(d),
+            Err(Error::NoVulkan(m)) if std::env::var_os("DIFFRACT_REQUIRE_VULKAN").is_none() => {
+                eprintln!("SKIPPED: no Vulkan device ({m})");
+                None
+            }
+            Err(e) => panic!("cannot create a validated device: {e}"),
+        }
+    }
+
+    /// The window's texels of the view after one frame of 8 of 16 samples: the mesh's
+    /// 16×16 square on the right, the BRDF map's on the left.
+    fn halfway_texels(
+        dev: &Arc<Device>,
+        view: &mut EnvView,
+        lighting: &EnvLighting,
+        scene: &Scene,
+        wi: [f64; 3],
+    ) -> Vec<u8> {
+        let state = ViewState::from_scene(scene);
+        let mesh = scene.mesh.load().unwrap();
+        view.load_map(&state).unwrap();
+        view.kernels = Some(view.make_kernels(dev, lighting, ((0, true), 0)).unwrap());
+        view.make_resolve(dev).unwrap();
+        let rect = |x: i32| vk::Rect2D {
+            offset: vk::Offset2D { x, y: 0 },
+            extent: vk::Extent2D {
+                width: 16,
+                height: 16,
+            },
+        };
+        let extent = vk::Extent2D {
+            width: 32,
+            height: 16,
+        };
+        let rects = (rect(16), Some((rect(0), wi)));
+        let bound = view
+            .bind_view(dev, lighting, scene, &state, &mesh, extent, rects)
+            .unwrap();
+        view.view = Some(bound);
+        view.batch = 8;
+        let bytes = 32 * 16 * 4;
+        let readback = Buffer::new(
+            dev,
+            "test texels",
+            bytes,
+            vk::BufferUsageFlags::TRANSFER_DST,
+            gpu_allocator::MemoryLocation::GpuToCpu,
+        )
+        .unwrap();
+        dev.submit_once("test resolve", |cb| {
+            let texels = view.record_resolved(dev, cb)?;
+            compute::copy_to_host(dev, cb, texels, &readback, bytes);
+            Ok(())
+        })
+        .unwrap();
+        assert_eq!(view.view.as_ref().map(|v| v.done), Some(8));
+        readback.mapped().unwrap().to_vec()
+    }
+
+    /// Halfway to the cap (8 of 16 samples) the window shows the offscreen pictures of 8
+    /// samples (the map's and the scene's, exposed, tone-mapped and encoded as the viewer
+    /// does): the point lights, added once weighted by the cap, are corrected to the
+    /// samples taken. The default scene's sun lights its skin texture, so an uncorrected
+    /// point-light part would come out twice as bright.
+    #[test]
+    fn halfway_the_picture_is_the_offscreen_picture_of_its_samples() {
+        let Some(dev) = device() else { return };
+        let mut scene = Scene::default_scene();
+        (scene.output.width, scene.output.height) = (16, 16);
+        scene.output.supersample = 1;
+        // A flat patch: a table of the specular lobe alone builds in a moment.
+        let hf = HeightField::new(64, 64, 65.0 / 64.0, vec![0.0; 64 * 64]).unwrap();
+        let spec = TableSpec {
+            region: Region {
+                lo: [-0.04, -0.04, -2.0],
+                hi: [0.04, 0.04, 0.0],
+            },
+            texel_uv: 0.002,
+            w_nodes: 4,
+            step_nm: 20,
+        };
+        let shading = scene.material.shading();
+        let lighting = EnvLighting::build(&hf, 65.0, &shading, &spec).unwrap();
+        let texture = scene.texture.as_ref().map(|t| t.load().unwrap());
+        let settings = EnvSettings {
+            entries: vec![Some(EnvSource::Sky)],
+            first: 0,
+            intensity: 1.0,
+            rotate_deg: 0.0,
+            samples: 16,
+            sun: true,
+            lit_without_map: false,
+            spec,
+            cache_dir: None,
+            texture: texture.clone(),
+        };
+        let mut view = EnvView::new(settings, None);
+        let wi = crate::brdf::direction(30.0, 90.0);
+        let texels = halfway_texels(&dev, &mut view, &lighting, &scene, wi);
+        let sky = EnvMap::load(&EnvSource::Sky, 1.0, 0.0).unwrap();
+        let map = render_env_brdf_map(
+            &dev,
+            &lighting,
+            &EnvMapRequest {
+                env: &sky,
+                shading,
+                samples: 8,
+                size: 16,
+                sun: Some((wi, 1.0)),
+                seed: 0,
+            },
+        )
+        .unwrap();
+        let lights = scene_lights(&scene, true, lighting.white);
+        let mesh = scene.mesh.load().unwrap();
+        let frame = render_env_scene(
+            &dev,
+            &lighting,
+            &EnvScene {
+                scene: &scene,
+                mesh: &mesh,
+                texture: texture.as_ref(),
+                env: Some(&sky),
+                lights: &lights,
+                shading,
+                samples: 8,
+                seed: 0,
+            },
+        )
+        .unwrap();
+        let gain = f64::from(crate::view::input::DEFAULT_MAP_EXPOSURE) / lighting.mirror_scale;
+        let map_px: Vec<[u8; 3]> = map
+            .xyz
+            .iter()
+            .map(|p| linear_to_srgb8(xyz_to_linear_srgb(p.map(f64::from)), gain))
+            .collect();
+        let mesh_px: Vec<[u8; 3]> = scene
+            .output
+            .resolve(&frame.rgb)
+            .unwrap()
+            .iter()
+            .map(|p| linear_to_srgb8(p.map(f64::from), 1.0))
+            .collect();
+        assert!(mesh_px.iter().flatten().any(|&c| c > 40), "the mesh is lit");
+        let (mut worst, mut off) = (0i32, 0);
+        for y in 0..16 {
+            for x in 0..32 {
+                let t = &texels[(y * 32 + x) * 4..][..4];
+                let got = [t[2], t[1], t[0]]; // B8G8R8A8
+                let want = if x < 16 {
+                    map_px[y * 16 + x]
+                } else {
+                    mesh_px[y * 16 + x - 16]
+                };
+                let d = (0..3)
+                    .map(|c| (i32::from(got[c]) - i32::from(want[c])).abs())
+                    .max()
+                    .unwrap();
+                worst = worst.max(d);
+                off += usize::from(d > 0);
+            }
+        }
+        eprintln!("halfway: {off} of 512 texels off by up to {worst}");
+        assert!(worst <= 1, "{off} texels off, by up to {worst}");
+        assert_eq!(dev.validation_messages(), 0);
+        let mut frames = Frames::single(&dev, "test").unwrap();
+        view.reset_kernels(&mut frames);
+        dev.wait_idle().unwrap();
+    }
 }
