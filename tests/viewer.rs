@@ -1199,6 +1199,10 @@ fn e_switches_to_the_environment_and_a_turn_restarts_it() {
         at("sky: 8/8 spp in ") < at("sky: accumulation restarts (was 8/8 spp)"),
         "{stdout}"
     );
+    assert!(
+        at("sky: accumulation restarts") < at("environment turned to 5°"),
+        "{stdout}"
+    );
     assert_eq!(stdout.matches("sky: 8/8 spp in ").count(), 2, "{stdout}");
     let sun = read_linear(&dir.join("diffract-view-1.png"));
     let turned = read_linear(&dir.join("turned.png"));

@@ -133,10 +133,13 @@ pub(super) struct EnvView {
     batch: u32,
     /// The swapchain's texels are B8G8R8A8 (else R8G8B8A8).
     bgra: bool,
+    /// The map's turn about +Y shown (degrees).
+    turned_deg: f64,
 }
 
 impl EnvView {
     pub fn new(settings: EnvSettings, first_map: Option<EnvMap>) -> Self {
+        let turned_deg = settings.rotate_deg;
         let mut maps: Vec<Option<EnvMap>> = settings.entries.iter().map(|_| None).collect();
         maps[settings.first] = first_map;
         EnvView {
@@ -150,6 +153,7 @@ impl EnvView {
             view: None,
             batch: 1,
             bgra: true,
+            turned_deg,
         }
     }
 
@@ -233,7 +237,10 @@ impl EnvView {
         if !self.on() {
             return None;
         }
-        let name = self.settings.name(self.current);
+        let mut name = self.settings.name(self.current);
+        if self.turned_deg != 0.0 {
+            name = format!("{name} {}°", self.turned_deg);
+        }
         Some(match (&self.building, &self.view) {
             (Some((_, _, t)), _) => format!(
                 "{name} · preparing the environment, {:.0} s",
@@ -349,7 +356,12 @@ impl EnvView {
     /// Loads the current entry's map (once) at the rotation of `state`.
     fn load_map(&mut self, state: &ViewState) -> Result<()> {
         let i = self.current;
-        let rotate = (self.settings.rotate_deg + state.env_rotate_deg).to_radians();
+        let turned = self.settings.rotate_deg + state.env_rotate_deg;
+        if turned != self.turned_deg {
+            println!("environment turned to {turned}°");
+            self.turned_deg = turned;
+        }
+        let rotate = turned.to_radians();
         if self.maps[i].is_none() {
             let map = match &self.settings.entries[i] {
                 Some(source) => EnvMap::load(source, self.settings.intensity, 0.0)?,
