@@ -6,7 +6,10 @@
 //! screenshot has the new size. Also: synthetic mouse and key input drives the controls;
 //! no display → one `error:` line; a shader edit with a syntax error reports file:line and
 //! keeps the last good SPIR-V; a material edit rebuilds the table in the background while
-//! frames go on, and the picture after it is the edited material's.
+//! frames go on, and the picture after it is the edited material's. Under an environment
+//! (`--env`, `E`) the picture accumulated to the cap equals `render --env` of the same
+//! scene, the BRDF map beside it `render_env_brdf_map`, a turn of the map starts the
+//! accumulation again, and bad environment flags get one error line.
 //!
 //! Needs `Xvfb` (the `xvfb` package, installed by `.ci/run`). Without it the window tests
 //! print SKIPPED and return; with `DIFFRACT_REQUIRE_XVFB=1` they fail instead.

@@ -30,13 +30,15 @@ use crate::{Error, Result};
 const FRAMES_IN_FLIGHT: usize = 2;
 
 /// The passes, the renderer that builds them and what a frame records. Field order is drop
-/// order: the frames (with the passes retired into them) before the passes, the passes
-/// before the renderer.
+/// order: the frames (with the passes retired into them) before the passes and the
+/// environment's objects, those before the renderer.
 pub(super) struct Draw {
     frames: Frames,
     pass: Option<ScenePass>,
     /// The BRDF map beside the mesh (while `controls.map`).
     map_pass: Option<ScenePass>,
+    /// The environment-lit picture, drawn instead of the passes while an environment is on.
+    env: EnvView,
     renderer: Renderer,
     /// The scene's mesh in world space: the map's tangent frame is read from it.
     mesh: Mesh,
@@ -56,8 +58,6 @@ pub(super) struct Draw {
     screenshots: Screenshots,
     timing: Timing,
     accumulation: Accumulation,
-    /// The environment-lit picture, drawn instead of the passes while an environment is on.
-    env: EnvView,
 }
 
 /// Where the passes draw in the target this frame.
