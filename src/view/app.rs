@@ -133,6 +133,8 @@ impl ApplicationHandler for App {
             return;
         };
         let Some((env_settings, first_map)) = env else {
+            self.error = Some(Error::invalid("view", "no environment settings"));
+            event_loop.exit();
             return;
         };
         let env = super::env::EnvView::new(env_settings, first_map);
