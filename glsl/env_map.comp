@@ -21,18 +21,24 @@ void main() {
     float x = 2.0 * (float(px) + 0.5) / float(S) - 1.0;
     float y = 1.0 - 2.0 * (float(py) + 0.5) / float(S);
     float r2 = x * x + y * y;
-    if (r2 >= 1.0) { outSum[idx] = vec4(0.0, 0.0, 0.0, 1.0); return; }
+    if (r2 >= 1.0) {
+        outSum[2u * idx] = vec4(0.0, 0.0, 0.0, 1.0);
+        outSum[2u * idx + 1u] = vec4(0.0);
+        return;
+    }
     // The map's patch (MODEL §10): N = +Y, T = +X, B = N × T = −Z.
     Surface s = Surface(vec3(1.0, 0.0, 0.0), vec3(0.0, 0.0, -1.0), vec3(0.0, 1.0, 0.0),
                         vec3(x, y, sqrt(1.0 - r2)), vec3(0.0));
-    // Per pixel: the XYZ sum of the samples, plus the point lights times the samples.
+    // Per pixel: (the samples' XYZ sum, their number), (the point lights' XYZ, 0).
     vec3 xyz, rgb, sq;
     integrate(s, idx, 0u, 1u, chunk.count, xyz, rgb, sq);
+    float n = float(chunk.base + chunk.count);
     if (chunk.base == 0) {
         vec3 pxyz, prgb;
         pointLights(s, pxyz, prgb);
-        outSum[idx] = vec4(xyz + float(P.envDims.z) * pxyz, 1.0);
+        outSum[2u * idx] = vec4(xyz, n);
+        outSum[2u * idx + 1u] = vec4(pxyz, 0.0);
     } else {
-        outSum[idx] = vec4(outSum[idx].xyz + xyz, 1.0);
+        outSum[2u * idx] = vec4(outSum[2u * idx].xyz + xyz, n);
     }
 }

@@ -171,6 +171,7 @@ pub struct Swapchain {
     pub format: vk::Format,
     pub extent: vk::Extent2D,
     pub present_mode: vk::PresentModeKHR,
+    usage: vk::ImageUsageFlags,
     /// Independent of the extent: shared with the next swapchain while the format stays the
     /// same, so pipelines built for it stay valid.
     render_pass: Arc<RenderPass>,
@@ -185,7 +186,7 @@ pub struct Swapchain {
 /// What a swapchain of a surface is made with: its capabilities, the extent (the window's,
 /// clamped where the surface leaves it to the application), an 8-bit sRGB format, the
 /// present mode `vsync` asks for where offered, one image more than the minimum, colour
-/// attachment and copy-source usage, and opaque composition where offered.
+/// attachment and copy-source usage (copy-target too where offered), and opaque composition where offered.
 struct SurfaceChoice {
     caps: vk::SurfaceCapabilitiesKHR,
     extent: vk::Extent2D,
@@ -269,11 +270,18 @@ impl SurfaceChoice {
             image_count = image_count.min(caps.max_image_count);
         }
         // Screenshots copy out of the swapchain image.
-        let usage = vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC;
+        let mut usage = vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC;
         if !caps.supported_usage_flags.contains(usage) {
             return Err(Error::NoPresentation(
                 "swapchain images cannot be colour attachments and copy sources".into(),
             ));
+        }
+        // The viewer's environment-lit picture is resolved by a compute pass and copied in.
+        if caps
+            .supported_usage_flags
+            .contains(vk::ImageUsageFlags::TRANSFER_DST)
+        {
+            usage |= vk::ImageUsageFlags::TRANSFER_DST;
         }
         let composite = if caps
             .supported_composite_alpha
@@ -375,6 +383,7 @@ impl Swapchain {
             format: format.format,
             extent,
             present_mode,
+            usage,
             render_pass,
             images: Vec::new(),
             views: Vec::new(),
@@ -603,6 +612,92 @@ impl Swapchain {
                 vk::DependencyFlags::empty(),
                 &[],
                 &[to_host],
+                &[to_present],
+            );
+        }
+    }
+
+    /// Whether [`Swapchain::record_upload`] can write the images (they are copy targets).
+    pub fn uploadable(&self) -> bool {
+        self.usage.contains(vk::ImageUsageFlags::TRANSFER_DST)
+    }
+
+    /// Records, instead of a render pass, the copy of `texels` (4 bytes per texel in the
+    /// swapchain's format, row-major, written by compute shaders) into image `index`, left in
+    /// PRESENT_SRC_KHR and available to TRANSFER (as the render pass leaves it, so
+    /// [`Swapchain::record_copy`] can follow).
+    pub fn record_upload(&self, cb: vk::CommandBuffer, index: u32, texels: &Buffer) {
+        let image = self.images[index as usize];
+        let range = vk::ImageSubresourceRange {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            base_mip_level: 0,
+            level_count: 1,
+            base_array_layer: 0,
+            layer_count: 1,
+        };
+        // The frame's submission waits for the acquire at COLOR_ATTACHMENT_OUTPUT: the
+        // transition chains on that stage.
+        let to_dst = vk::ImageMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::empty())
+            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .old_layout(vk::ImageLayout::UNDEFINED)
+            .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .image(image)
+            .subresource_range(range);
+        let to_present = vk::ImageMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
+            .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
+            .new_layout(vk::ImageLayout::PRESENT_SRC_KHR)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .image(image)
+            .subresource_range(range);
+        let from_shader = vk::MemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::SHADER_WRITE)
+            .dst_access_mask(vk::AccessFlags::TRANSFER_READ);
+        let region = vk::BufferImageCopy::default()
+            .image_subresource(vk::ImageSubresourceLayers {
+                aspect_mask: vk::ImageAspectFlags::COLOR,
+                mip_level: 0,
+                base_array_layer: 0,
+                layer_count: 1,
+            })
+            .image_extent(vk::Extent3D {
+                width: self.extent.width,
+                height: self.extent.height,
+                depth: 1,
+            });
+        let raw = self.dev.raw();
+        // SAFETY: cb records outside a render pass; the image was acquired by this frame;
+        // texels holds w·h·4 bytes.
+        unsafe {
+            raw.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::COLOR_ATTACHMENT_OUTPUT
+                    | vk::PipelineStageFlags::COMPUTE_SHADER,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::DependencyFlags::empty(),
+                &[from_shader],
+                &[],
+                &[to_dst],
+            );
+            raw.cmd_copy_buffer_to_image(
+                cb,
+                texels.raw,
+                image,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+                &[region],
+            );
+            raw.cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::TRANSFER | vk::PipelineStageFlags::BOTTOM_OF_PIPE,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[],
                 &[to_present],
             );
         }

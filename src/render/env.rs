@@ -19,7 +19,7 @@ use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
 use crate::brdf::env_reference::{absolute_factor, radiance_slices};
-use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, Region, TableSpec};
+use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, TableSpec};
 use crate::brdf::Shading;
 use crate::colour::{linear_srgb_to_xyz, ColourTable};
 use crate::gpu::compute::{self, ComputeLayout, ComputePipeline, StorageSet};
@@ -30,7 +30,7 @@ use crate::light::env::{map_to_direction, EnvMap, EnvSampler};
 use crate::{Error, Result};
 use std::f64::consts::PI;
 
-const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_map.comp.spv"));
+pub(crate) const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_map.comp.spv"));
 
 /// Cells of the BRDF's density a side of one table cell.
 pub const SUB: usize = 2;
@@ -332,7 +332,7 @@ pub struct SampledDisc {
 }
 
 /// Least and most share of light samples among the BRDF's.
-pub const LIGHT_SHARE: (f64, f64) = (1.0 / 16.0, 1.0);
+pub const LIGHT_SHARE: (f64, f64) = (1.0 / 8.0, 1.0);
 
 /// The share of light samples (per BRDF sample) given the lights' luminance integral
 /// `power = ∫ Y dω` and `square = ∫ Y² dω` over the sphere. Their ratio `power²/(4π·square)` is the part of
@@ -354,10 +354,12 @@ pub fn light_share(power: f64, square: f64) -> f64 {
 }
 
 /// One light sample every `m`-th BRDF sample: the largest power of two up to `1/share`
-/// (at most 16) that divides every count in `counts` (the samples at which passes end),
-/// so that the light samples are exactly `1/m` of the BRDF's, as the estimator weighs them.
+/// (at most 8, so that pictures read at multiples of 8 samples, as the viewer's are, draw
+/// the same samples as offscreen ones) that divides every count in `counts` (the samples
+/// at which passes end), so that the light samples are exactly `1/m` of the BRDF's, as the
+/// estimator weighs them.
 pub fn light_every(share: f64, counts: &[u32]) -> u32 {
-    let mut m = 16u32;
+    let mut m = 8u32;
     while m > 1 && (f64::from(m) * share > 1.0 + 1e-9 || counts.iter().any(|c| c % m != 0)) {
         m /= 2;
     }
@@ -393,14 +395,13 @@ impl Lights {
     /// The probability that a sample is drawn from the lights rather than from the BRDF
     /// ([`light_share`]), from the environment and these discs.
     pub fn light_share(&self, env: &EnvMap) -> f64 {
-        let mut power = 0.0;
-        let mut square = 0.0;
-        for (p, c) in env.radiance.iter().enumerate() {
-            let omega = env.pixel_solid_angle(p as u32 / env.width);
-            let y = crate::light::env::luminance(*c).max(0.0);
-            power += y * omega;
-            square += y * y * omega;
-        }
+        let (power, square) = env_moments(env);
+        self.light_share_with(power, square)
+    }
+
+    /// [`Self::light_share`] with the environment's moments `(∫ Y dω, ∫ Y² dω)` given.
+    pub fn light_share_with(&self, env_power: f64, env_square: f64) -> f64 {
+        let (mut power, mut square) = (env_power, env_square);
         for d in &self.discs {
             let y = d.radiance_xyz[1].max(0.0);
             power += y * d.solid_angle;
@@ -563,6 +564,9 @@ pub(crate) struct Dispatch<'a> {
     pub shading: Shading,
     /// Samples per pixel: every pixel's for a map, the most a pixel takes for a G-buffer.
     pub samples: u32,
+    /// The fewest samples a picture is read at (its first pass; `samples` for one pass):
+    /// the light samples are exactly their share at every multiple of it ([`light_every`]).
+    pub first: u32,
     pub seed: u32,
     /// Texture blending's `w_diffuse`, `None` without a texture.
     pub w_diffuse: Option<f64>,
@@ -590,32 +594,326 @@ pub(crate) struct Pass {
     pub samples: u32,
 }
 
-/// Runs `d` with `lighting`: the per-pixel sums divided by the samples, and the GPU time.
-pub(crate) fn dispatch(
-    dev: &Arc<Device>,
-    lighting: &EnvLighting,
-    d: &Dispatch<'_>,
-) -> Result<(Vec<[f32; 4]>, f64)> {
-    let first = Pass {
-        pixels: Vec::new(),
-        samples: d.samples,
-    };
-    let (raw, gpu_ms) = dispatch_passes(dev, lighting, d, first, &mut |_, _| None)?;
-    let n = d.samples as f32;
-    Ok((
-        raw.iter()
-            .map(|p| [p[0] / n, p[1] / n, p[2] / n, p[3]])
-            .collect(),
-        gpu_ms,
-    ))
-}
-
 /// What decides the next pass from the sums so far and the samples of the last pass.
 pub(crate) type NextPass<'a> = dyn FnMut(&[[f32; 4]], u32) -> Option<Pass> + 'a;
 
+/// The device objects of an integration that stay while the environment, the table and
+/// the stage stay: the table's coefficients, the environment's radiance and CDFs, the
+/// BRDF's density, the layout and the pipeline. What changes with the view, the lights or
+/// the rotation is bound per [`EnvTarget`]; [`EnvKernel::record`] adds samples
+/// `[base, base + count)` to a target's running sums, so a progressive picture (the
+/// viewer) dispatches a few samples a frame into the same sums, and an adaptive one
+/// ([`dispatch_passes`]) narrows the pixels between passes ([`EnvKernel::set_pass`]).
+pub(crate) struct EnvKernel {
+    dev: Arc<Device>,
+    pipeline: ComputePipeline,
+    layout: ComputeLayout,
+    coeff: Buffer,
+    radiance: Buffer,
+    env_cdf: Buffer,
+    density: Buffer,
+    /// The environment's `∫ Y dω` and `∫ Y² dω` (the light sampler's share, [`light_share`]).
+    env_power: f64,
+    env_square: f64,
+    /// The irradiance table of the rotation it was made for (texture blending reads it).
+    irradiance: Option<(f64, Vec<[f64; 3]>)>,
+    /// Whether the stage reads its own buffer at binding 7 (the G-buffer) and the pass's
+    /// pixels at binding 8.
+    extra: bool,
+    name: String,
+}
+
+/// What one picture integrates into: the parameters, the lights, the stage's own buffer,
+/// the pixels of the pass and the running sums (`outputs` vec4s a pixel), with their
+/// descriptor set.
+pub(crate) struct EnvTarget {
+    /// Made by [`EnvKernel::set_pass`].
+    set: Option<StorageSet>,
+    params: ParamsSsbo,
+    params_buf: Buffer,
+    lights: Buffer,
+    extra: Option<Buffer>,
+    pass: Option<Buffer>,
+    mapped: bool,
+    pub out: Buffer,
+    /// Invocations of a dispatch: the pixels of the pass.
+    pub pixels: u64,
+}
+
+/// The environment's luminance moments `(∫ Y dω, ∫ Y² dω)`.
+fn env_moments(env: &EnvMap) -> (f64, f64) {
+    let (mut power, mut square) = (0.0, 0.0);
+    for (p, c) in env.radiance.iter().enumerate() {
+        let omega = env.pixel_solid_angle(p as u32 / env.width);
+        let y = crate::light::env::luminance(*c).max(0.0);
+        power += y * omega;
+        square += y * y * omega;
+    }
+    (power, square)
+}
+
+impl EnvKernel {
+    /// The objects of `lighting` and `env` for the stage `spirv` (`extra`: it reads a
+    /// G-buffer at binding 7 and the pass's pixels at binding 8).
+    pub fn new(
+        dev: &Arc<Device>,
+        lighting: &EnvLighting,
+        env: &EnvMap,
+        spirv: &[u8],
+        extra: bool,
+        name: &str,
+    ) -> Result<Self> {
+        let t = &lighting.table;
+        let sampler = EnvSampler::new(env);
+        let env_pdf = sampler
+            .prob
+            .iter()
+            .enumerate()
+            .map(|(p, pr)| (pr / env.pixel_solid_angle(p as u32 / env.width)) as f32);
+        let mut env_cdf = f32_bytes(sampler.marginal.iter().map(|&x| x as f32));
+        env_cdf.extend(f32_bytes(sampler.conditional.iter().map(|&x| x as f32)));
+        env_cdf.extend(f32_bytes(env_pdf));
+        let env_xyz = f32_bytes(
+            env.radiance
+                .iter()
+                .flat_map(|p| linear_srgb_to_xyz(p.map(f64::from)).map(|x| x as f32)),
+        );
+        let coeff = f32_bytes(t.splines.iter().flatten().flatten().map(|&x| x as f32));
+        let b = |what: &str, bytes: &[u8]| {
+            compute::storage_with_data(dev, &format!("{name} {what}"), bytes)
+        };
+        let layout = ComputeLayout::new(dev, name, 7 + 2 * u32::from(extra), 8)?;
+        let pipeline = ComputePipeline::new(dev, name, &layout, spirv, &[])?;
+        let (env_power, env_square) = env_moments(env);
+        Ok(EnvKernel {
+            dev: Arc::clone(dev),
+            coeff: b("table", &coeff)?,
+            radiance: b("radiance", &env_xyz)?,
+            env_cdf: b("environment CDFs", &env_cdf)?,
+            density: b(
+                "BRDF density",
+                &f32_bytes(lighting.density.data.iter().copied()),
+            )?,
+            pipeline,
+            layout,
+            env_power,
+            env_square,
+            irradiance: None,
+            extra,
+            name: name.to_string(),
+        })
+    }
+
+    /// A small buffer of a target: host-visible when `mapped` (no upload that waits for
+    /// the queue, for a frame path).
+    fn small(&self, what: &str, bytes: &[u8], mapped: bool) -> Result<Buffer> {
+        let label = format!("{} {what}", self.name);
+        if mapped {
+            Buffer::with_data(
+                &self.dev,
+                &label,
+                vk::BufferUsageFlags::STORAGE_BUFFER,
+                bytes,
+            )
+        } else {
+            compute::storage_with_data(&self.dev, &label, bytes)
+        }
+    }
+
+    /// Binds a picture of `d` (whose `env` is the kernel's map, at any rotation): the
+    /// parameters, the lights and `d.extra` uploaded, every pixel in the pass, the sums
+    /// allocated (written by the first dispatch, at `base = 0`). `mapped`: the small
+    /// buffers stay host-visible.
+    pub fn bind(
+        &mut self,
+        lighting: &EnvLighting,
+        d: &Dispatch<'_>,
+        mapped: bool,
+    ) -> Result<EnvTarget> {
+        if !(1..=MAX_SAMPLES).contains(&d.samples) {
+            return Err(Error::invalid(
+                "env samples",
+                format!("{}; expected 1 to {MAX_SAMPLES}", d.samples),
+            ));
+        }
+        let (q_env, q_discs) = d.lights.probabilities(self.env_power);
+        let share = d.lights.light_share_with(self.env_power, self.env_square);
+        let every = light_every(share, &[d.samples, d.first.max(1)]);
+        let params = params(lighting, d, q_env, every);
+        let rotation = d.env.rotate_rad;
+        if d.w_diffuse.is_some() && self.irradiance.as_ref().is_none_or(|(r, _)| *r != rotation) {
+            self.irradiance = Some((rotation, irradiance_table(d.env)));
+        }
+        let irradiance: &[[f64; 3]] = match (&self.irradiance, d.w_diffuse) {
+            (Some((_, e)), Some(_)) => e,
+            _ => &[],
+        };
+        let lights = self.small(
+            "lights",
+            &f32_bytes(d.lights.buffer(&q_discs, irradiance)),
+            mapped,
+        )?;
+        let extra = match (self.extra, d.extra) {
+            (true, Some(e)) => Some(self.small("G-buffer", e, mapped)?),
+            (true, None) => Some(self.small("G-buffer", &[0; 64], mapped)?),
+            (false, _) => None,
+        };
+        let out_bytes = (d.pixels * d.outputs * 16).max(16);
+        let out = compute::storage(&self.dev, &format!("{} output", self.name), out_bytes)?;
+        let params_buf = self.small("params", crate::gpu::memory::bytes_of(&[params]), mapped)?;
+        let mut t = EnvTarget {
+            set: None,
+            params,
+            params_buf,
+            lights,
+            extra,
+            pass: None,
+            mapped,
+            out,
+            pixels: d.pixels,
+        };
+        let all: Vec<u32> = (0..d.pixels as u32).collect();
+        self.set_pass(&mut t, &all)?;
+        Ok(t)
+    }
+
+    /// The next dispatches of `t` integrate `pixels` (G-buffer indices; a map's stage
+    /// integrates every pixel whatever the list). Call it between submissions.
+    pub fn set_pass(&self, t: &mut EnvTarget, pixels: &[u32]) -> Result<()> {
+        let invocations = if self.extra {
+            pixels.len() as u64
+        } else {
+            t.pixels.max(t.params.env_dims[3] as u64)
+        };
+        t.params.env_dims[3] = invocations as i32;
+        t.params_buf = self.small(
+            "params",
+            crate::gpu::memory::bytes_of(&[t.params]),
+            t.mapped,
+        )?;
+        if self.extra {
+            let list: Vec<u8> = pixels.iter().flat_map(|i| i.to_le_bytes()).collect();
+            let bytes: &[u8] = if list.is_empty() { &[0; 4] } else { &list };
+            t.pass = Some(self.small("pixels of the pass", bytes, t.mapped)?);
+        }
+        let mut buffers = vec![
+            &t.params_buf,
+            &self.coeff,
+            &self.radiance,
+            &self.env_cdf,
+            &self.density,
+            &t.out,
+            &t.lights,
+        ];
+        buffers.extend(t.extra.as_ref());
+        buffers.extend(t.pass.as_ref());
+        t.set = None;
+        t.set = Some(StorageSet::new(
+            &self.dev,
+            &self.name,
+            &self.layout,
+            &buffers,
+        )?);
+        t.pixels = invocations;
+        Ok(())
+    }
+
+    /// Records the dispatches that add samples `[base, base + count)` to `t`'s sums
+    /// (`base = 0` starts them and writes the point lights apart), each followed by a
+    /// barrier, so what comes after in `cb` reads the sums.
+    pub fn record(
+        &self,
+        cb: vk::CommandBuffer,
+        t: &EnvTarget,
+        base: u32,
+        count: u32,
+    ) -> Result<()> {
+        let set = t
+            .set
+            .as_ref()
+            .ok_or(Error::Internal("an environment target without its pass"))?;
+        compute::compute_barrier(&self.dev, cb);
+        let mut at = base;
+        loop {
+            let n = CHUNK.min(base + count - at);
+            let push: Vec<u8> = [at, n].iter().flat_map(|v| v.to_le_bytes()).collect();
+            self.layout
+                .dispatch(cb, &self.pipeline, set, &push, t.pixels.max(1))?;
+            compute::compute_barrier(&self.dev, cb);
+            at += n;
+            if at >= base + count {
+                return Ok(());
+            }
+        }
+    }
+}
+
+/// The parameter block of `d` (env_common.glsl's `Params`), a light sample every
+/// `light_every`-th sample.
+fn params(lighting: &EnvLighting, d: &Dispatch<'_>, q_env: f64, light_every: u32) -> ParamsSsbo {
+    let env = d.env;
+    let t = &lighting.table;
+    let r = t.region;
+    let g = &lighting.density;
+    ParamsSsbo {
+        region_lo: [r.lo[0] as f32, r.lo[1] as f32, r.lo[2] as f32, 0.0],
+        region_hi: [r.hi[0] as f32, r.hi[1] as f32, r.hi[2] as f32, 0.0],
+        blend: [
+            d.w_diffuse.unwrap_or(0.0) as f32,
+            q_env as f32,
+            light_every as f32,
+            0.0,
+        ],
+        white: [
+            lighting.white[0] as f32,
+            lighting.white[1] as f32,
+            lighting.white[2] as f32,
+            crate::brdf::schlick_r0(d.shading.ior) as f32,
+        ],
+        cdf_lo: [g.lo[0] as f32, g.lo[1] as f32, g.w0 as f32, g.dw as f32],
+        cdf_step: [g.step[0] as f32, g.step[1] as f32, 0.0, 0.0],
+        table_dims: [
+            t.nu as i32,
+            t.nv as i32,
+            t.coeffs.len() as i32,
+            d.stride.max(1) as i32,
+        ],
+        cdf_dims: [
+            g.bins[0] as i32,
+            g.bins[1] as i32,
+            g.nodes as i32,
+            d.batch.max(1) as i32,
+        ],
+        env_dims: [
+            env.width as i32,
+            env.height as i32,
+            d.samples as i32,
+            d.pixels as i32,
+        ],
+        flags: [
+            i32::from(d.shading.fresnel),
+            i32::from(d.shading.shadowing),
+            i32::from(q_env > 0.0),
+            d.seed as i32,
+        ],
+        env_rot: [
+            env.rotate_rad.cos() as f32,
+            env.rotate_rad.sin() as f32,
+            0.0,
+            0.0,
+        ],
+        light_dims: [
+            d.lights.points.len() as i32,
+            d.lights.discs.len() as i32,
+            i32::from(d.w_diffuse.is_some()),
+            d.map_side as i32,
+        ],
+    }
+}
+
 /// Runs `d` with `lighting` in passes: `first`, then whatever `next` asks for after reading
 /// the sums so far (it gets them and the samples of the last pass; `None` ends). Returns
-/// the raw sums (not divided) and the GPU time of all passes.
+/// the raw sums and the GPU time of all passes.
 pub(crate) fn dispatch_passes(
     dev: &Arc<Device>,
     lighting: &EnvLighting,
@@ -623,19 +921,9 @@ pub(crate) fn dispatch_passes(
     first: Pass,
     next: &mut NextPass<'_>,
 ) -> Result<(Vec<[f32; 4]>, f64)> {
-    if !(1..=MAX_SAMPLES).contains(&d.samples) {
-        return Err(Error::invalid(
-            "env samples",
-            format!("{}; expected 1 to {MAX_SAMPLES}", d.samples),
-        ));
-    }
-    let b = |name: &str, bytes: &[u8]| {
-        compute::storage_with_data(dev, &format!("{} {name}", d.name), bytes)
-    };
-    let inputs = upload_inputs(dev, lighting, d)?;
-    let extra_buf = d.extra.map(|e| b("G-buffer", e)).transpose()?;
+    let mut kernel = EnvKernel::new(dev, lighting, d.env, d.spirv, d.extra.is_some(), d.name)?;
+    let mut target = kernel.bind(lighting, d, false)?;
     let out_bytes = (d.pixels * d.outputs * 16).max(16);
-    let out = compute::storage(dev, &format!("{} output", d.name), out_bytes)?;
     let readback = Buffer::new(
         dev,
         &format!("{} readback", d.name),
@@ -643,51 +931,18 @@ pub(crate) fn dispatch_passes(
         vk::BufferUsageFlags::TRANSFER_DST,
         MemoryLocation::GpuToCpu,
     )?;
-    let every = light_every(inputs.share, &[d.samples, first.samples]);
-    let bindings = if d.extra.is_some() { 9 } else { 7 };
-    let layout = ComputeLayout::new(dev, d.name, bindings, 8)?;
-    let pipeline = ComputePipeline::new(dev, d.name, &layout, d.spirv, &[])?;
     let start = Instant::now();
     let mut pass = Some(first);
     let mut done = 0;
     let mut sums = Vec::new();
     while let Some(p) = pass.take() {
-        let invocations = if d.extra.is_some() {
-            p.pixels.len() as u64
-        } else {
-            d.pixels
-        };
-        let list: Vec<u8> = p.pixels.iter().flat_map(|i| i.to_le_bytes()).collect();
-        let active = match d.extra {
-            Some(_) => Some(b(
-                "pixels of the pass",
-                if list.is_empty() { &[0; 4] } else { &list },
-            )?),
-            None => None,
-        };
-        let params = inputs.params(d, invocations, every);
-        let params_buf = b("params", crate::gpu::memory::bytes_of(&[params]))?;
-        let mut buffers = vec![
-            &params_buf,
-            &inputs.coeff,
-            &inputs.env,
-            &inputs.env_cdf,
-            &inputs.density,
-            &out,
-            &inputs.lights,
-        ];
-        buffers.extend(extra_buf.as_ref());
-        buffers.extend(active.as_ref());
-        let set = StorageSet::new(dev, d.name, &layout, &buffers)?;
-        let (from, to) = (done, p.samples.min(d.samples));
+        if d.extra.is_some() {
+            kernel.set_pass(&mut target, &p.pixels)?;
+        }
+        let to = p.samples.min(d.samples);
         dev.submit_once(d.name, |cb| {
-            for base in (from..to).step_by(CHUNK as usize) {
-                let count = CHUNK.min(to - base);
-                let push: Vec<u8> = [base, count].iter().flat_map(|v| v.to_le_bytes()).collect();
-                layout.dispatch(cb, &pipeline, &set, &push, invocations.max(1))?;
-                compute::compute_barrier(dev, cb);
-            }
-            compute::copy_to_host(dev, cb, &out, &readback, out_bytes);
+            kernel.record(cb, &target, done, to - done)?;
+            compute::copy_to_host(dev, cb, &target.out, &readback, out_bytes);
             Ok(())
         })?;
         done = to;
@@ -697,6 +952,16 @@ pub(crate) fn dispatch_passes(
         }
     }
     Ok((sums, start.elapsed().as_secs_f64() * 1e3))
+}
+
+/// vec4s a pixel of the map's stage writes: (the samples' XYZ sum, their number), (the
+/// point lights' XYZ, 0) (glsl/env_map.comp).
+pub const MAP_OUTPUTS: u64 = 2;
+
+/// A pixel's value from its sums: the point lights plus the samples' mean.
+pub fn mean_of(sum: [f32; 4], point: [f32; 4]) -> [f32; 3] {
+    let n = sum[3].max(1.0);
+    [0, 1, 2].map(|c| point[c] + sum[c] / n)
 }
 
 /// The vec4s of `buf`.
@@ -713,123 +978,21 @@ fn read_sums(buf: &Buffer, count: u64) -> Result<Vec<[f32; 4]>> {
         .collect())
 }
 
-/// The buffers every pass of a dispatch reads, and what its parameters need.
-struct Inputs {
-    coeff: Buffer,
-    env: Buffer,
-    env_cdf: Buffer,
-    density: Buffer,
-    lights: Buffer,
-    q_env: f64,
-    /// The share of light samples ([`light_share`]).
-    share: f64,
-    region: Region,
-    dims: [i32; 3],
-    white: [f64; 3],
-    density_lo: [f64; 4],
-    density_step: [f64; 2],
-    density_dims: [i32; 3],
-}
-
-fn upload_inputs(dev: &Arc<Device>, lighting: &EnvLighting, d: &Dispatch<'_>) -> Result<Inputs> {
-    let env = d.env;
-    let t = &lighting.table;
-    let sampler = EnvSampler::new(env);
-    let env_pdf = sampler
-        .prob
-        .iter()
-        .enumerate()
-        .map(|(p, pr)| (pr / env.pixel_solid_angle(p as u32 / env.width)) as f32);
-    let mut env_cdf = f32_bytes(sampler.marginal.iter().map(|&x| x as f32));
-    env_cdf.extend(f32_bytes(sampler.conditional.iter().map(|&x| x as f32)));
-    env_cdf.extend(f32_bytes(env_pdf));
-    let env_xyz = f32_bytes(
-        env.radiance
-            .iter()
-            .flat_map(|p| linear_srgb_to_xyz(p.map(f64::from)).map(|x| x as f32)),
-    );
-    let coeff = f32_bytes(t.splines.iter().flatten().flatten().map(|&x| x as f32));
-    let g = &lighting.density;
-    let (q_env, q_discs) = d.lights.probabilities(sampler.total);
-    let irradiance = if d.w_diffuse.is_some() {
-        irradiance_table(env)
-    } else {
-        Vec::new()
-    };
-    let b = |name: &str, bytes: &[u8]| {
-        compute::storage_with_data(dev, &format!("{} {name}", d.name), bytes)
-    };
-    Ok(Inputs {
-        coeff: b("table", &coeff)?,
-        env: b("radiance", &env_xyz)?,
-        env_cdf: b("environment CDFs", &env_cdf)?,
-        density: b("BRDF density", &f32_bytes(g.data.iter().copied()))?,
-        lights: b("lights", &f32_bytes(d.lights.buffer(&q_discs, &irradiance)))?,
-        q_env,
-        share: d.lights.light_share(env),
-        region: t.region,
-        dims: [t.nu as i32, t.nv as i32, t.coeffs.len() as i32],
-        white: lighting.white,
-        density_lo: [g.lo[0], g.lo[1], g.w0, g.dw],
-        density_step: g.step,
-        density_dims: [g.bins[0] as i32, g.bins[1] as i32, g.nodes as i32],
-    })
-}
-
-impl Inputs {
-    /// The parameter block of a pass over `invocations` pixels.
-    fn params(&self, d: &Dispatch<'_>, invocations: u64, light_every: u32) -> ParamsSsbo {
-        let (r, env) = (&self.region, d.env);
-        let f4 = |v: [f64; 4]| v.map(|x| x as f32);
-        ParamsSsbo {
-            region_lo: f4([r.lo[0], r.lo[1], r.lo[2], 0.0]),
-            region_hi: f4([r.hi[0], r.hi[1], r.hi[2], 0.0]),
-            blend: f4([
-                d.w_diffuse.unwrap_or(0.0),
-                self.q_env,
-                f64::from(light_every),
-                0.0,
-            ]),
-            white: f4([
-                self.white[0],
-                self.white[1],
-                self.white[2],
-                crate::brdf::schlick_r0(d.shading.ior),
-            ]),
-            cdf_lo: f4(self.density_lo),
-            cdf_step: f4([self.density_step[0], self.density_step[1], 0.0, 0.0]),
-            table_dims: [
-                self.dims[0],
-                self.dims[1],
-                self.dims[2],
-                d.stride.max(1) as i32,
-            ],
-            cdf_dims: [
-                self.density_dims[0],
-                self.density_dims[1],
-                self.density_dims[2],
-                d.batch.max(1) as i32,
-            ],
-            env_dims: [
-                env.width as i32,
-                env.height as i32,
-                d.samples as i32,
-                invocations as i32,
-            ],
-            flags: [
-                i32::from(d.shading.fresnel),
-                i32::from(d.shading.shadowing),
-                i32::from(self.q_env > 0.0),
-                d.seed as i32,
-            ],
-            env_rot: f4([env.rotate_rad.cos(), env.rotate_rad.sin(), 0.0, 0.0]),
-            light_dims: [
-                d.lights.points.len() as i32,
-                d.lights.discs.len() as i32,
-                i32::from(d.w_diffuse.is_some()),
-                d.map_side as i32,
-            ],
-        }
+/// The lights of an environment-lit BRDF map: the sun at `sun` (tangent space of the map's
+/// patch, towards it, and its irradiance) as one point light, or none.
+pub fn map_lights(lighting: &EnvLighting, sun: Option<([f64; 3], f64)>) -> Lights {
+    // The sun in the world: the map's patch is N = +Y, T = +X, B = −Z (MODEL §10).
+    let frame = crate::brdf::env_reference::Frame::BRDF_MAP;
+    Lights {
+        points: sun
+            .filter(|s| s.1 > 0.0)
+            .map(|(wi, e)| PointLight {
+                towards: frame.to_world(wi),
+                irradiance_xyz: lighting.white.map(|w| w * e),
+            })
+            .into_iter()
+            .collect(),
+        discs: Vec::new(),
     }
 }
 
@@ -839,21 +1002,12 @@ pub fn render_env_brdf_map(
     lighting: &EnvLighting,
     req: &EnvMapRequest<'_>,
 ) -> Result<EnvPicture> {
-    // The sun in the world: the map's patch is N = +Y, T = +X, B = −Z (MODEL §10).
-    let frame = crate::brdf::env_reference::Frame::BRDF_MAP;
-    let lights = Lights {
-        points: req
-            .sun
-            .filter(|s| s.1 > 0.0)
-            .map(|(wi, e)| PointLight {
-                towards: frame.to_world(wi),
-                irradiance_xyz: lighting.white.map(|w| w * e),
-            })
-            .into_iter()
-            .collect(),
-        discs: Vec::new(),
+    let lights = map_lights(lighting, req.sun);
+    let first = Pass {
+        pixels: Vec::new(),
+        samples: req.samples,
     };
-    let (sums, gpu_ms) = dispatch(
+    let (sums, gpu_ms) = dispatch_passes(
         dev,
         lighting,
         &Dispatch {
@@ -861,21 +1015,24 @@ pub fn render_env_brdf_map(
             lights: &lights,
             shading: req.shading,
             samples: req.samples,
+            first: req.samples,
             seed: req.seed,
             w_diffuse: None,
             pixels: u64::from(req.size) * u64::from(req.size),
             map_side: req.size,
-            outputs: 1,
+            outputs: MAP_OUTPUTS,
             extra: None,
             stride: 1,
-            batch: 1,
+            batch: req.samples,
             spirv: SPIRV,
             name: "env map",
         },
+        first,
+        &mut |_, _| None,
     )?;
     Ok(EnvPicture {
         size: req.size,
-        xyz: sums.iter().map(|p| [p[0], p[1], p[2]]).collect(),
+        xyz: sums.chunks_exact(2).map(|p| mean_of(p[0], p[1])).collect(),
         gpu_ms,
     })
 }
@@ -928,12 +1085,12 @@ mod tests {
 
     #[test]
     fn light_samples_come_every_mth_sample_where_m_divides_the_counts() {
-        assert_eq!(light_every(1.0 / 16.0, &[1024, 16]), 16);
-        assert_eq!(light_every(1.0 / 16.0, &[1024, 4]), 4);
+        assert_eq!(light_every(1.0 / 8.0, &[1024, 16]), 8);
+        assert_eq!(light_every(1.0 / 8.0, &[1024, 4]), 4);
         assert_eq!(light_every(0.3, &[256]), 2);
         assert_eq!(light_every(1.0, &[256]), 1);
         assert_eq!(light_every(0.01, &[7]), 1);
-        assert_eq!(light_every(0.01, &[96, 64]), 16);
+        assert_eq!(light_every(0.01, &[96, 64]), 8);
     }
 
     #[test]

@@ -29,7 +29,7 @@ use crate::mesh::Mesh;
 use crate::scene::{Camera, Scene};
 use crate::Result;
 
-const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_scene.comp.spv"));
+pub(crate) const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_scene.comp.spv"));
 
 /// A texture as the G-buffer reads it: linear-sRGB albedo, top row first, repeated.
 pub struct Albedo {
@@ -337,6 +337,11 @@ pub const DEFAULT_SAMPLES: u32 = 1024;
 /// of one estimated standard error ([`NoiseTarget`]).
 pub const DEFAULT_NOISE: f64 = 0.3;
 
+/// vec4s a G-buffer pixel of the scene's stage writes: (the samples' linear-sRGB sum, their
+/// number), (the sum of the squared batch sums, 0), (the point lights' linear sRGB, 0)
+/// (glsl/env_scene.comp).
+pub const SCENE_OUTPUTS: u64 = 3;
+
 /// Samples per noise batch of a G-buffer pixel: the noise of a pixel is estimated from the
 /// spread of its batch sums.
 pub const NOISE_BATCH: u32 = 4;
@@ -469,11 +474,12 @@ pub fn shade_gbuffer(
             lights: req.lights,
             shading: req.shading,
             samples: req.samples,
+            first,
             seed: req.seed,
             w_diffuse: req.w_diffuse,
             pixels: g.covered.len() as u64,
             map_side: 0,
-            outputs: 3,
+            outputs: SCENE_OUTPUTS,
             extra: Some(if bytes.is_empty() { &[0; 64] } else { &bytes }),
             stride,
             batch: NOISE_BATCH,
@@ -488,10 +494,7 @@ pub fn shade_gbuffer(
     )?;
     let (rgb, samples) = sums
         .chunks_exact(3)
-        .map(|p| {
-            let n = p[0][3].max(1.0);
-            ([0, 1, 2].map(|c| p[2][c] + p[0][c] / n), n as u32)
-        })
+        .map(|p| (super::env::mean_of(p[0], p[2]), p[0][3] as u32))
         .unzip();
     Ok(Shaded {
         rgb,
@@ -638,7 +641,13 @@ pub fn render_env_scene(
 }
 
 /// What the camera sees where no triangle is ([`EnvSceneFrame`]).
-fn background(scene: &Scene, env: Option<&EnvMap>, w: u32, h: u32, scale: f64) -> Vec<[f32; 3]> {
+pub fn background(
+    scene: &Scene,
+    env: Option<&EnvMap>,
+    w: u32,
+    h: u32,
+    scale: f64,
+) -> Vec<[f32; 3]> {
     let out = &scene.output;
     let Some(env) = env else {
         let c = out.background.map(|c| c / out.exposure);

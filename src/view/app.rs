@@ -56,12 +56,14 @@ pub(super) struct Settings {
     /// Start with the BRDF map beside the mesh.
     pub map: bool,
     pub map_exposure: f32,
+    /// The environments and how they light the scene.
+    pub env: Option<(super::env::EnvSettings, Option<crate::light::env::EnvMap>)>,
     /// When the command started (the first frame's delay is measured from it).
     pub started: Instant,
 }
 
 /// Opens the display, prepares the material, runs the event loop.
-pub(super) fn run(scene: Scene, settings: Settings) -> Result<()> {
+pub(super) fn run(scene: Scene, mut settings: Settings) -> Result<()> {
     if std::env::var_os("DISPLAY").is_none_or(|d| d.is_empty()) {
         return Err(Error::NoPresentation(
             "no X display (DISPLAY is not set); run under X11, XWayland or Xvfb".into(),
@@ -86,9 +88,10 @@ pub(super) fn run(scene: Scene, settings: Settings) -> Result<()> {
         plan,
         settings.cache_dir.as_deref(),
     )?;
+    let env = settings.env.take();
     let mut app = App {
         scene,
-        start: Some((Arc::new(prepared), loader)),
+        start: Some((Arc::new(prepared), loader, env)),
         settings,
         viewer: None,
         error: None,
@@ -113,10 +116,12 @@ pub(super) fn run(scene: Scene, settings: Settings) -> Result<()> {
     Ok(())
 }
 
+type EnvStart = (super::env::EnvSettings, Option<crate::light::env::EnvMap>);
+
 struct App {
     scene: Scene,
-    /// The material and its loader, until the viewer takes them.
-    start: Option<(Arc<PreparedMaterial>, MaterialLoader)>,
+    /// The material, its loader and the environments, until the viewer takes them.
+    start: Option<(Arc<PreparedMaterial>, MaterialLoader, Option<EnvStart>)>,
     settings: Settings,
     viewer: Option<Viewer>,
     error: Option<Error>,
@@ -124,10 +129,23 @@ struct App {
 
 impl ApplicationHandler for App {
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
-        let Some((prepared, loader)) = self.start.take() else {
+        let Some((prepared, loader, env)) = self.start.take() else {
             return;
         };
-        match Viewer::new(event_loop, &self.scene, &self.settings, prepared, loader) {
+        let Some((env_settings, first_map)) = env else {
+            self.error = Some(Error::invalid("view", "no environment settings"));
+            event_loop.exit();
+            return;
+        };
+        let env = super::env::EnvView::new(env_settings, first_map);
+        match Viewer::new(
+            event_loop,
+            &self.scene,
+            &self.settings,
+            prepared,
+            loader,
+            env,
+        ) {
             Ok(v) => {
                 println!("{HELP}");
                 self.viewer = Some(v);
@@ -170,6 +188,10 @@ impl ApplicationHandler for App {
             WindowEvent::KeyboardInput { event, .. } if event.state == ElementState::Pressed => {
                 let effect = v.controls.key(&event.logical_key);
                 v.apply(effect, event_loop);
+                Ok(())
+            }
+            WindowEvent::KeyboardInput { event, .. } => {
+                v.controls.key_released(&event.logical_key);
                 Ok(())
             }
             WindowEvent::MouseInput { state, button, .. } => {
@@ -241,6 +263,7 @@ impl Viewer {
         settings: &Settings,
         prepared: Arc<PreparedMaterial>,
         loader: MaterialLoader,
+        env: super::env::EnvView,
     ) -> Result<Self> {
         let mesh = scene.mesh.load()?;
         for line in &mesh.repairs {
@@ -281,7 +304,7 @@ impl Viewer {
         controls.map = settings.map;
         controls.state.map_exposure = settings.map_exposure;
         let mut viewer = Viewer {
-            draw: Draw::new(renderer, mesh, prepared)?,
+            draw: Draw::new(renderer, mesh, prepared, env)?,
             swapchain: None,
             surface,
             reload: None,
@@ -437,7 +460,10 @@ impl Viewer {
         self.take_loaded_material();
         self.draw
             .update_passes(scene, &mut self.controls, self.swapchain.as_ref())?;
-        let settled = !(self.draw.building() || self.loader.loading());
+        if let Some(sc) = &self.swapchain {
+            self.draw.update_env(scene, &self.controls, sc);
+        }
+        let settled = !(self.draw.settling() || self.loader.loading());
         if !self.draw.has_pass() {
             // Nothing to draw before the first build arrives; the title says how far it is.
             self.update_title(false);
@@ -528,6 +554,7 @@ impl Viewer {
                 println!("BRDF map {}", if self.controls.map { "on" } else { "off" });
                 self.draw.map_toggled(self.controls.map);
             }
+            Effect::Env => println!("{}", self.draw.next_env()),
             Effect::Help => println!("{HELP}"),
             Effect::Screenshot => self.draw.request_screenshot(),
             Effect::Quit => event_loop.exit(),

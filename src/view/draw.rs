@@ -14,6 +14,7 @@ use std::time::Instant;
 
 use ash::vk;
 
+use super::env::EnvView;
 use super::input::{tangent_frame_at_view, Controls};
 use crate::gpu::frames::{FrameStart, Frames};
 use crate::gpu::memory::Buffer;
@@ -29,13 +30,15 @@ use crate::{Error, Result};
 const FRAMES_IN_FLIGHT: usize = 2;
 
 /// The passes, the renderer that builds them and what a frame records. Field order is drop
-/// order: the frames (with the passes retired into them) before the passes, the passes
-/// before the renderer.
+/// order: the frames (with the passes retired into them) before the passes and the
+/// environment's objects, those before the renderer.
 pub(super) struct Draw {
     frames: Frames,
     pass: Option<ScenePass>,
     /// The BRDF map beside the mesh (while `controls.map`).
     map_pass: Option<ScenePass>,
+    /// The environment-lit picture, drawn instead of the passes while an environment is on.
+    env: EnvView,
     renderer: Renderer,
     /// The scene's mesh in world space: the map's tangent frame is read from it.
     mesh: Mesh,
@@ -176,7 +179,12 @@ impl Accumulation {
 
 impl Draw {
     /// Draws with `renderer` (set up for the window); `prepared` is the material shown first.
-    pub fn new(renderer: Renderer, mesh: Mesh, prepared: Arc<PreparedMaterial>) -> Result<Self> {
+    pub fn new(
+        renderer: Renderer,
+        mesh: Mesh,
+        prepared: Arc<PreparedMaterial>,
+        env: EnvView,
+    ) -> Result<Self> {
         let frames = Frames::new(renderer.device(), "viewer frame", FRAMES_IN_FLIGHT, true)?;
         Ok(Self {
             frames,
@@ -196,6 +204,7 @@ impl Draw {
                 totals: Totals::default(),
             },
             accumulation: Accumulation::default(),
+            env,
         })
     }
 
@@ -207,9 +216,10 @@ impl Draw {
         &self.renderer
     }
 
-    /// Whether a pass exists to draw (not before the first build arrives).
+    /// Whether there is something to draw: a pass (not before the first build arrives) or
+    /// the environment-lit picture.
     pub fn has_pass(&self) -> bool {
-        self.pass.is_some()
+        self.pass.is_some() || self.env.drawing()
     }
 
     /// Whether a variant build runs in the background.
@@ -222,12 +232,59 @@ impl Draw {
     pub fn view_changed(&mut self) {
         self.view_changed = true;
         self.accumulation.reset();
+        self.env.reset(&mut self.frames);
     }
 
     /// The passes are rebuilt at the next update (a new swapchain format).
     pub fn request_rebuild(&mut self) {
         self.rebuild = true;
         self.waiting = false;
+        self.env.reset(&mut self.frames);
+    }
+
+    /// `E`: the next environment. The line to print.
+    pub fn next_env(&mut self) -> String {
+        self.accumulation.reset();
+        self.env.cycle(&mut self.frames)
+    }
+
+    /// Whether what the frame shows is still changing: while the environment-lit picture
+    /// draws, its preparation and accumulation; otherwise a variant build.
+    pub fn settling(&self) -> bool {
+        if self.env.drawing() {
+            self.env.busy()
+        } else {
+            self.building() || self.env.busy()
+        }
+    }
+
+    /// Brings the environment-lit picture up to date for the controls' view in a target of
+    /// `extent` (see [`EnvView::update`]). A failure is printed and the environment is
+    /// switched off (the sun-lit passes draw).
+    pub fn update_env(&mut self, scene: &Scene, controls: &Controls, sc: &Swapchain) {
+        if self.env.on() && !sc.uploadable() {
+            eprintln!("error: the window's images cannot be copied into (environment off)");
+            self.env.switch_off(&mut self.frames);
+            return;
+        }
+        let extent = sc.extent;
+        let (mesh_rect, map_rect) = layout(extent, controls.map);
+        let map = map_rect.map(|r| (r, self.map_wi(controls)));
+        let dev = Arc::clone(self.renderer.device());
+        let result = self.env.update(
+            &dev,
+            &mut self.frames,
+            &self.material,
+            scene,
+            &controls.state,
+            &self.mesh,
+            extent,
+            (mesh_rect, map),
+        );
+        if let Err(e) = result {
+            eprintln!("error: {e} (environment off)");
+            self.env.switch_off(&mut self.frames);
+        }
     }
 
     /// Draws `kind` from the next update on.
@@ -559,6 +616,7 @@ impl Draw {
         let frame = self.frames.begin()?;
         if let Some(ms) = frame.previous_gpu_ms {
             self.timing.add_gpu(ms);
+            self.env.frame_gpu_ms(ms);
         }
         Ok(frame)
     }
@@ -579,19 +637,26 @@ impl Draw {
         views: &Views,
         shot: Option<PathBuf>,
     ) -> Result<Option<Shot>> {
-        let Some(pass) = &self.pass else {
-            return Err(Error::invalid("viewer frame", "no pass to draw"));
-        };
         let readback = match &shot {
             Some(_) => Some(sc.readback_buffer()?),
             None => None,
         };
-        let target = sc.target(index);
-        match (&self.map_pass, views.map) {
-            (Some(map), Some(map_rect)) => {
-                ScenePass::record_views(frame.cb, &target, &[(pass, views.mesh), (map, map_rect)])
+        if self.env.drawing() {
+            let dev = Arc::clone(self.renderer.device());
+            self.env.record(&dev, frame.cb, sc, index)?;
+        } else {
+            let Some(pass) = &self.pass else {
+                return Err(Error::invalid("viewer frame", "no pass to draw"));
+            };
+            let target = sc.target(index);
+            match (&self.map_pass, views.map) {
+                (Some(map), Some(map_rect)) => ScenePass::record_views(
+                    frame.cb,
+                    &target,
+                    &[(pass, views.mesh), (map, map_rect)],
+                ),
+                _ => pass.record(frame.cb, &target),
             }
-            _ => pass.record(frame.cb, &target),
         }
         self.frames.end_timing();
         if let Some(buf) = &readback {
@@ -672,8 +737,12 @@ impl Draw {
             None if loading => " — loading the material".to_string(),
             None => String::new(),
         };
+        let env = self
+            .env
+            .title()
+            .map_or(String::new(), |t| format!(" — {t}"));
         Some(format!(
-            "diffract — {name}{building} — GPU {gpu} — {fps:.1} fps"
+            "diffract — {name}{env}{building} — GPU {gpu} — {fps:.1} fps"
         ))
     }
 

@@ -23,8 +23,11 @@ diffract view — keys and mouse
   B                BRDF map beside the mesh  [ / ]         map exposure ÷1.25 / ×1.25
   Z / X            height ÷1.25 / ×1.25      K / L         coherence length ÷1.25 / ×1.25
   N                next height field         P             screenshot (PNG)
+  E                next environment (none, sky, studio, white, --env's)
+  R + left drag    turn the environment      , / .         turn it by −5° / +5°
   H                this help                 Esc / Q       quit
-  (a material edit rebuilds the table in the background; the title shows its progress)";
+  (a material edit rebuilds the table in the background; the title shows its progress;
+   under an environment the picture accumulates, the title shows the samples so far)";
 
 /// The height fields `N` cycles through after the scene's own: the synthetic gratings and
 /// the measured Elaphe crop grown to the default patch.
@@ -85,6 +88,10 @@ const PIXELS_PER_LINE: f32 = 40.0;
 const ARROW_DEGREES: f32 = 3.0;
 /// Exposure factor of `+` / `-`.
 const EXPOSURE_STEP: f32 = 1.25;
+/// Degrees the environment turns per `,` / `.` press.
+pub const ENV_ROTATE_STEP_DEG: f64 = 5.0;
+/// Degrees the environment turns per pixel of an `R` + left drag.
+const ENV_DRAG_DEG: f64 = 0.5;
 
 /// Camera and light state of the viewer.
 #[derive(Debug, Clone)]
@@ -98,6 +105,8 @@ pub struct ViewState {
     pub fresnel: bool,
     pub shadowing: bool,
     pub texture: bool,
+    /// The environment's turn about +Y on top of its own (degrees; `,` `.` and `R` + drag).
+    pub env_rotate_deg: f64,
 }
 
 /// What an input changed, for the app to act on.
@@ -114,6 +123,8 @@ pub enum Effect {
     Material(String),
     /// `B`: the BRDF map beside the mesh was switched on or off ([`Controls::map`]).
     Map,
+    /// `E`: the next environment.
+    Env,
     /// `H`: print [`HELP`].
     Help,
     /// `P`: save the next frame.
@@ -138,6 +149,8 @@ pub struct Controls {
     /// Left, right, middle.
     buttons: [bool; 3],
     shift: bool,
+    /// `R` is held: a left drag turns the environment.
+    rotate_env: bool,
     cursor: Option<(f64, f64)>,
 }
 
@@ -151,6 +164,7 @@ impl Controls {
             material: MaterialEdit::default(),
             buttons: [false; 3],
             shift: false,
+            rotate_env: false,
             cursor: None,
         }
     }
@@ -172,6 +186,13 @@ impl Controls {
                 "]" => s.map_exposure *= EXPOSURE_STEP,
                 "[" => s.map_exposure /= EXPOSURE_STEP,
                 "h" => return Effect::Help,
+                "e" => return Effect::Env,
+                "," => s.env_rotate_deg -= ENV_ROTATE_STEP_DEG,
+                "." => s.env_rotate_deg += ENV_ROTATE_STEP_DEG,
+                "r" => {
+                    self.rotate_env = true;
+                    return Effect::None;
+                }
                 "z" | "x" | "k" | "l" | "n" => return self.edit_material(c),
                 "p" => return Effect::Screenshot,
                 "b" => {
@@ -205,6 +226,13 @@ impl Controls {
             _ => return Effect::None,
         }
         Effect::View
+    }
+
+    /// A key released: `R` ends the environment's drag.
+    pub fn key_released(&mut self, key: &Key) {
+        if matches!(key, Key::Character(c) if c.eq_ignore_ascii_case("r")) {
+            self.rotate_env = false;
+        }
     }
 
     /// `Z`/`X` (height), `K`/`L` (coherence length), `N` (height field).
@@ -253,7 +281,9 @@ impl Controls {
         };
         let (dx, dy) = ((x - lx) as f32, (y - ly) as f32);
         let [left, right, middle] = self.buttons;
-        if middle || (left && self.shift) {
+        if left && self.rotate_env {
+            self.state.env_rotate_deg += f64::from(dx) * ENV_DRAG_DEG;
+        } else if middle || (left && self.shift) {
             self.state.pan(dx * PAN_PER_PIXEL, dy * PAN_PER_PIXEL);
         } else if left {
             self.state.orbit(dx * DRAG_RADIANS, dy * DRAG_RADIANS);
@@ -335,6 +365,7 @@ impl ViewState {
             fresnel: scene.material.fresnel,
             shadowing: scene.material.shadowing,
             texture: true,
+            env_rotate_deg: 0.0,
         }
     }
 

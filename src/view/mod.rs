@@ -4,11 +4,15 @@
 //! [`ScenePass`](crate::render::ScenePass) recorded into swapchain images: the same code as
 //! `diffract render`, so a screenshot matches the offscreen render of the same camera.
 //!
-//! No physics here and no Vulkan beyond frame pacing: the pass and the swapchain own their
-//! objects.
+//! Under an environment map (`env.rs`) the frames are the environment-lit picture of
+//! `diffract render --env`, accumulated over frames by the same compute estimator.
+//!
+//! No physics here and no Vulkan beyond frame pacing and the environment's resolve: the
+//! passes, the kernels and the swapchain own their objects.
 
 mod app;
 mod draw;
+mod env;
 pub mod input;
 mod material;
 pub mod reload;
@@ -16,6 +20,7 @@ pub mod reload;
 use std::path::PathBuf;
 
 use crate::cli::cache::CacheArgs;
+use crate::cli::env::EnvArgs;
 use crate::cli::gpu::GpuArgs;
 use crate::cli::material::MaterialArgs;
 use crate::cli::scene::SceneArgs;
@@ -40,6 +45,8 @@ pub struct ViewArgs {
     pub material: MaterialArgs,
     #[command(flatten)]
     pub cache: CacheArgs,
+    #[command(flatten)]
+    pub env: EnvArgs,
     /// Recompile glsl/* when it changes and rebuild the pipeline (a compile error keeps the
     /// last good one).
     #[arg(long)]
@@ -133,11 +140,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         }
     }
     view_args(args, &scene)?;
-    if scene.environment.is_some() || !scene.disc_lights.is_empty() {
-        eprintln!(
-            "warning: the viewer lights with the sun only; the scene's [environment] and [[disc_light]] tables are drawn by `diffract render` (docs/lighting.md)"
-        );
-    }
+    let env = env_settings(args, &scene)?;
     if args.frames == Some(0) {
         return Err(Error::invalid("frames", "0; expected at least 1"));
     }
@@ -169,9 +172,87 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         script,
         map: args.map,
         map_exposure,
+        env: Some(env),
         started,
     };
     app::run(scene, settings)
+}
+
+/// The environments `E` cycles through (none, the built-in maps, `--env`'s or the scene's
+/// file) and how they light the scene, checked as `render` checks them; and the map shown
+/// first, loaded.
+fn env_settings(
+    args: &ViewArgs,
+    scene: &crate::scene::Scene,
+) -> Result<(env::EnvSettings, Option<crate::light::env::EnvMap>)> {
+    use crate::light::env::EnvSource;
+    let source = match (&args.env.env, &scene.environment) {
+        (Some(s), _) => Some(EnvSource::parse(s)?),
+        (None, Some(e)) => Some(e.source()?),
+        (None, None) => None,
+    };
+    let first_map = match source {
+        Some(_) => args.env.load(false, scene)?,
+        None => {
+            // Without a map the flags still apply to the maps `E` shows: checked as
+            // `render` checks them, on the smallest one.
+            let mut probe = args.env.clone();
+            probe.env = Some("builtin:white".into());
+            probe.load(false, scene)?;
+            None
+        }
+    };
+    let mut entries = vec![
+        None,
+        Some(EnvSource::Sky),
+        Some(EnvSource::Studio),
+        Some(EnvSource::White),
+    ];
+    let first = match &source {
+        None => 0,
+        Some(s) => match entries.iter().position(|e| e.as_ref() == Some(s)) {
+            Some(i) => i,
+            None => {
+                entries.push(Some(s.clone()));
+                entries.len() - 1
+            }
+        },
+    };
+    let spec_env = scene.environment.as_ref();
+    let material = args.material.apply(scene.material.clone());
+    let t = &args.gpu.table;
+    let spec = crate::cli::env::map_table_spec(
+        t.table_texel,
+        t.table_w_nodes,
+        t.table_step_nm,
+        material.coherence_um,
+    )?;
+    let texture = match &scene.texture {
+        Some(t) => Some(t.load()?),
+        None => None,
+    };
+    let settings = env::EnvSettings {
+        entries,
+        first,
+        intensity: args
+            .env
+            .env_intensity
+            .unwrap_or_else(|| spec_env.map_or(1.0, |e| e.intensity)),
+        rotate_deg: args
+            .env
+            .env_rotate_deg
+            .unwrap_or_else(|| spec_env.map_or(0.0, |e| e.rotate_deg)),
+        samples: args
+            .env
+            .env_samples
+            .unwrap_or(crate::render::env::DEFAULT_SAMPLES),
+        sun: !args.env.no_sun,
+        lit_without_map: args.env.lights_scene(None, scene),
+        spec,
+        cache_dir: args.cache.dir(),
+        texture,
+    };
+    Ok((settings, first_map))
 }
 
 /// `diffract view`: the screenshot must be a PNG that can be written and is none of the
