@@ -1,10 +1,11 @@
 #version 450
 // A BRDF map lit by an environment map (MODEL §10), one invocation per pixel: N samples
 // per pixel of L_o = ∫ L(ωi)·f_r·cos θi dωi, combining two samplers by multiple importance
-// sampling (power heuristic, one sample of each a round):
-//  - the BRDF: (u, v) drawn from a piecewise-constant density fitted to the table's G
-//    (the envelope over w), dωi = du dv / cos θi;
-//  - the lights: an environment pixel drawn by luminance, uniform in solid angle inside it.
+// sampling (power heuristic with the samples' counts):
+//  - the BRDF, every sample: (u, v) drawn from a piecewise-constant density fitted to the
+//    table's G (the envelope over w), dωi = du dv / cos θi;
+//  - the lights, every m-th sample: an environment pixel drawn by luminance, uniform in
+//    solid angle inside it, or a disc light.
 // Random numbers: the 5-dimensional R-sequence (Roberts' generalised golden ratio), with a
 // per-pixel Cranley–Patterson rotation from a hash of the pixel. G is the chebyshev-w model
 // of a table summed with radiance weights (brdf::env_reference): f_r/W per XYZ channel, so

@@ -91,6 +91,12 @@ fn bad_maps_and_flags_get_one_error_line() {
             &["--env", "builtin:sky", "--env-samples", "70000"],
             "env samples",
         ),
+        (&["--env", "builtin:sky", "--env-noise", "-1"], "env noise"),
+        (&["--env", "builtin:sky", "--env-noise", "nan"], "env noise"),
+        (
+            &["--brdf-map", "--env", "builtin:sky", "--env-noise", "0.5"],
+            "env noise",
+        ),
     ];
     for (args, want) in cases {
         let o = render(args, &d);

@@ -1341,6 +1341,7 @@ fn bad_env_flags_are_one_error_line() {
         vec!["--env-samples", "0"],
         vec!["--env", "builtin:sky", "--env-intensity", "-1"],
         vec!["--env-rotate-deg", "nan"],
+        vec!["--env", "builtin:sky", "--env-noise", "0.5"],
     ] {
         let out = diffract()
             .args(["view", "--frames", "1"])

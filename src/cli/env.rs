@@ -28,7 +28,7 @@ pub struct EnvArgs {
     /// A scene's output pixel stops taking samples once its estimated noise, as CIEDE2000
     /// of the picture as written, is below this; 0: every pixel takes --env-samples
     /// [default: 0.3].
-    #[arg(long, value_name = "DELTA_E")]
+    #[arg(long, value_name = "DELTA_E", allow_negative_numbers = true)]
     pub env_noise: Option<f64>,
     /// The environment's radiance scale [default: 1, or the scene's].
     #[arg(long)]
@@ -338,11 +338,18 @@ fn table_line(lighting: &EnvLighting, spec: &TableSpec, built: bool) -> String {
         )
     };
     format!(
-        "environment table: u, v ∈ [−2, 2], w ∈ [−2, 0], texel {:.4}, K = {} of {} (the rest below {:.0e} of the peak), {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",
+        "environment table: u, v ∈ [−2, 2], w ∈ [−2, 0], texel {:.4}, K = {}{}, {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",
         spec.texel_uv,
         t.coeffs.len(),
-        t.coeffs.len() + lighting.dropped,
-        crate::render::env::TERM_TOLERANCE,
+        if lighting.dropped > 0 {
+            format!(
+                " of {} (the rest below {:.0e} of the peak)",
+                t.coeffs.len() + lighting.dropped,
+                crate::render::env::TERM_TOLERANCE
+            )
+        } else {
+            String::new()
+        },
         t.nu,
         t.nv,
         mb as f64 / 1e6,

@@ -207,6 +207,11 @@ pub struct EnvLighting {
 /// reads every term kept, so each term costs a sixteenth of a sample's table reads).
 pub const TERM_TOLERANCE: f64 = 1e-4;
 
+/// A table whose last Chebyshev term in `w` is above this (relative to the peak) gets a
+/// warning that more `w` nodes would resolve it: a material's default tolerance
+/// (`[material] tolerance`, relative to a mirror's specular value).
+pub const W_TOLERANCE: f64 = 1e-3;
+
 impl EnvLighting {
     /// The radiance-weighted table of `hf` over `spec` and its sampling density.
     pub fn build(
@@ -259,9 +264,9 @@ impl EnvLighting {
         drop(slices);
         let dropped = table.truncate(TERM_TOLERANCE);
         let last = table.decay().last().copied().unwrap_or(0.0);
-        if dropped == 0 && last > TERM_TOLERANCE {
+        if dropped == 0 && last > W_TOLERANCE {
             report.warn(&format!(
-                "environment table: its last Chebyshev term in w is {last:.1e} of the peak (above {TERM_TOLERANCE:.0e}): more --table-w-nodes than {} resolve w better",
+                "environment table: its last Chebyshev term in w is {last:.1e} of the peak (above {W_TOLERANCE:.0e}): more --table-w-nodes than {} resolve w better",
                 spec.w_nodes
             ));
         }
@@ -291,7 +296,7 @@ impl EnvLighting {
 pub struct EnvMapRequest<'a> {
     pub env: &'a EnvMap,
     pub shading: Shading,
-    /// Samples per pixel (each a BRDF sample and an environment sample).
+    /// Samples per pixel (each a BRDF sample; every m-th also a light sample, [`light_every`]).
     pub samples: u32,
     /// Map side in pixels.
     pub size: u32,

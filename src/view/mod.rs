@@ -186,6 +186,12 @@ fn env_settings(
     scene: &crate::scene::Scene,
 ) -> Result<(env::EnvSettings, Option<crate::light::env::EnvMap>)> {
     use crate::light::env::EnvSource;
+    if args.env.env_noise.is_some() {
+        return Err(crate::Error::invalid(
+            "env noise",
+            "--env-noise applies to render's scenes; the viewer accumulates every pixel to --env-samples",
+        ));
+    }
     let source = match (&args.env.env, &scene.environment) {
         (Some(s), _) => Some(EnvSource::parse(s)?),
         (None, Some(e)) => Some(e.source()?),
