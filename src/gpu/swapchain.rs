@@ -538,33 +538,24 @@ impl Swapchain {
     /// it into `readback` (4 bytes per texel, the swapchain's format) and the transition back.
     pub fn record_copy(&self, cb: vk::CommandBuffer, index: u32, readback: &Buffer) {
         let image = self.images[index as usize];
-        let range = vk::ImageSubresourceRange {
-            aspect_mask: vk::ImageAspectFlags::COLOR,
-            base_mip_level: 0,
-            level_count: 1,
-            base_array_layer: 0,
-            layer_count: 1,
-        };
         // The render pass's outgoing dependency made the colour writes and the transition to
         // PRESENT_SRC_KHR available to TRANSFER; this barrier chains on it.
-        let to_src = vk::ImageMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::empty())
-            .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
-            .old_layout(vk::ImageLayout::PRESENT_SRC_KHR)
-            .new_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(image)
-            .subresource_range(range);
-        let to_present = vk::ImageMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_READ)
-            .dst_access_mask(vk::AccessFlags::empty())
-            .old_layout(vk::ImageLayout::TRANSFER_SRC_OPTIMAL)
-            .new_layout(vk::ImageLayout::PRESENT_SRC_KHR)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(image)
-            .subresource_range(range);
+        let to_src = colour_barrier(
+            image,
+            (vk::AccessFlags::empty(), vk::ImageLayout::PRESENT_SRC_KHR),
+            (
+                vk::AccessFlags::TRANSFER_READ,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            ),
+        );
+        let to_present = colour_barrier(
+            image,
+            (
+                vk::AccessFlags::TRANSFER_READ,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+            ),
+            (vk::AccessFlags::empty(), vk::ImageLayout::PRESENT_SRC_KHR),
+        );
         let to_host = vk::BufferMemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
             .dst_access_mask(vk::AccessFlags::HOST_READ)
@@ -628,33 +619,27 @@ impl Swapchain {
     /// [`Swapchain::record_copy`] can follow).
     pub fn record_upload(&self, cb: vk::CommandBuffer, index: u32, texels: &Buffer) {
         let image = self.images[index as usize];
-        let range = vk::ImageSubresourceRange {
-            aspect_mask: vk::ImageAspectFlags::COLOR,
-            base_mip_level: 0,
-            level_count: 1,
-            base_array_layer: 0,
-            layer_count: 1,
-        };
         // The frame's submission waits for the acquire at COLOR_ATTACHMENT_OUTPUT: the
         // transition chains on that stage.
-        let to_dst = vk::ImageMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::empty())
-            .dst_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .old_layout(vk::ImageLayout::UNDEFINED)
-            .new_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(image)
-            .subresource_range(range);
-        let to_present = vk::ImageMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::TRANSFER_READ)
-            .old_layout(vk::ImageLayout::TRANSFER_DST_OPTIMAL)
-            .new_layout(vk::ImageLayout::PRESENT_SRC_KHR)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .image(image)
-            .subresource_range(range);
+        let to_dst = colour_barrier(
+            image,
+            (vk::AccessFlags::empty(), vk::ImageLayout::UNDEFINED),
+            (
+                vk::AccessFlags::TRANSFER_WRITE,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            ),
+        );
+        let to_present = colour_barrier(
+            image,
+            (
+                vk::AccessFlags::TRANSFER_WRITE,
+                vk::ImageLayout::TRANSFER_DST_OPTIMAL,
+            ),
+            (
+                vk::AccessFlags::TRANSFER_READ,
+                vk::ImageLayout::PRESENT_SRC_KHR,
+            ),
+        );
         let from_shader = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE)
             .dst_access_mask(vk::AccessFlags::TRANSFER_READ);
@@ -739,6 +724,31 @@ impl Drop for Swapchain {
         // with a newer swapchain of the same format) drops with its last owner.
         unsafe { self.loader.destroy_swapchain(self.raw, None) };
     }
+}
+
+/// The layout transition of a swapchain image's one colour level and layer, from
+/// `(access, layout)` to `(access, layout)`, on the same queue family.
+fn colour_barrier(
+    image: vk::Image,
+    from: (vk::AccessFlags, vk::ImageLayout),
+    to: (vk::AccessFlags, vk::ImageLayout),
+) -> vk::ImageMemoryBarrier<'static> {
+    let range = vk::ImageSubresourceRange {
+        aspect_mask: vk::ImageAspectFlags::COLOR,
+        base_mip_level: 0,
+        level_count: 1,
+        base_array_layer: 0,
+        layer_count: 1,
+    };
+    vk::ImageMemoryBarrier::default()
+        .src_access_mask(from.0)
+        .dst_access_mask(to.0)
+        .old_layout(from.1)
+        .new_layout(to.1)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .image(image)
+        .subresource_range(range)
 }
 
 #[cfg(test)]
