@@ -564,18 +564,7 @@ impl Swapchain {
             .buffer(readback.raw)
             .offset(0)
             .size(vk::WHOLE_SIZE);
-        let region = vk::BufferImageCopy::default()
-            .image_subresource(vk::ImageSubresourceLayers {
-                aspect_mask: vk::ImageAspectFlags::COLOR,
-                mip_level: 0,
-                base_array_layer: 0,
-                layer_count: 1,
-            })
-            .image_extent(vk::Extent3D {
-                width: self.extent.width,
-                height: self.extent.height,
-                depth: 1,
-            });
+        let region = super::target::colour_copy(self.extent);
         let raw = self.dev.raw();
         // SAFETY: cb records outside a render pass; the image was acquired by this frame and
         // is in PRESENT_SRC_KHR after the render pass; readback holds w·h·4 bytes.
@@ -643,18 +632,7 @@ impl Swapchain {
         let from_shader = vk::MemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::SHADER_WRITE)
             .dst_access_mask(vk::AccessFlags::TRANSFER_READ);
-        let region = vk::BufferImageCopy::default()
-            .image_subresource(vk::ImageSubresourceLayers {
-                aspect_mask: vk::ImageAspectFlags::COLOR,
-                mip_level: 0,
-                base_array_layer: 0,
-                layer_count: 1,
-            })
-            .image_extent(vk::Extent3D {
-                width: self.extent.width,
-                height: self.extent.height,
-                depth: 1,
-            });
+        let region = super::target::colour_copy(self.extent);
         let raw = self.dev.raw();
         // SAFETY: cb records outside a render pass; the image was acquired by this frame;
         // texels holds w·h·4 bytes.

@@ -135,18 +135,7 @@ impl OffscreenTarget {
     /// Records the copy of the colour image (in `TRANSFER_SRC_OPTIMAL` after the render
     /// pass) into the readback buffer, made visible to the host.
     pub fn record_readback(&self, cb: vk::CommandBuffer) {
-        let region = vk::BufferImageCopy::default()
-            .image_subresource(vk::ImageSubresourceLayers {
-                aspect_mask: vk::ImageAspectFlags::COLOR,
-                mip_level: 0,
-                base_array_layer: 0,
-                layer_count: 1,
-            })
-            .image_extent(vk::Extent3D {
-                width: self.extent.width,
-                height: self.extent.height,
-                depth: 1,
-            });
+        let region = colour_copy(self.extent);
         let to_host = vk::BufferMemoryBarrier::default()
             .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
             .dst_access_mask(vk::AccessFlags::HOST_READ)
@@ -200,4 +189,21 @@ impl Drop for OffscreenTarget {
         // the render pass and the image views it references (fields, dropped after).
         unsafe { self.dev.raw.destroy_framebuffer(self.framebuffer, None) };
     }
+}
+
+/// The copy between a buffer of tightly packed texels and the whole colour image of
+/// `extent` (one level, one layer), the region of a readback or an upload.
+pub(crate) fn colour_copy(extent: vk::Extent2D) -> vk::BufferImageCopy {
+    vk::BufferImageCopy::default()
+        .image_subresource(vk::ImageSubresourceLayers {
+            aspect_mask: vk::ImageAspectFlags::COLOR,
+            mip_level: 0,
+            base_array_layer: 0,
+            layer_count: 1,
+        })
+        .image_extent(vk::Extent3D {
+            width: extent.width,
+            height: extent.height,
+            depth: 1,
+        })
 }
