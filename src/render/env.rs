@@ -591,6 +591,37 @@ pub(crate) struct Dispatch<'a> {
     pub name: &'a str,
 }
 
+impl<'a> Dispatch<'a> {
+    /// A BRDF map of `side` pixels (glsl/env_map.comp: the patch's every pixel, no
+    /// texture, [`MAP_OUTPUTS`] a pixel), every pixel taking `samples` in one pass, seed 0.
+    pub fn map(
+        env: &'a EnvMap,
+        lights: &'a Lights,
+        shading: Shading,
+        samples: u32,
+        side: u32,
+        name: &'a str,
+    ) -> Self {
+        Dispatch {
+            env,
+            lights,
+            shading,
+            samples,
+            first: samples,
+            seed: 0,
+            w_diffuse: None,
+            pixels: u64::from(side) * u64::from(side),
+            map_side: side,
+            outputs: MAP_OUTPUTS,
+            extra: None,
+            stride: 1,
+            batch: 1,
+            spirv: SPIRV,
+            name,
+        }
+    }
+}
+
 /// A pass of [`dispatch_passes`]: the pixels it integrates (indices into the G-buffer;
 /// empty for every pixel of a map) and the samples each has when it ends (every listed
 /// pixel has taken the same number before it).
@@ -777,7 +808,11 @@ impl EnvKernel {
             out,
             pixels: d.pixels,
         };
-        let all: Vec<u32> = (0..d.pixels as u32).collect();
+        let all: Vec<u32> = if self.extra {
+            (0..d.pixels as u32).collect()
+        } else {
+            Vec::new()
+        };
         self.set_pass(&mut t, &all)?;
         Ok(t)
     }
@@ -788,7 +823,7 @@ impl EnvKernel {
         let invocations = if self.extra {
             pixels.len() as u64
         } else {
-            t.pixels.max(t.params.env_dims[3] as u64)
+            t.pixels
         };
         t.params.env_dims[3] = invocations as i32;
         t.params_buf = self.small(
@@ -1016,21 +1051,15 @@ pub fn render_env_brdf_map(
         dev,
         lighting,
         &Dispatch {
-            env: req.env,
-            lights: &lights,
-            shading: req.shading,
-            samples: req.samples,
-            first: req.samples,
             seed: req.seed,
-            w_diffuse: None,
-            pixels: u64::from(req.size) * u64::from(req.size),
-            map_side: req.size,
-            outputs: MAP_OUTPUTS,
-            extra: None,
-            stride: 1,
-            batch: req.samples,
-            spirv: SPIRV,
-            name: "env map",
+            ..Dispatch::map(
+                req.env,
+                &lights,
+                req.shading,
+                req.samples,
+                req.size,
+                "env map",
+            )
         },
         first,
         &mut |_, _| None,

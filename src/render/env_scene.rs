@@ -384,7 +384,8 @@ impl NoiseTarget {
 pub struct Shaded {
     /// Linear-sRGB radiance of every covered pixel, in the G-buffer's order.
     pub rgb: Vec<[f32; 3]>,
-    /// Samples each covered pixel took.
+    /// Samples each output pixel took (its G-buffer pixels' together), one entry per
+    /// output pixel with a covered G-buffer pixel.
     pub samples: Vec<u32>,
     pub gpu_ms: f64,
 }
@@ -492,10 +493,14 @@ pub fn shade_gbuffer(
         },
         &mut next,
     )?;
-    let (rgb, samples) = sums
+    let rgb = sums
         .chunks_exact(3)
-        .map(|p| (super::env::mean_of(p[0], p[2]), p[0][3] as u32))
-        .unzip();
+        .map(|p| super::env::mean_of(p[0], p[2]))
+        .collect();
+    let samples = groups
+        .iter()
+        .map(|m| m.iter().map(|&i| sums[3 * i as usize][3] as u32).sum())
+        .collect();
     Ok(Shaded {
         rgb,
         samples,
@@ -613,16 +618,9 @@ pub fn render_env_scene(
             stride: ss * ss,
         },
     )?;
-    // Samples per output pixel: its G-buffer pixels' together.
-    let mut per_output = std::collections::HashMap::<u32, u32>::new();
-    for (k, &n) in shaded.samples.iter().enumerate() {
-        *per_output
-            .entry(g.data[16 * k + 15].to_bits() >> 4)
-            .or_default() += n;
-    }
-    let samples_mean =
-        per_output.values().map(|&n| f64::from(n)).sum::<f64>() / per_output.len().max(1) as f64;
-    let samples_most = per_output.values().copied().max().unwrap_or(0);
+    let samples_mean = shaded.samples.iter().map(|&n| f64::from(n)).sum::<f64>()
+        / shaded.samples.len().max(1) as f64;
+    let samples_most = shaded.samples.iter().copied().max().unwrap_or(0);
     let s = lighting.mirror_scale;
     let mut rgb = background(scene, req.env, w, h, s);
     for (&i, c) in g.covered.iter().zip(&shaded.rgb) {

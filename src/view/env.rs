@@ -28,7 +28,7 @@ use crate::gpu::Device;
 use crate::light::env::{EnvMap, EnvSource};
 use crate::material::PreparedMaterial;
 use crate::mesh::Mesh;
-use crate::render::env::{map_lights, Dispatch, EnvKernel, EnvLighting, EnvTarget, MAP_OUTPUTS};
+use crate::render::env::{map_lights, Dispatch, EnvKernel, EnvLighting, EnvTarget};
 use crate::render::env_scene::{rasterise, scene_lights, Albedo, NOISE_BATCH, SCENE_OUTPUTS};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -553,21 +553,15 @@ impl EnvView {
                     PictureSpec {
                         kernel: &mut kernels.map,
                         dispatch: Dispatch {
-                            env,
-                            lights: &lights,
-                            shading,
-                            samples: s.samples,
                             first: EXACT_EVERY.min(s.samples),
-                            seed: 0,
-                            w_diffuse: None,
-                            pixels: u64::from(side) * u64::from(side),
-                            map_side: side,
-                            outputs: MAP_OUTPUTS,
-                            extra: None,
-                            stride: 1,
-                            batch: NOISE_BATCH,
-                            spirv: &[],
-                            name: "viewer env map",
+                            ..Dispatch::map(
+                                env,
+                                &lights,
+                                shading,
+                                s.samples,
+                                side,
+                                "viewer env map",
+                            )
                         },
                         pixels,
                         rect,
