@@ -132,6 +132,18 @@ pub fn map_table_spec(
     Ok(spec)
 }
 
+impl crate::cli::gpu::TableArgs {
+    /// The environment table these flags ask for ([`map_table_spec`]).
+    pub fn env_spec(&self, coherence_um: f64) -> Result<TableSpec> {
+        map_table_spec(
+            self.table_texel,
+            self.table_w_nodes,
+            self.table_step_nm,
+            coherence_um,
+        )
+    }
+}
+
 /// What [`draw_map`] drew.
 pub struct EnvMapOutput {
     /// Linear-sRGB radiance, row-major from the top.
@@ -213,12 +225,7 @@ pub fn run_env_scene(
         crate::report::Report::warn(&crate::report::Stderr, line);
     }
     let t = &args.gpu.table;
-    let spec = map_table_spec(
-        t.table_texel,
-        t.table_w_nodes,
-        t.table_step_nm,
-        material.coherence_um,
-    )?;
+    let spec = t.env_spec(material.coherence_um)?;
     let dev = crate::gpu::Device::new(crate::cli::gpu::validation_requested())?;
     crate::render::env_scene::check_size(Some(&dev), scene)?;
     let shading = material.shading();

@@ -21,7 +21,8 @@ pub struct TableArgs {
     /// Table variants: node spacing in u and v (default: half the coherence lobe).
     #[arg(long)]
     pub table_texel: Option<f64>,
-    /// Table variants: nodes along w (default: volume 32, chebyshev-w 16, dhillon 12).
+    /// Table variants: nodes along w (default: volume 32, chebyshev-w 16, dhillon 12; an
+    /// environment's table 8).
     #[arg(long)]
     pub table_w_nodes: Option<usize>,
     /// Table variants: wavelength step of the offline spectral integral (nm) [default: 1,

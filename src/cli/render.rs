@@ -217,12 +217,7 @@ fn run_env_map(args: &RenderArgs, scene: &Scene, env: &crate::light::env::EnvMap
     let material = args.material.apply(scene.material.clone());
     let (hf, _) = material.load_planned(&Reach::ALL, Precision::F32, &crate::report::Stderr)?;
     let t = &args.gpu.table;
-    let spec = crate::cli::env::map_table_spec(
-        t.table_texel,
-        t.table_w_nodes,
-        t.table_step_nm,
-        material.coherence_um,
-    )?;
+    let spec = t.env_spec(material.coherence_um)?;
     let start = std::time::Instant::now();
     let dev = crate::gpu::Device::new(validation_requested())?;
     let size = args.size.unwrap_or(crate::render::DEFAULT_MAP_SIZE);

@@ -205,12 +205,7 @@ fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>
         return Ok(None);
     };
     let t = &args.table;
-    let spec = crate::cli::env::map_table_spec(
-        t.table_texel,
-        t.table_w_nodes,
-        t.table_step_nm,
-        base.coherence_um,
-    )?;
+    let spec = t.env_spec(base.coherence_um)?;
     let mut samples = if args.env_spp.is_empty() {
         DEFAULT_ENV_SPP.to_vec()
     } else {

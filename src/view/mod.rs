@@ -227,12 +227,7 @@ fn env_settings(
     let spec_env = scene.environment.as_ref();
     let material = args.material.apply(scene.material.clone());
     let t = &args.gpu.table;
-    let spec = crate::cli::env::map_table_spec(
-        t.table_texel,
-        t.table_w_nodes,
-        t.table_step_nm,
-        material.coherence_um,
-    )?;
+    let spec = t.env_spec(material.coherence_um)?;
     let texture = match &scene.texture {
         Some(t) => Some(t.load()?),
         None => None,
