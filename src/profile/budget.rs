@@ -47,6 +47,33 @@ pub enum Frames {
     Budget(Budget),
 }
 
+impl Frames {
+    /// Whether a row that has drawn the frames in `times`, the last taking `last_wall_ms`,
+    /// draws another: a fixed count until it is reached; with a budget, the first frame
+    /// always, then until the median is known to the budget's precision, the row has its
+    /// most frames, or another frame like the last would pass `end` (no `end`: the first
+    /// frame only).
+    pub fn more(
+        &self,
+        times: &FrameTimes,
+        last_wall_ms: Option<f64>,
+        end: Option<Instant>,
+    ) -> bool {
+        let n = times.0.len();
+        match (*self, end) {
+            (Frames::Fixed(k), _) => n < k,
+            (Frames::Budget(b), Some(end)) => {
+                let next = std::time::Duration::from_secs_f64(last_wall_ms.unwrap_or(0.0) / 1e3);
+                n == 0
+                    || (n < b.max_frames
+                        && times.relative_error().is_none_or(|e| e > b.precision)
+                        && Instant::now() + next <= end)
+            }
+            (Frames::Budget(_), None) => n == 0,
+        }
+    }
+}
+
 /// A time budget for the whole profile.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Budget {
@@ -197,6 +224,33 @@ impl Pace {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_row_draws_its_frames_until_the_count_the_precision_or_the_deadline() {
+        let none = FrameTimes::default();
+        let two = FrameTimes(vec![1.0, 1.0]);
+        assert!(Frames::Fixed(2).more(&none, None, None));
+        assert!(!Frames::Fixed(2).more(&two, Some(1.0), None));
+        let b = Frames::Budget(Budget::seconds(60.0));
+        // Without a deadline the first frame only; with one, the first always.
+        assert!(b.more(&none, None, None) && !b.more(&two, Some(1.0), None));
+        let past = Instant::now();
+        assert!(b.more(&none, None, Some(past)));
+        let later = Instant::now() + std::time::Duration::from_secs(60);
+        assert!(
+            b.more(&two, Some(1.0), Some(later)),
+            "fewer than 3 frames: no precision yet"
+        );
+        assert!(
+            !b.more(&two, Some(120e3), Some(later)),
+            "the next frame would pass the end"
+        );
+        let steady = FrameTimes(vec![1.0; 5]);
+        assert!(
+            !b.more(&steady, Some(1.0), Some(later)),
+            "the median is known"
+        );
+    }
 
     #[test]
     fn frame_statistics() {

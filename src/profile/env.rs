@@ -147,22 +147,7 @@ fn timed(
     let mut times = FrameTimes::default();
     let mut walls: Vec<f64> = Vec::new();
     let mut last = None;
-    loop {
-        let n = walls.len();
-        let more = match (frames, end) {
-            (Frames::Fixed(k), _) => n < k,
-            (Frames::Budget(b), Some(end)) => {
-                let next = Duration::from_secs_f64(walls.last().copied().unwrap_or(0.0) / 1e3);
-                n == 0
-                    || (n < b.max_frames
-                        && times.relative_error().is_none_or(|e| e > b.precision)
-                        && Instant::now() + next <= end)
-            }
-            (Frames::Budget(_), None) => n == 0,
-        };
-        if !more {
-            break;
-        }
+    while frames.more(&times, walls.last().copied(), end) {
         let (pic, wall) = draw(samples)?;
         times.0.push(pic.gpu_ms);
         walls.push(wall);

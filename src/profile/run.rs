@@ -379,24 +379,7 @@ impl Run<'_> {
         let mut times = FrameTimes::default();
         let mut wall: Vec<f64> = Vec::new();
         let mut last = None;
-        loop {
-            let n = wall.len();
-            let more = match (self.setup.frames, end) {
-                (Frames::Fixed(k), _) => n < k,
-                (Frames::Budget(b), Some(end)) => {
-                    let next = std::time::Duration::from_secs_f64(
-                        wall.last().copied().unwrap_or(0.0) / 1e3,
-                    );
-                    n == 0
-                        || (n < b.max_frames
-                            && times.relative_error().is_none_or(|e| e > b.precision)
-                            && Instant::now() + next <= end)
-                }
-                (Frames::Budget(_), None) => n == 0,
-            };
-            if !more {
-                break;
-            }
+        while self.setup.frames.more(&times, wall.last().copied(), end) {
             let f = draw_map(renderer, prepared, self.setup)?;
             times.0.push(f.gpu_ms.unwrap_or(f.wall_ms));
             wall.push(f.wall_ms);
