@@ -3,19 +3,16 @@
 #ifndef COLOUR_GLSL
 #define COLOUR_GLSL
 #include "interface.glsl"
+#include "srgb.glsl"
 
 // Weights of spectral sample j: xyz = CIE·D65·Δλ weight, w = λ in nm.
 vec4 getColorWeights(int j) {
     return colourWeights[j];
 }
 
-// Eq. 1.10 with MODEL §5's matrix (GLSL matrices are column-major: columns listed).
+// Eq. 1.10 with MODEL §5's matrix (srgb.glsl).
 vec3 xyzToLinearSrgb(vec3 xyz) {
-    const mat3 M = mat3(
-        3.2406, -0.9689, 0.0557,
-        -1.5372, 1.8758, -0.2040,
-        -0.4986, 0.0415, 1.0570);
-    return M * xyz;
+    return XYZ_TO_SRGB * xyz;
 }
 
 // Algorithm 4: c_out = (1 − w_d)·c_diffraction + (1 − α)·c_texture + w_d·c_texture,

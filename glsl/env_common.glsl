@@ -53,11 +53,7 @@ const float PI = 3.14159265358979;
 const int IRR_W = 128;
 const int IRR_H = 64;
 
-// XYZ → linear sRGB (MODEL §5, colour.glsl; columns listed).
-const mat3 XYZ_TO_SRGB = mat3(
-    3.2406, -0.9689, 0.0557,
-    -1.5372, 1.8758, -0.2040,
-    -0.4986, 0.0415, 1.0570);
+#include "srgb.glsl"
 
 // --- the BRDF: C(ωi, ωr)·G(u, v, w) -------------------------------------------------------
 

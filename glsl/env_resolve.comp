@@ -30,10 +30,7 @@ layout(push_constant) uniform Resolve {
     float white;
 } r;
 
-const mat3 XYZ_TO_SRGB = mat3(
-    3.2406, -0.9689, 0.0557,
-    -1.5372, 1.8758, -0.2040,
-    -0.4986, 0.0415, 1.0570);
+#include "srgb.glsl"
 
 float encode(float x) {
     if (!(x > 0.0)) return 0.0;
