@@ -345,13 +345,33 @@ pub fn refuse_overwrite(inputs: &[(&str, PathBuf)], outputs: &[(&str, PathBuf)])
     Ok(())
 }
 
-/// The whole policy for one command: every output passes [`check_output`], and none is an
-/// input or another output ([`refuse_overwrite`]). Commands call it before any work.
+/// The whole policy for one command: every input that exists is a regular file
+/// ([`check_inputs`]), every output passes [`check_output`], and none is an input or another
+/// output ([`refuse_overwrite`]). Commands call it before any work.
 pub fn check_outputs(inputs: &[(&str, PathBuf)], outputs: &[(&str, PathBuf)]) -> Result<()> {
+    check_inputs(inputs)?;
     for (_, o) in outputs {
         check_output(o)?;
     }
     refuse_overwrite(inputs, outputs)
+}
+
+/// Every input that exists (through links) is a regular file: a FIFO would block its reader
+/// forever, a device would never end, a directory would give a confusing message. A missing
+/// input is left to its reader, which names it (an optional sidecar may be absent).
+/// Nothing is opened here.
+pub fn check_inputs(inputs: &[(&str, PathBuf)]) -> Result<()> {
+    for (role, p) in inputs {
+        if let Ok(meta) = std::fs::metadata(p) {
+            if !meta.is_file() {
+                return Err(Error::parse(
+                    p,
+                    format!("not a regular file; the {role} must be a file"),
+                ));
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Largest scene, sidecar or other TOML file read (bytes): real ones are a few KB.

@@ -101,12 +101,14 @@ pub fn refuse_flags(flags: &[(&str, bool)], needs: &str) -> Result<()> {
 }
 
 /// Every file a scene render reads: the scene file, the height field of `heightfield` (the
-/// scene's material after the command line's overrides) and its sidecar, the mesh and the
-/// texture. Each may be the target of a mistaken output path.
+/// scene's material after the command line's overrides) and its sidecar, the mesh, the
+/// texture and the environment map (`env`, the `--env` flag, else the scene's
+/// `[environment] map`). Each may be the target of a mistaken output path.
 pub fn scene_inputs(
     scene_path: Option<&Path>,
     scene: &crate::scene::Scene,
     heightfield: &str,
+    env: Option<&str>,
 ) -> Vec<(&'static str, PathBuf)> {
     let mut inputs = heightfield_inputs(heightfield);
     if let Some(s) = scene_path {
@@ -118,7 +120,15 @@ pub fn scene_inputs(
     if let Some(t) = scene.texture.as_ref().filter(|t| !t.is_builtin()) {
         inputs.push(("texture", t.path.clone()));
     }
+    let env = env.or(scene.environment.as_ref().map(|e| e.map.as_str()));
+    inputs.extend(env_input(env));
     inputs
+}
+
+/// The file an environment source (`--env`) reads: none for `builtin:` maps.
+pub fn env_input(env: Option<&str>) -> Option<(&'static str, PathBuf)> {
+    env.filter(|m| !m.starts_with(crate::light::env::BUILTIN_PREFIX))
+        .map(|m| ("environment map", PathBuf::from(m)))
 }
 
 /// `diffract heightfield -o OUT [--from-sample S]`: the image and its sidecar must be

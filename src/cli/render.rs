@@ -511,17 +511,12 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
     if args.brdf_map && args.png {
         outputs.push(("--png image", png_sibling));
     }
-    let mut inputs =
-        crate::guard::scene_inputs(args.scene.scene.as_deref(), scene, &material.heightfield);
-    // An environment map file is an input too: `-o` may not overwrite it.
-    let env_map = args
-        .env
-        .env
-        .as_deref()
-        .or(scene.environment.as_ref().map(|e| e.map.as_str()));
-    if let Some(map) = env_map.filter(|m| !m.starts_with("builtin:")) {
-        inputs.push(("environment map", std::path::PathBuf::from(map)));
-    }
+    let inputs = crate::guard::scene_inputs(
+        args.scene.scene.as_deref(),
+        scene,
+        &material.heightfield,
+        args.env.env.as_deref(),
+    );
     crate::guard::check_outputs(&inputs, &outputs)?;
     if !args.brdf_map {
         if let Some(m) = &scene.mesh.path {

@@ -286,10 +286,9 @@ pub fn profile_args(args: &ProfileArgs) -> Result<()> {
         .into_iter()
         .filter_map(|(flag, out)| out.clone().map(|o| (flag, o)))
         .collect();
-    crate::guard::check_outputs(
-        &crate::guard::heightfield_inputs(&material.heightfield),
-        &outputs,
-    )
+    let mut inputs = crate::guard::heightfield_inputs(&material.heightfield);
+    inputs.extend(crate::guard::env_input(args.env.as_deref()));
+    crate::guard::check_outputs(&inputs, &outputs)
 }
 
 /// Scored pixels (no more than the map's disk holds), frames, the mesh view and its quads.

@@ -256,10 +256,11 @@ fn env_settings(
     Ok((settings, first_map))
 }
 
-/// `diffract view`: the screenshot must be a PNG that can be written and is none of the
-/// files the scene reads.
+/// `diffract view`: every file the scene reads is a regular file, and the screenshot must be
+/// a PNG that can be written and is none of them.
 pub fn view_args(args: &ViewArgs, scene: &crate::scene::Scene) -> Result<()> {
     args.gpu.table.check()?;
+    let mut outputs = Vec::new();
     if let Some(p) = &args.screenshot {
         if p.extension().and_then(|e| e.to_str()) != Some("png") {
             return Err(Error::invalid(
@@ -267,11 +268,16 @@ pub fn view_args(args: &ViewArgs, scene: &crate::scene::Scene) -> Result<()> {
                 format!("{}: must be a .png file", p.display()),
             ));
         }
-        let material = args.material.apply(scene.material.clone());
-        crate::guard::check_outputs(
-            &crate::guard::scene_inputs(args.scene.scene.as_deref(), scene, &material.heightfield),
-            &[("--screenshot", p.clone())],
-        )?;
+        outputs.push(("--screenshot", p.clone()));
     }
-    Ok(())
+    let material = args.material.apply(scene.material.clone());
+    crate::guard::check_outputs(
+        &crate::guard::scene_inputs(
+            args.scene.scene.as_deref(),
+            scene,
+            &material.heightfield,
+            args.env.env.as_deref(),
+        ),
+        &outputs,
+    )
 }
