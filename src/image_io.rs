@@ -81,6 +81,19 @@ pub fn write_png_srgb(
     write_bytes(path, &bytes)
 }
 
+/// Writes 8-bit RGB texels, already sRGB-encoded (a screenshot), as a PNG through the output
+/// policy: encoded in memory, written to a temporary sibling and renamed over `path`.
+pub fn write_png_rgb8(path: &Path, width: u32, height: u32, rgb: Vec<u8>) -> Result<()> {
+    let img = image::RgbImage::from_raw(width, height, rgb)
+        .ok_or_else(|| image_err(path, "pixel buffer does not match the size"))?;
+    let bytes = encode(
+        path,
+        image::DynamicImage::ImageRgb8(img),
+        image::ImageFormat::Png,
+    )?;
+    write_bytes(path, &bytes)
+}
+
 /// Encodes an image in memory: what can fail here is the encoder, never the disk.
 fn encode(path: &Path, img: image::DynamicImage, format: image::ImageFormat) -> Result<Vec<u8>> {
     let mut bytes = std::io::Cursor::new(Vec::new());

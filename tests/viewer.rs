@@ -144,6 +144,10 @@ fn screenshot_matches_offscreen_render() {
     let Some(x) = Xvfb::start() else { return };
     let dir = temp_dir("shot");
     let shot = dir.join("view.png");
+    // A screenshot replaces its file by a rename: a hard link to the old file keeps it.
+    std::fs::write(&shot, b"the old screenshot").unwrap();
+    let old = dir.join("old.png");
+    std::fs::hard_link(&shot, &old).unwrap();
     let out = diffract()
         .args(["view", "--scene"])
         .arg(rainbow_scene_path())
@@ -179,6 +183,11 @@ fn screenshot_matches_offscreen_render() {
         "key help printed:\n{stdout}"
     );
 
+    assert_eq!(
+        std::fs::read(&old).unwrap(),
+        b"the old screenshot",
+        "the screenshot was written into the old file instead of a new one renamed over it"
+    );
     let (w, h, px) = image_io::read_png_rgb8(&shot).expect("screenshot PNG");
     let scene = Scene::load(&rainbow_scene_path()).expect("scene");
     assert_eq!((w, h), (scene.output.width, scene.output.height));

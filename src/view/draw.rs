@@ -821,21 +821,12 @@ fn mesh_aspect(extent: vk::Extent2D, map: bool) -> f32 {
     mesh.width as f32 / mesh.height.max(1) as f32
 }
 
-/// Writes the read-back swapchain texels (already sRGB-encoded) to a PNG.
+/// Writes the read-back swapchain texels (already sRGB-encoded) to a PNG, through a
+/// temporary file and a rename like every output.
 fn save_screenshot(sc: &Swapchain, buf: &Buffer, path: &std::path::Path) -> Result<()> {
     let rgb = sc.texels_to_rgb8(buf.mapped()?);
     let bytes: Vec<u8> = rgb.into_iter().flatten().collect();
-    image::save_buffer(
-        path,
-        &bytes,
-        sc.extent.width,
-        sc.extent.height,
-        image::ExtendedColorType::Rgb8,
-    )
-    .map_err(|e| Error::Image {
-        path: path.to_path_buf(),
-        msg: e.to_string(),
-    })
+    crate::image_io::write_png_rgb8(path, sc.extent.width, sc.extent.height, bytes)
 }
 
 #[cfg(test)]
