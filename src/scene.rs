@@ -583,6 +583,17 @@ impl Scene {
                 l.intensity
             ));
         }
+        crate::light::check_radiometric("[light] intensity", f64::from(l.intensity))?;
+        let sun = crate::light::area::DiscLight {
+            angular_diameter_deg: l.angular_diameter_deg,
+            ..Default::default()
+        };
+        if sun.solid_angle() > 0.0 {
+            crate::light::check_radiometric(
+                "[light] radiance (intensity / the disc's solid angle)",
+                f64::from(l.intensity) / sun.solid_angle(),
+            )?;
+        }
         if !(0.0..=MAX_ANGULAR_DIAMETER_DEG).contains(&l.angular_diameter_deg) {
             return Err(format!(
                 "[light] angular_diameter_deg = {}: expected 0 to {MAX_ANGULAR_DIAMETER_DEG} \

@@ -97,11 +97,30 @@ impl DiscLight {
                 self.intensity
             ));
         }
+        self.check_float32(&what)?;
         if !(1..=MAX_DISK_SAMPLES).contains(&self.disk_samples) {
             return Err(format!(
                 "{what} disk_samples = {}: expected 1 to {MAX_DISK_SAMPLES}",
                 self.disk_samples
             ));
+        }
+        Ok(())
+    }
+}
+
+impl DiscLight {
+    /// The irradiance `I·colour` and, for a disc of non-zero size, the radiance
+    /// `I·colour/Ω` the device carries must fit float32 ([`super::check_radiometric`]).
+    fn check_float32(&self, what: &str) -> Result<(), String> {
+        let peak = f64::from(self.intensity)
+            * self.colour.iter().fold(0.0f64, |m, &c| m.max(f64::from(c)));
+        super::check_radiometric(&format!("{what} intensity × colour"), peak)?;
+        let omega = self.solid_angle();
+        if omega > 0.0 {
+            super::check_radiometric(
+                &format!("{what} radiance intensity × colour / solid angle"),
+                peak / omega,
+            )?;
         }
         Ok(())
     }
@@ -142,6 +161,8 @@ impl EnvironmentSpec {
                 self.intensity
             ));
         }
+        // The map's pixels scale it further; that product is checked when the map loads.
+        super::check_radiometric("[environment] intensity", self.intensity)?;
         if !self.rotate_deg.is_finite() {
             return Err(format!(
                 "[environment] rotate_deg = {}: must be finite",

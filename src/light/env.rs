@@ -40,6 +40,9 @@ pub const BYTES_PER_PIXEL: u64 = 36;
 /// Memory budget of one environment map: an 8192×4096 map (an "8K" HDR panorama) fits.
 pub const BUDGET_BYTES: u64 = 8192 * 4096 * BYTES_PER_PIXEL;
 
+/// Largest map file read (bytes): an 8192×4096 EXR of uncompressed float32 RGBA is 512 MiB.
+pub const MAX_FILE_BYTES: u64 = 1 << 30;
+
 /// Where a map comes from.
 #[derive(Debug, Clone, PartialEq, Eq)]
 pub enum EnvSource {
@@ -160,6 +163,17 @@ impl EnvMap {
             EnvSource::File(p) => read_map(p)?,
         };
         let mut map = EnvMap::from_pixels(w, h, px, &source.name())?;
+        // The brightest pixel after the intensity is what float32 must hold on the device.
+        let peak = map
+            .radiance
+            .iter()
+            .flatten()
+            .fold(0.0f64, |m, &c| m.max(f64::from(c)));
+        super::check_radiometric(
+            "environment radiance (brightest pixel × intensity)",
+            peak * intensity,
+        )
+        .map_err(|msg| Error::invalid("environment", format!("{}: {msg}", source.name())))?;
         for p in &mut map.radiance {
             *p = p.map(|c| (f64::from(c) * intensity) as f32);
         }
@@ -282,9 +296,9 @@ fn check_dimensions(width: u32, height: u32) -> std::result::Result<(), String> 
     let bytes = u64::from(width) * u64::from(height) * BYTES_PER_PIXEL;
     if bytes > BUDGET_BYTES {
         return Err(format!(
-            "the {width}×{height} map needs {:.1} GB ({BYTES_PER_PIXEL} bytes a pixel on the host and the device); the budget allows {:.1} GB (8192×4096)",
-            bytes as f64 * 1e-9,
-            BUDGET_BYTES as f64 * 1e-9
+            "the {width}×{height} map needs {} MB ({BYTES_PER_PIXEL} bytes a pixel: host copy, device texel and sampling tables); the budget allows {} MB (8192×4096)",
+            bytes.div_ceil(1_000_000),
+            BUDGET_BYTES / 1_000_000
         ));
     }
     Ok(())
@@ -296,6 +310,8 @@ fn read_map(path: &Path) -> Result<(u32, u32, Vec<[f32; 3]>)> {
         path: path.to_path_buf(),
         msg,
     };
+    // A pipe or a device would block or never end; the size is bounded before reading.
+    crate::fsutil::check_input_file(path, "environment map", MAX_FILE_BYTES)?;
     let file = std::fs::File::open(path).map_err(|e| Error::io(path, e))?;
     let reader = BufReader::new(file);
     let decoded: std::result::Result<Vec<f32>, String> = match extension(path).as_deref() {

@@ -20,6 +20,34 @@ pub const MAX_ANGULAR_DIAMETER_DEG: f32 = 20.0;
 /// Largest accepted number of directions.
 pub const MAX_DISK_SAMPLES: u32 = 256;
 
+/// Largest radiance or irradiance a light may carry to the device. float32 holds 3.4e38;
+/// the estimator's sums over its samples and the BRDF's peaks over its sampling density
+/// need the other eight decades. Measured: an environment of 1e35
+/// still renders in proportion, one of 1e38 is lost in the sums.
+pub const MAX_RADIOMETRIC: f64 = 1e30;
+
+/// Smallest non-zero radiance or irradiance a light may carry: the products with a dim
+/// BRDF value (1e-6) stay normal float32 numbers (above 1.2e-38), never flushed to zero.
+pub const MIN_RADIOMETRIC: f64 = 1e-30;
+
+/// Checks a radiometric value on its way to the device (a light's radiance or irradiance,
+/// after every scale it meets on the host): 0, or within [`MIN_RADIOMETRIC`] to
+/// [`MAX_RADIOMETRIC`]. `what` names the value as the user wrote it.
+pub fn check_radiometric(what: &str, v: f64) -> Result<(), String> {
+    if v == 0.0 || (MIN_RADIOMETRIC..=MAX_RADIOMETRIC).contains(&v) {
+        return Ok(());
+    }
+    let v = if v.is_finite() {
+        format!("{v:.3e}")
+    } else {
+        "beyond float64".to_string()
+    };
+    Err(format!(
+        "{what} = {v}: must be 0 or within {MIN_RADIOMETRIC:e} to {MAX_RADIOMETRIC:e} to be \
+         carried in float32 on the device"
+    ))
+}
+
 /// One direction towards a point of the light's disc (unit, world space) and its weight.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct DiskSample {
@@ -74,6 +102,18 @@ mod tests {
 
     fn angle(a: [f32; 3], b: DVec3) -> f64 {
         DVec3::from(a.map(f64::from)).dot(b).clamp(-1.0, 1.0).acos()
+    }
+
+    #[test]
+    fn radiometric_values_must_fit_float32_with_room_for_the_sums() {
+        for ok in [0.0, 1e-30, 1.0, 1e30] {
+            assert!(check_radiometric("x", ok).is_ok(), "{ok}");
+        }
+        for bad in [1e-31, 1.1e30, 1e38, 1e300, f64::INFINITY] {
+            let e = check_radiometric("intensity", bad).unwrap_err();
+            assert!(e.starts_with("intensity = ") && e.contains("1e30"), "{e}");
+            assert!(e.len() < 200, "{e}");
+        }
     }
 
     #[test]
