@@ -243,6 +243,8 @@ fn main() -> ExitCode {
         Err(code) => return code,
     };
     diffract::fsutil::remove_temps_on_interrupt();
+    // A refused command prints one error line: the notes of its checks wait for the work.
+    diffract::report::hold_notes();
     // The environment is an input like the flags: a bad cache cap is refused before any
     // work, by every command that may write the cache.
     if !matches!(
@@ -276,9 +278,13 @@ fn main() -> ExitCode {
         Command::Validity(a) => diffract::cli::validity::run(a),
     };
     match result {
-        Ok(()) => ExitCode::SUCCESS,
+        Ok(()) => {
+            diffract::report::work_begins();
+            ExitCode::SUCCESS
+        }
         Err(e) => {
-            eprintln!("error: {e}");
+            diffract::report::discard_notes();
+            eprintln!("error: {}", diffract::report::readable(&e.to_string()));
             ExitCode::FAILURE
         }
     }

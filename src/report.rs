@@ -23,20 +23,95 @@ pub trait Report: Send + Sync {
     fn checkpoint(&self) {}
 }
 
+/// A message as a person reads it: a number of more than 24 digits (1e300 printed in full
+/// by `{}`; no integer of 64 bits or time stamp is that long) becomes scientific notation
+/// with four significant digits. Digits that touch letters (a hexadecimal key) stay as
+/// they are. Every `error:` and `warning:` line the binary prints passes through here.
+pub fn readable(msg: &str) -> String {
+    let mut out = String::with_capacity(msg.len());
+    let b = msg.as_bytes();
+    let mut i = 0;
+    while i < b.len() {
+        let start = i;
+        while i < b.len() && (b[i].is_ascii_digit() || (b[i] == b'.' && i > start)) {
+            i += 1;
+        }
+        let run = &msg[start..i];
+        let digits = run.bytes().filter(u8::is_ascii_digit).count();
+        let touches = |c: Option<char>| c.is_some_and(|c| c.is_ascii_alphanumeric() || c == '_');
+        let before = msg[..start].chars().next_back();
+        let after = msg[i..].chars().next();
+        if digits > 24 && !touches(before) && !after.is_some_and(|c| c.is_ascii_alphabetic()) {
+            let run = run.trim_end_matches('.');
+            match run.parse::<f64>() {
+                Ok(v) => out.push_str(&format!("{v:.3e}")),
+                Err(_) => out.push_str(run),
+            }
+            out.push_str(&msg[start + run.len()..i]);
+        } else if i > start {
+            out.push_str(run);
+        }
+        if i < b.len() && i == start {
+            let c = msg[i..].chars().next().unwrap_or(' ');
+            out.push(c);
+            i += c.len_utf8();
+        }
+    }
+    out
+}
+
 /// The command line's report: lines on stderr, bars on stderr while it is a terminal.
+///
+/// Notes can be held back while a command checks its inputs ([`hold_notes`]): a refused
+/// command then prints its one `error:` line and nothing else, since the notes of a check
+/// that failed ([`discard_notes`]) are never shown. They are printed, in order, when the
+/// work begins ([`work_begins`]: the device opens, a progress bar starts) or when the
+/// command ends well. Warnings are never held.
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Stderr;
 
+/// Notes waiting for the work to begin; `None` while notes print at once.
+static HELD: Mutex<Option<Vec<String>>> = Mutex::new(None);
+
+/// Holds [`Stderr`]'s notes back from now until [`work_begins`] or [`discard_notes`].
+pub fn hold_notes() {
+    if let Ok(mut h) = HELD.lock() {
+        h.get_or_insert_with(Vec::new);
+    }
+}
+
+/// The checks are over: prints the held notes and lets later ones through at once.
+pub fn work_begins() {
+    let lines = HELD.lock().ok().and_then(|mut h| h.take());
+    for line in lines.into_iter().flatten() {
+        eprintln!("{line}");
+    }
+}
+
+/// A check failed: the held notes are dropped (the command prints only its error).
+pub fn discard_notes() {
+    if let Ok(mut h) = HELD.lock() {
+        *h = None;
+    }
+}
+
 impl Report for Stderr {
     fn warn(&self, line: &str) {
-        eprintln!("warning: {line}");
+        eprintln!("warning: {}", readable(line));
     }
 
     fn note(&self, line: &str) {
+        if let Ok(mut h) = HELD.lock() {
+            if let Some(held) = h.as_mut() {
+                held.push(line.to_string());
+                return;
+            }
+        }
         eprintln!("{line}");
     }
 
     fn progress(&self, bar: ProgressBar) -> ProgressBar {
+        work_begins();
         bar
     }
 }
@@ -104,5 +179,34 @@ mod tests {
         assert_eq!(c.warnings(), ["w1"]);
         assert_eq!(c.notes(), ["n1"]);
         assert_eq!(c.bars(), ["table"]);
+    }
+
+    #[test]
+    fn long_numbers_read_as_scientific_notation() {
+        let huge = format!("theta-i {}°; expected 0° to 90°", 1e300);
+        assert_eq!(readable(&huge), "theta-i 1.000e300°; expected 0° to 90°");
+        let tiny = format!("dH {} µm", 1.234_567_890_123_456_7e-30);
+        assert_eq!(readable(&tiny), "dH 1.235e-30 µm");
+        let same = "12 of 2026-11-27: 1.5 µm, 3.25e-3, 18446744073709551615 bytes";
+        assert_eq!(readable(same), same);
+        let key = "key 0123456789012345678901234567abcdef ok";
+        assert_eq!(readable(key), key);
+        assert_eq!(readable("é 1000000000000000000000000000."), "é 1.000e27.");
+    }
+
+    #[test]
+    fn held_notes_wait_for_the_work_and_go_with_a_refusal() {
+        hold_notes();
+        Stderr.note("kept");
+        assert_eq!(
+            HELD.lock().unwrap().as_deref(),
+            Some(&["kept".to_string()][..])
+        );
+        discard_notes();
+        assert!(HELD.lock().unwrap().is_none());
+        hold_notes();
+        Stderr.note("shown");
+        work_begins();
+        assert!(HELD.lock().unwrap().is_none());
     }
 }

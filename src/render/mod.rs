@@ -235,6 +235,8 @@ impl Renderer {
 
     /// A renderer on an existing device (the viewer's, which can present).
     pub fn on(dev: Arc<Device>) -> Result<Self> {
+        // The inputs were checked before the device opened: the held notes may show.
+        crate::report::work_begins();
         Ok(Self {
             map: None,
             storage: StorageFormat::default(),
