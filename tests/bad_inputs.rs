@@ -1439,12 +1439,56 @@ fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
             } else if meta.file_type().is_symlink() {
                 let t = std::fs::read_link(&p).unwrap();
                 out.insert(p, t.to_string_lossy().as_bytes().to_vec());
+            } else if !meta.is_file() {
+                // A FIFO would block a read: its kind is what is compared.
+                out.insert(p, b"<not a regular file>".to_vec());
             } else {
                 out.insert(p.clone(), std::fs::read(&p).unwrap());
             }
         }
     }
     out
+}
+
+/// A case that runs longer than this hangs (a FIFO read, a loop): it fails and is killed.
+const HANG_SECS: u64 = 120;
+
+/// Runs `cmd` to its end and collects its output, or kills it after `secs` (`None`).
+fn output_within(cmd: &mut Command, secs: u64) -> Option<Output> {
+    use std::io::Read;
+    use std::process::Stdio;
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let drain = |mut r: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut v = Vec::new();
+            let _ = r.read_to_end(&mut v);
+            v
+        })
+    };
+    let out = drain(Box::new(child.stdout.take().unwrap()));
+    let err = drain(Box::new(child.stderr.take().unwrap()));
+    let start = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed().as_secs() >= secs {
+            let _ = child.kill();
+            let _ = child.wait();
+            return None;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    Some(Output {
+        status,
+        stdout: out.join().unwrap(),
+        stderr: err.join().unwrap(),
+    })
 }
 
 fn run(c: &Case, root: &Path, index: usize) -> Result<(), String> {
@@ -1487,7 +1531,9 @@ fn run(c: &Case, root: &Path, index: usize) -> Result<(), String> {
         }
     }
     let before = snapshot(&d);
-    let o: Output = cmd.output().unwrap();
+    let Some(o) = output_within(&mut cmd, HANG_SECS) else {
+        return Err(format!("hung: killed after {HANG_SECS} s: {args:?}"));
+    };
     let after = snapshot(&d);
     let err = String::from_utf8_lossy(&o.stderr);
     let ctx = || format!("{args:?}\nstatus {:?}\nstderr:\n{err}", o.status.code());
@@ -2106,4 +2152,314 @@ fn an_output_onto_a_dangling_link_creates_its_file_and_keeps_the_link() {
     let text = std::fs::read_to_string(d.join("sub/new.csv")).unwrap();
     assert!(text.starts_with("theta_i_deg,"), "{text}");
     let _ = std::fs::remove_dir_all(&d);
+}
+
+/// A 16×8 OpenEXR environment map of uniform radiance `v`.
+fn env_exr(p: &Path, v: f32) {
+    let img = image::Rgb32FImage::from_pixel(16, 8, image::Rgb([v, v, v]));
+    image::DynamicImage::ImageRgb32F(img).save(p).unwrap();
+}
+
+fn fifo(p: &Path) {
+    let c = std::ffi::CString::new(p.to_str().unwrap()).unwrap();
+    // SAFETY: a valid NUL-terminated path; mkfifo only creates the node.
+    assert_eq!(
+        unsafe { libc::mkfifo(c.as_ptr(), 0o644) },
+        0,
+        "mkfifo {}",
+        p.display()
+    );
+}
+
+/// A Radiance `.hdr` whose header claims `w`×`h`, with no pixel data after it.
+fn hdr_header(p: &Path, w: u32, h: u32) {
+    put(
+        p,
+        format!("#?RADIANCE\nFORMAT=32-bit_rle_rgbe\n\n-Y {h} +X {w}\n"),
+    );
+}
+
+/// A Gwyddion Simple Field of `nx`×`ny` heights `f(i, j)` in metres, 100 nm pixels.
+fn gsf(p: &Path, nx: usize, ny: usize, f: impl Fn(usize, usize) -> f32) {
+    let mut b = format!(
+        "Gwyddion Simple Field 1.0\nXRes = {nx}\nYRes = {ny}\nXReal = {}\nYReal = {}\n\
+         XYUnits = m\nZUnits = m\n",
+        nx as f64 * 1e-7,
+        ny as f64 * 1e-7
+    )
+    .into_bytes();
+    b.resize(b.len() + 4 - b.len() % 4, 0);
+    for j in 0..ny {
+        for i in 0..nx {
+            b.extend_from_slice(&f(i, j).to_le_bytes());
+        }
+    }
+    put(p, b);
+}
+
+#[test]
+fn a_refusal_after_loading_a_scan_prints_only_its_error() {
+    use Expect::*;
+    let wave = |i: usize, _| 1e-7 * (i as f32 / 3.0).sin();
+    let cases = vec![
+        case(
+            "scan: a 64×1 scan under the default levelling",
+            move |d| gsf(&d.join("row.gsf"), 64, 1, wave),
+            &["render", "--heightfield", "{d}/row.gsf", "-o", "{d}/o.png"],
+            Fail("a 64×1 field is too small to level"),
+        ),
+        case(
+            "scan: validity of a flat scan",
+            |d| gsf(&d.join("flat.gsf"), 64, 64, |_, _| 0.0),
+            &["validity", "--heightfield", "{d}/flat.gsf"],
+            Fail("no ridges"),
+        ),
+        case(
+            "scan: a field too tall for the tolerance",
+            |d| {
+                gsf(&d.join("tall.gsf"), 64, 64, |i, _| {
+                    5e-6 * (i as f32 / 3.0).sin()
+                })
+            },
+            &[
+                "render",
+                "--heightfield",
+                "{d}/tall.gsf",
+                "--tolerance",
+                "1e-6",
+                "-o",
+                "{d}/o.png",
+            ],
+            Fail("no supported expansion meets the tolerance"),
+        ),
+    ];
+    run_cases("scan-lines", cases);
+}
+
+#[test]
+fn environment_maps_lights_and_levels_keep_the_contract() {
+    use Expect::*;
+    let map_render = |extra: &[&'static str]| {
+        let mut v = vec!["render", "--brdf-map", "--size", "8", "-o", "{d}/o.exr"];
+        v.extend_from_slice(extra);
+        v
+    };
+    let lit = |d: &Path, text: &str| put(&d.join("s.toml"), text);
+    let cases = vec![
+        case(
+            "output: profile --csv onto its --env map",
+            |d| env_exr(&d.join("e.exr"), 1.0),
+            &[
+                "profile",
+                "--only",
+                "env",
+                "--env",
+                "{d}/e.exr",
+                "--csv",
+                "{d}/e.exr",
+            ],
+            Fail("e.exr is the environment map"),
+        ),
+        case(
+            "output: profile --plot onto a hard link of its --env map",
+            |d| {
+                env_exr(&d.join("e.exr"), 1.0);
+                std::fs::hard_link(d.join("e.exr"), d.join("p.png")).unwrap();
+            },
+            &[
+                "profile",
+                "--only",
+                "env",
+                "--env",
+                "{d}/e.exr",
+                "--plot",
+                "{d}/p.png",
+            ],
+            Fail("is the environment map"),
+        ),
+        case(
+            "output: view --screenshot onto a hard link of its --env map",
+            |d| {
+                env_exr(&d.join("e.exr"), 1.0);
+                std::fs::hard_link(d.join("e.exr"), d.join("l.png")).unwrap();
+            },
+            &[
+                "view",
+                "--env",
+                "{d}/e.exr",
+                "--screenshot",
+                "{d}/l.png",
+                "--frames",
+                "1",
+            ],
+            Fail("l.png is the environment map"),
+        ),
+        case(
+            "output: render -o onto the scene's [environment] map through a symbolic link",
+            |d| {
+                env_exr(&d.join("e.exr"), 1.0);
+                link("e.exr", &d.join("o.exr"));
+                put(&d.join("s.toml"), "[environment]\nmap = \"e.exr\"\n");
+            },
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.exr"],
+            Fail("is the environment map"),
+        ),
+        case(
+            "input: a FIFO as render --env (a BRDF map)",
+            |d| fifo(&d.join("f.hdr")),
+            &map_render(&["--env", "{d}/f.hdr"]),
+            Fail("f.hdr: not a regular file; the environment map must be a file"),
+        ),
+        case(
+            "input: a FIFO as render --env (a scene)",
+            |d| fifo(&d.join("f.exr")),
+            &["render", "--env", "{d}/f.exr", "-o", "{d}/o.png"],
+            Fail("not a regular file"),
+        ),
+        case(
+            "input: a FIFO as profile --env",
+            |d| fifo(&d.join("f.hdr")),
+            &["profile", "--only", "env", "--env", "{d}/f.hdr"],
+            Fail("not a regular file"),
+        ),
+        case(
+            "input: a FIFO as view --env",
+            |d| fifo(&d.join("f.hdr")),
+            &["view", "--env", "{d}/f.hdr", "--frames", "1"],
+            Fail("not a regular file"),
+        ),
+        case(
+            "input: a FIFO as a scene's [environment] map",
+            |d| {
+                fifo(&d.join("f.hdr"));
+                put(&d.join("s.toml"), "[environment]\nmap = \"f.hdr\"\n");
+            },
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("not a regular file"),
+        ),
+        case(
+            "input: a directory named like a map",
+            |d| std::fs::create_dir_all(d.join("dir.exr")).unwrap(),
+            &map_render(&["--env", "{d}/dir.exr"]),
+            Fail("not a regular file"),
+        ),
+        case(
+            "input: a FIFO as the height field",
+            |d| fifo(&d.join("hf.png")),
+            &map_render(&["--heightfield", "{d}/hf.png"]),
+            Fail("not a regular file"),
+        ),
+        case(
+            "light: --env-intensity 1e38 on a map",
+            |d| env_exr(&d.join("e.exr"), 1.0),
+            &map_render(&["--env", "{d}/e.exr", "--env-intensity", "1e38"]),
+            Fail("= 1.000e38: must be 0 or within 1e-30 to 1e30"),
+        ),
+        case(
+            "light: --env-intensity 3.4e38 on a map",
+            |d| env_exr(&d.join("e.exr"), 1.0),
+            &map_render(&["--env", "{d}/e.exr", "--env-intensity", "3.4e38"]),
+            Fail("carried in float32 on the device"),
+        ),
+        case(
+            "light: --env-intensity 1e39 on a map (beyond float32)",
+            |d| env_exr(&d.join("e.exr"), 1.0),
+            &map_render(&["--env", "{d}/e.exr", "--env-intensity", "1e39"]),
+            Fail("carried in float32 on the device"),
+        ),
+        case(
+            "light: --env-intensity 1e300 on a map",
+            |d| env_exr(&d.join("e.exr"), 1.0),
+            &map_render(&["--env", "{d}/e.exr", "--env-intensity", "1e300"]),
+            Fail("carried in float32 on the device"),
+        ),
+        case(
+            "light: a map of 1e20 under --env-intensity 1e20",
+            |d| env_exr(&d.join("e.exr"), 1e20),
+            &map_render(&["--env", "{d}/e.exr", "--env-intensity", "1e20"]),
+            Fail("= 1.000e40"),
+        ),
+        case(
+            "light: --env-intensity 1e-40 (lost to float32's underflow)",
+            |_| {},
+            &map_render(&["--env", "builtin:white", "--env-intensity", "1e-40"]),
+            Fail("must be 0 or within 1e-30 to 1e30"),
+        ),
+        case(
+            "light: [environment] intensity = 1e300",
+            move |d| {
+                lit(
+                    d,
+                    "[environment]\nmap = \"builtin:sky\"\nintensity = 1e300\n",
+                )
+            },
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("[environment] intensity = 1.000e300"),
+        ),
+        case(
+            "light: [[disc_light]] intensity = 1e38",
+            move |d| lit(d, "[[disc_light]]\nintensity = 1e38\n"),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("[disc_light] 1: intensity × colour = 1.000e38"),
+        ),
+        case(
+            "light: a small [[disc_light]] whose radiance passes float32's range",
+            move |d| {
+                lit(
+                    d,
+                    "[[disc_light]]\nintensity = 1e25\nangular_diameter_deg = 0.001\n",
+                )
+            },
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("radiance intensity × colour / solid angle"),
+        ),
+        case(
+            "light: [[disc_light]] colour [1e20, 0, 0] at intensity 1e20",
+            move |d| {
+                lit(
+                    d,
+                    "[[disc_light]]\nintensity = 1e20\ncolour = [1e20, 0.0, 0.0]\n",
+                )
+            },
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("intensity × colour = 1.000e40"),
+        ),
+        case(
+            "light: [light] intensity = 1e36",
+            move |d| lit(d, "[light]\nintensity = 1e36\n"),
+            &["render", "--scene", "{d}/s.toml", "-o", "{d}/o.png"],
+            Fail("[light] intensity = 1.000e36"),
+        ),
+        case(
+            "light: --env-noise without any environment",
+            |_| {},
+            &["render", "--env-noise", "0.3", "-o", "{d}/o.png"],
+            Fail("--env-noise and --no-sun need an environment"),
+        ),
+        case(
+            "map: an 8194×4097 map is over the budget, by its header",
+            |d| hdr_header(&d.join("big.hdr"), 8194, 4097),
+            &map_render(&["--env", "{d}/big.hdr"]),
+            Fail("needs 1209 MB"),
+        ),
+        case(
+            "flag: --level \"\" (no step at all)",
+            |_| {},
+            &["render", "--level", "", "-o", "{d}/o.png"],
+            Fail("has an empty step"),
+        ),
+        case(
+            "flag: --level \",,\"",
+            |_| {},
+            &["render", "--level", ",,", "-o", "{d}/o.png"],
+            Fail("has an empty step"),
+        ),
+        case(
+            "flag: --theta-i 1e300 reads as a number",
+            |_| {},
+            &map_render(&["--theta-i", "1e300"]),
+            Fail("invalid theta-i: 1.000e300°; expected 0° to 90°"),
+        ),
+    ];
+    run_cases("lights", cases);
 }

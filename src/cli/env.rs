@@ -82,13 +82,13 @@ impl EnvArgs {
                     "--env-intensity and --env-rotate-deg need an environment (--env SOURCE)",
                 ));
             }
-            if (self.env_samples.is_some() || self.no_sun) && !discs {
+            if (self.env_samples.is_some() || self.env_noise.is_some() || self.no_sun) && !discs {
                 return Err(Error::invalid(
                     "lighting",
                     if brdf_map {
                         "--env-samples and --no-sun need an environment (--env SOURCE)"
                     } else {
-                        "--env-samples and --no-sun need an environment (--env SOURCE) or [[disc_light]] tables in the scene"
+                        "--env-samples, --env-noise and --no-sun need an environment (--env SOURCE) or [[disc_light]] tables in the scene"
                     },
                 ));
             }

@@ -59,7 +59,16 @@ impl FromStr for Levelling {
         let mut steps = Vec::new();
         for word in s.split(',').map(str::trim) {
             let step = match word.to_ascii_lowercase().as_str() {
-                "none" | "" => continue,
+                "none" => continue,
+                "" => {
+                    return Err(Error::invalid(
+                        "level",
+                        format!(
+                            "{s:?} has an empty step; expected a comma list of none, plane, \
+                             rows, poly:N (none turns levelling off)"
+                        ),
+                    ))
+                }
                 "plane" => Step::Plane,
                 "rows" => Step::Rows,
                 w => match w.strip_prefix("poly:").map(str::parse::<usize>) {
@@ -466,7 +475,17 @@ mod tests {
         assert_eq!(l.0, vec![Step::Plane, Step::Rows, Step::Poly(3)]);
         assert_eq!(l.to_string(), "plane,rows,poly:3");
         assert!("none".parse::<Levelling>().unwrap().0.is_empty());
-        for bad in ["plain", "poly:0", "poly:11", "poly:x", "rows;plane"] {
+        for bad in [
+            "plain",
+            "poly:0",
+            "poly:11",
+            "poly:x",
+            "rows;plane",
+            "",
+            ",,",
+            "plane,",
+            " , rows",
+        ] {
             assert!(bad.parse::<Levelling>().is_err(), "{bad}");
         }
     }
