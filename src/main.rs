@@ -238,6 +238,7 @@ fn parse() -> Result<Cli, ExitCode> {
 }
 
 fn main() -> ExitCode {
+    diffract::report::start_clock();
     let cli = match parse() {
         Ok(cli) => cli,
         Err(code) => return code,

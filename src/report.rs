@@ -70,6 +70,20 @@ pub fn readable(msg: &str) -> String {
 #[derive(Debug, Clone, Copy, Default)]
 pub struct Stderr;
 
+/// When the process started its work (set by the binary first thing, [`start_clock`]).
+static START: std::sync::OnceLock<std::time::Instant> = std::sync::OnceLock::new();
+
+/// Starts the process clock that [`process_wall_s`] reads; later calls change nothing.
+pub fn start_clock() {
+    START.get_or_init(std::time::Instant::now);
+}
+
+/// Seconds since [`start_clock`]: the wall time a command reports covers the whole process
+/// (parsing, loading, building, drawing, writing), not just its draw.
+pub fn process_wall_s() -> Option<f64> {
+    START.get().map(|t| t.elapsed().as_secs_f64())
+}
+
 /// Notes waiting for the work to begin; `None` while notes print at once.
 static HELD: Mutex<Option<Vec<String>>> = Mutex::new(None);
 

@@ -282,7 +282,7 @@ pub fn run_env_scene(
     crate::image_io::write_image(&args.out, out.width, out.height, &rgb, 1.0)?;
     println!("{}", table_line(&lighting, &spec, built));
     println!(
-        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s",
+        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",
         dev.info.name,
         out.width,
         out.height,
@@ -303,7 +303,7 @@ pub fn run_env_scene(
         out.supersample.max(1),
         frame.raster_ms,
         frame.gpu_ms,
-        start.elapsed().as_secs_f64()
+        crate::report::process_wall_s().unwrap_or(start.elapsed().as_secs_f64())
     );
     let n = dev.validation_messages();
     if n > 0 {
