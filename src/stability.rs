@@ -879,9 +879,9 @@ fn report_cell(c: &Cell, done: usize, total: usize, start: Instant, budget_s: Op
     }
 }
 
-/// Writes [`STABILITY_FILES`] into `dir` (created with its parents).
+/// Writes [`STABILITY_FILES`] into `dir` (created unless it exists).
 fn write_reports(dir: &Path, spec: &MatrixSpec, r: &Reports) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    crate::fsutil::create_output_dir(dir)?;
     crate::fsutil::write_atomic(&dir.join("stability.csv"), to_csv(r.cells).as_bytes())?;
     let mut md = to_markdown(spec, r.cells, r.header) + &table_cases_markdown(spec, r.table_cells);
     if !r.lighting_cells.is_empty() {
@@ -1534,48 +1534,25 @@ fn check_axes(args: &StabilityArgs) -> Result<()> {
     Ok(())
 }
 
-/// The output directory: an existing one must not hold the height field under one of
-/// [`STABILITY_FILES`]; a new one is created after the run, so its nearest existing
-/// ancestor must be a directory.
+/// The output directory ([`crate::fsutil::check_output_dir`]: an existing directory this
+/// process may write, or a new one in such a directory) and its [`STABILITY_FILES`], which
+/// must pass the output policy and not be the height field or its sidecar.
 fn check_output_dir(args: &StabilityArgs) -> Result<()> {
     let dir = &args.out;
-    if dir.as_os_str().is_empty() {
-        return Err(Error::invalid("output", "empty directory path"));
-    }
-    match std::fs::metadata(dir) {
-        Ok(m) if m.is_dir() => {
-            let outputs: Vec<(&str, PathBuf)> = STABILITY_FILES
-                .iter()
-                .map(|f| ("-o", dir.join(f)))
-                .collect();
-            let inputs = args
-                .heightfield
-                .as_deref()
-                .map(crate::guard::heightfield_inputs)
-                .unwrap_or_default();
-            crate::guard::check_outputs(&inputs, &outputs)
-        }
-        Ok(_) => Err(Error::invalid(
-            "output",
-            format!("{}: not a directory", dir.display()),
-        )),
-        // Created after the run, with its parents: the nearest existing one must be a
-        // directory. A new directory holds no input.
-        Err(_) => {
-            let mut up = dir.parent();
-            while let Some(p) = up.filter(|p| !p.as_os_str().is_empty()) {
-                if let Ok(m) = std::fs::metadata(p) {
-                    if m.is_dir() {
-                        return Ok(());
-                    }
-                    return Err(Error::invalid(
-                        "output",
-                        format!("{}: {} is not a directory", dir.display(), p.display()),
-                    ));
-                }
-                up = p.parent();
-            }
-            Ok(())
-        }
+    crate::fsutil::check_output_dir(dir)?;
+    let outputs: Vec<(&str, PathBuf)> = STABILITY_FILES
+        .iter()
+        .map(|f| ("-o", dir.join(f)))
+        .collect();
+    let inputs = args
+        .heightfield
+        .as_deref()
+        .map(crate::guard::heightfield_inputs)
+        .unwrap_or_default();
+    if dir.is_dir() {
+        crate::guard::check_outputs(&inputs, &outputs)
+    } else {
+        // A new directory holds no file yet: nothing in it can be an input.
+        crate::guard::refuse_overwrite(&inputs, &outputs)
     }
 }

@@ -245,3 +245,69 @@ fn validity_refuses_a_flat_field_before_any_report_line() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+// ---- stability's output directory ------------------------------------------------------------
+
+/// Runs `cmd` as an unprivileged user where the test runs as root (root writes anywhere);
+/// without root, the directories' modes alone do it.
+fn unprivileged(cmd: &mut Command) {
+    use std::os::unix::process::CommandExt;
+    // SAFETY: geteuid has no preconditions.
+    if unsafe { libc::geteuid() } == 0 {
+        cmd.uid(65534).gid(65534);
+    }
+}
+
+/// The smallest matrix: one height, angle and wavelength, no GPU, no model axis.
+const SMALL: [&str; 9] = [
+    "stability",
+    "--no-gpu",
+    "--no-model",
+    "--hmax-um",
+    "0.05",
+    "--theta-i",
+    "0",
+    "--lambda-nm",
+    "580",
+];
+
+/// `stability -o DIR` creates DIR (not its parents) after the run and writes its files into
+/// it: a DIR in a read-only directory, a read-only DIR, a DIR whose parent is missing or a
+/// file, and a link to nothing are refused before the matrix runs, and nothing is created.
+#[test]
+fn stability_checks_its_output_directory_before_any_work() {
+    use std::os::unix::fs::PermissionsExt;
+    let d = scratch("stab-out");
+    std::fs::set_permissions(&d, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let ro = d.join("ro");
+    std::fs::create_dir(&ro).unwrap();
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o555)).unwrap();
+    std::fs::write(d.join("file"), "keep").unwrap();
+    std::os::unix::fs::symlink(d.join("nowhere"), d.join("dangling")).unwrap();
+    for (out, needle) in [
+        (ro.join("new"), "cannot be created: directory"),
+        (
+            ro.clone(),
+            "cannot be written (read-only or permission denied)",
+        ),
+        (d.join("missing/new"), "does not exist"),
+        (d.join("file/new"), "is not a directory"),
+        (d.join("file"), "not a directory"),
+        (d.join("dangling"), "is a link to nothing"),
+    ] {
+        let mut cmd = diffract(&SMALL, false);
+        cmd.arg("-o").arg(&out);
+        unprivileged(&mut cmd);
+        refused(cmd, &d, needle, QUICK);
+    }
+    // A new directory in a writable one is created, and holds the report.
+    let o = diffract(&SMALL, false)
+        .arg("-o")
+        .arg(d.join("new"))
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(d.join("new/stability.md").is_file());
+    std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
+    let _ = std::fs::remove_dir_all(&d);
+}
