@@ -1506,7 +1506,7 @@ fn check_axes(args: &StabilityArgs) -> Result<()> {
         ));
     }
     if let Some(b) = args.budget_s {
-        crate::guard::in_range("budget-s", b, 1.0..=1e6, " s")?;
+        crate::guard::budget_s(b)?;
     }
     for &h in &args.h_max_um {
         if !(h.is_finite() && h >= 0.0) {

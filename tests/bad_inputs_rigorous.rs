@@ -311,3 +311,43 @@ fn stability_checks_its_output_directory_before_any_work() {
     std::fs::set_permissions(&ro, std::fs::Permissions::from_mode(0o755)).unwrap();
     let _ = std::fs::remove_dir_all(&d);
 }
+
+// ---- time budgets ----------------------------------------------------------------------------
+
+/// `profile --budget-s` and `stability --budget-s` take the same range (1 s to 1e6 s) with
+/// the same message.
+#[test]
+fn profile_and_stability_take_the_same_budgets() {
+    let d = scratch("budget");
+    let out = d.join("s");
+    for b in ["1e-9", "0.5", "0", "1e12", "1000001", "nan", "inf"] {
+        let mut lines = Vec::new();
+        for args in [
+            vec!["profile", "--budget-s", b],
+            vec![
+                "stability",
+                "--no-gpu",
+                "--budget-s",
+                b,
+                "-o",
+                out.to_str().unwrap(),
+            ],
+        ] {
+            refused(
+                diffract(&args, false),
+                &d,
+                "expected 1 s to 1000000 s",
+                QUICK,
+            );
+            let o = diffract(&args, false).output().unwrap();
+            lines.push(String::from_utf8_lossy(&o.stderr).to_string());
+        }
+        assert_eq!(lines[0], lines[1], "budget {b}");
+        assert!(
+            lines[0].starts_with("error: invalid budget-s: "),
+            "{}",
+            lines[0]
+        );
+    }
+    let _ = std::fs::remove_dir_all(&d);
+}
