@@ -351,3 +351,48 @@ fn profile_and_stability_take_the_same_budgets() {
     }
     let _ = std::fs::remove_dir_all(&d);
 }
+
+/// `stability --budget-s` holds for the whole run (the device, the lighting and table cases
+/// and the GPU pipelines, built once before the cells, are steps of its setup): it ends
+/// within 20 % of its budget, or one `warning:` line names the step that took the time.
+#[test]
+fn stability_keeps_its_budget_or_says_why() {
+    let d = scratch("budget-kept");
+    let out = d.join("s");
+    let budget = 2.0;
+    let t = Instant::now();
+    let o = diffract(
+        &[
+            "stability",
+            "--hmax-um",
+            "0",
+            "--theta-i",
+            "0",
+            "--lambda-nm",
+            "380",
+            "--budget-s",
+            "2",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        true,
+    )
+    .output()
+    .unwrap();
+    if gpu_util::binary_found_no_vulkan(&o) {
+        return;
+    }
+    let secs = t.elapsed().as_secs_f64();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(err.contains("GPU pipeline(s) built"), "{err}");
+    let explained: Vec<&str> = err
+        .lines()
+        .filter(|l| l.starts_with("warning: stability took"))
+        .collect();
+    assert!(
+        secs <= 1.2 * budget || explained.len() == 1,
+        "{secs:.1} s on a {budget} s budget, unexplained: {err}"
+    );
+    let _ = std::fs::remove_dir_all(&d);
+}
