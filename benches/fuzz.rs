@@ -6,8 +6,13 @@
 //! come from a grammar (`obj-grammar`, `scene-grammar`): well-formed lines with awkward
 //! values (negative and out-of-range indices, coordinates of 1e30 and 3.4e38, degenerate and
 //! unlit faces, missing normals; scene keys with extreme numbers), which byte flips rarely
-//! reach; a scene whose mesh is the built-in plane is loaded with its fuzzed placement. Any
-//! panic is caught, its input saved under the temp directory and counted, and so is a hang:
+//! reach; a scene whose mesh is the built-in plane is loaded with its fuzzed placement. The
+//! scene grammar also writes `[environment]` and `[[disc_light]]` tables with extreme numbers;
+//! a scene that parses has its lights checked and its environment loaded (a built-in map
+//! with the fuzzed intensity and rotation, or the fuzzed map file). Environment maps are
+//! fuzzed as files too (`env-hdr`, `env-exr`: byte mutations of a small valid Radiance HDR
+//! and OpenEXR map, through `EnvMap::load`). `FUZZ_ONLY` (comma-separated target names)
+//! runs only those targets. Any panic is caught, its input saved under the temp directory and counted, and so is a hang:
 //! an input that takes more than `FUZZ_HANG_MS` (default 2000) to parse. Exits non-zero if
 //! there was either. Run with `cargo bench --bench fuzz`.
 
@@ -17,6 +22,7 @@ use std::time::{Duration, Instant};
 
 use diffract::brdf::query::parse_queries;
 use diffract::heightfield::HeightField;
+use diffract::light::env::{EnvMap, EnvSource};
 use diffract::mesh::Mesh;
 use diffract::scene::Scene;
 use diffract::spectrum::cache;
@@ -63,6 +69,16 @@ const TOKENS: &[&[u8]] = &[
     b"terms = ",
     b"inf",
     b"#",
+    b"[environment]\n",
+    b"[[disc_light]]\n",
+    b"map = ",
+    b"-Y 8 +X 4\n",
+    b"-Y 99999999 +X 99999999\n",
+    b"#?RADIANCE\n",
+    b"FORMAT=32-bit_rle_rgbe\n",
+    b"\x02\x02",
+    b"v/1\x01",
+    b"channels\0chlist\0",
 ];
 
 fn mutate(rng: &mut Rng, seed: &[u8]) -> Vec<u8> {
@@ -220,7 +236,76 @@ fn scene_grammar(rng: &mut Rng) -> Vec<u8> {
             s += &format!("{key} = {value}\n");
         }
     }
+    if rng.below(2) == 0 {
+        s += "[environment]\n";
+        const MAPS: &[&str] = &[
+            "builtin:white",
+            "builtin:sky",
+            "builtin:studio",
+            "builtin:nothing",
+            "env.hdr",
+            "env.exr",
+            "missing.hdr",
+            "env.png",
+            "",
+        ];
+        if rng.below(8) != 0 {
+            s += &format!("map = \"{}\"\n", MAPS[rng.below(MAPS.len())]);
+        }
+        for key in ["intensity", "rotate_deg"] {
+            if rng.below(2) == 0 {
+                s += &format!("{key} = {}\n", toml_number(rng));
+            }
+        }
+    }
+    for _ in 0..rng.below(4) {
+        s += "[[disc_light]]\n";
+        for key in [
+            "direction",
+            "angular_diameter_deg",
+            "colour",
+            "intensity",
+            "disk_samples",
+        ] {
+            if rng.below(3) == 0 {
+                continue;
+            }
+            let value = match key {
+                "direction" | "colour" => format!(
+                    "[{}, {}, {}]",
+                    toml_number(rng),
+                    toml_number(rng),
+                    toml_number(rng)
+                ),
+                "disk_samples" => {
+                    const COUNTS: &[&str] = &["0", "1", "16", "256", "257", "-1", "4294967296"];
+                    COUNTS[rng.below(COUNTS.len())].to_string()
+                }
+                _ => toml_number(rng),
+            };
+            s += &format!("{key} = {value}\n");
+        }
+    }
     s.into_bytes()
+}
+
+/// [`number`] or one of TOML's own extremes (infinities, NaN, beyond float32).
+fn toml_number(rng: &mut Rng) -> String {
+    const EXTREME: &[&str] = &[
+        "inf", "-inf", "nan", "1e39", "-1e39", "1e308", "1e-320", "180", "180.0001", "-0.0",
+    ];
+    if rng.below(3) == 0 {
+        EXTREME[rng.below(EXTREME.len())].to_string()
+    } else {
+        number(rng)
+    }
+}
+
+/// An 8×4 equirectangular map of small, finite radiance.
+fn map_pixels() -> image::Rgb32FImage {
+    image::Rgb32FImage::from_fn(8, 4, |x, y| {
+        image::Rgb([0.1 * x as f32, 0.5 + 0.2 * y as f32, 2.0])
+    })
 }
 
 fn main() {
@@ -261,6 +346,24 @@ fn main() {
     cache::terms_cached(&hf, &req, Some(&dir), &diffract::report::Stderr).unwrap();
     let key = cache::cache_key(&hf, &req);
     let cache_seed = std::fs::read(dir.join(format!("terms-{key:016x}.bin"))).unwrap();
+    let map = map_pixels();
+    {
+        let f = std::fs::File::create(file("seed.hdr")).unwrap();
+        let px: Vec<image::Rgb<f32>> = map.pixels().copied().collect();
+        image::codecs::hdr::HdrEncoder::new(std::io::BufWriter::new(f))
+            .encode(&px, 8, 4)
+            .unwrap();
+    }
+    map.save(file("seed.exr")).unwrap();
+    let hdr = std::fs::read(file("seed.hdr")).unwrap();
+    let exr = std::fs::read(file("seed.exr")).unwrap();
+    // The seeds themselves must load, or the targets would fuzz nothing but the refusal.
+    for seed in ["seed.hdr", "seed.exr"] {
+        EnvMap::load(&EnvSource::File(file(seed)), 1.0, 0.0).unwrap();
+    }
+    // The scene grammar's map files, relative to its scene path.
+    std::fs::copy(file("seed.hdr"), file("env.hdr")).unwrap();
+    std::fs::copy(file("seed.exr"), file("env.exr")).unwrap();
 
     // Panics are caught and counted; keep the default hook quiet while fuzzing.
     std::panic::set_hook(Box::new(|_| {}));
@@ -274,18 +377,35 @@ fn main() {
         "cache",
         "obj-grammar",
         "scene-grammar",
+        "env-hdr",
+        "env-exr",
     ];
+    let only: Vec<usize> = match std::env::var("FUZZ_ONLY") {
+        Ok(list) => list
+            .split(',')
+            .map(|n| {
+                names
+                    .iter()
+                    .position(|x| *x == n.trim())
+                    .unwrap_or_else(|| {
+                        eprintln!("fuzz: unknown target '{n}'; expected one of {names:?}");
+                        std::process::exit(2)
+                    })
+            })
+            .collect(),
+        Err(_) => (0..names.len()).collect(),
+    };
     let hang_ms: u128 = std::env::var("FUZZ_HANG_MS")
         .ok()
         .and_then(|v| v.parse().ok())
         .unwrap_or(2000);
-    let mut runs = [0u64; 9];
-    let mut slowest = [0u128; 9];
+    let mut runs = [0u64; 11];
+    let mut slowest = [0u128; 11];
     let mut panics = 0u64;
     let mut hangs = 0u64;
     let start = Instant::now();
     while start.elapsed() < Duration::from_secs(secs) {
-        let which = rng.below(names.len());
+        let which = only[rng.below(only.len())];
         let input = match which {
             0 => mutate(&mut rng, &png),
             1 => mutate(&mut rng, &f32s),
@@ -295,7 +415,9 @@ fn main() {
             5 => mutate(&mut rng, &csv),
             6 => mutate(&mut rng, &cache_seed),
             7 => obj_grammar(&mut rng),
-            _ => scene_grammar(&mut rng),
+            8 => scene_grammar(&mut rng),
+            9 => mutate(&mut rng, &hdr),
+            _ => mutate(&mut rng, &exr),
         };
         let began = Instant::now();
         let outcome = std::panic::catch_unwind(AssertUnwindSafe(|| match which {
@@ -320,11 +442,24 @@ fn main() {
             }
             4 | 8 => {
                 let text = String::from_utf8_lossy(&input);
-                if let Ok(s) = Scene::from_toml_str(&text, Path::new("fuzz.toml")) {
+                if let Ok(s) = Scene::from_toml_str(&text, &file("fuzz.toml")) {
                     if s.mesh.builtin.as_deref() == Some("plane") && s.mesh.path.is_none() {
                         let _ = s.mesh.load();
                     }
+                    for light in &s.disc_lights {
+                        let _ = (light.disk_samples(), light.solid_angle());
+                    }
+                    if let Some(e) = &s.environment {
+                        if let Ok(source) = e.source() {
+                            let _ = EnvMap::load(&source, e.intensity, e.rotate_deg);
+                        }
+                    }
                 }
+            }
+            9 | 10 => {
+                let name = if which == 9 { "w.hdr" } else { "w.exr" };
+                std::fs::write(file(name), &input).unwrap();
+                let _ = EnvMap::load(&EnvSource::File(file(name)), 1.0, 0.0);
             }
             5 => {
                 let text = String::from_utf8_lossy(&input);
@@ -360,11 +495,9 @@ fn main() {
         }
     }
     let total: u64 = runs.iter().sum();
-    let per: Vec<String> = names
+    let per: Vec<String> = only
         .iter()
-        .zip(runs)
-        .zip(slowest)
-        .map(|((n, r), ms)| format!("{n} {r} (slowest {ms} ms)"))
+        .map(|&i| format!("{} {} (slowest {} ms)", names[i], runs[i], slowest[i]))
         .collect();
     println!(
         "fuzz: {total} inputs in {:.0} s ({}), {panics} panic(s), {hangs} hang(s) over {hang_ms} ms",

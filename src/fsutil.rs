@@ -280,6 +280,63 @@ pub fn check_output(path: &Path) -> Result<()> {
     }
 }
 
+/// An output directory the command creates after its work (without parents) and fills with
+/// files: an existing one must be a directory this process may write (each file in it still
+/// goes through [`check_outputs`]); a new one needs an existing directory above it that this
+/// process may write, so that it can be created when the work is done.
+pub fn check_output_dir(dir: &Path) -> Result<()> {
+    let bad = |msg: String| {
+        Err(Error::invalid(
+            "output",
+            format!("{}: {msg}", dir.display()),
+        ))
+    };
+    if dir.as_os_str().is_empty() {
+        return Err(Error::invalid("output", "empty directory path"));
+    }
+    match std::fs::metadata(dir) {
+        Ok(m) if m.is_dir() => {
+            return if writable(dir) {
+                Ok(())
+            } else {
+                bad("directory cannot be written (read-only or permission denied)".into())
+            };
+        }
+        Ok(_) => return bad("not a directory".into()),
+        Err(_) => {}
+    }
+    if std::fs::symlink_metadata(dir).is_ok() {
+        return bad("is a link to nothing; create its directory or choose another path".into());
+    }
+    let parent = match dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    match std::fs::metadata(parent) {
+        Ok(m) if m.is_dir() => {}
+        Ok(_) => return bad(format!("{} is not a directory", parent.display())),
+        Err(_) => return bad(format!("directory {} does not exist", parent.display())),
+    }
+    if writable(parent) {
+        Ok(())
+    } else {
+        bad(format!(
+            "cannot be created: directory {} cannot be written (read-only or permission denied)",
+            parent.display()
+        ))
+    }
+}
+
+/// Creates an output directory that [`check_output_dir`] accepted, unless it exists.
+pub fn create_output_dir(dir: &Path) -> Result<()> {
+    match std::fs::create_dir(dir) {
+        Err(e) if !(e.kind() == std::io::ErrorKind::AlreadyExists && dir.is_dir()) => {
+            Err(Error::io(dir, e))
+        }
+        _ => Ok(()),
+    }
+}
+
 /// Whether this process may write `path` (`access(2)` with `W_OK`: permissions and a
 /// read-only file system).
 fn writable(path: &Path) -> bool {

@@ -75,6 +75,15 @@ pub fn in_range(
     }
 }
 
+/// The time budgets (s) a command accepts (`profile --budget-s`, `stability --budget-s`):
+/// from one second (less cannot hold one measured row or cell) to 1e6 s (eleven days).
+pub const BUDGET_RANGE_S: std::ops::RangeInclusive<f64> = 1.0..=1e6;
+
+/// A `--budget-s` in [`BUDGET_RANGE_S`], with one message for every command.
+pub fn budget_s(v: f64) -> Result<f64> {
+    in_range("budget-s", v, BUDGET_RANGE_S, " s")
+}
+
 /// A finite number (an angle that wraps, for instance).
 pub fn finite(what: &'static str, v: f64) -> Result<f64> {
     if v.is_finite() {

@@ -29,6 +29,7 @@ use crate::render::{Renderer, TableOptions, VariantKind};
 use crate::spectrum::Expansion;
 use crate::{validity, Error, Result};
 
+mod heartbeat;
 pub mod lighting;
 pub mod model_axis;
 
@@ -404,6 +405,38 @@ pub fn run_matrix(
     Ok(cells.into_iter().flatten().collect())
 }
 
+/// Builds the GPU pipeline of every shader configuration the matrix's GPU cells use (a
+/// variant with its expansion and term count, which are specialisation constants), once
+/// each, by drawing a one-pixel map. On a CPU driver with a cold shader cache one build
+/// takes up to seconds (Chebyshev with 30 terms: 4 s on lavapipe, 2 cores), and only the
+/// first cell of its configuration pays it, which no cell's cost could predict: built here,
+/// it is a step of the run's setup and every cell costs what its evaluation costs. Returns
+/// how many configurations there are.
+fn build_pipelines(spec: &MatrixSpec, renderer: &mut Renderer) -> Result<usize> {
+    let mut built: Vec<(VariantKind, Expansion, usize)> = Vec::new();
+    for p in points(spec)
+        .iter()
+        .filter(|p| p.evaluator == Evaluator::Gpu)
+    {
+        let hf = scaled(&spec.field, spec.h_max_um[p.h])?;
+        let m = material(spec, p.expansion, p.terms);
+        let reach = Reach::at(1.0 + p.theta_i.to_radians().cos(), p.lambda);
+        // A refused plan is a refused cell: it draws nothing.
+        let Ok(plan) = m.plan(&hf, &reach, Precision::F32) else {
+            continue;
+        };
+        let key = (p.variant, plan.expansion, plan.terms);
+        if built.contains(&key) {
+            continue;
+        }
+        built.push(key);
+        let prepared = m.prepare_planned(hf, plan, None, &crate::report::Stderr)?;
+        renderer.set_variant(p.variant);
+        renderer.render_brdf_map(&prepared, p.theta_i, 0.0, 1, Some(p.lambda))?;
+    }
+    Ok(built.len())
+}
+
 /// Indices of `points` taking one cell of each variant in turn.
 fn round_robin(points: &[Point]) -> Vec<usize> {
     let mut lanes: Vec<(VariantKind, Vec<usize>)> = Vec::new();
@@ -419,33 +452,40 @@ fn round_robin(points: &[Point]) -> Vec<usize> {
         .collect()
 }
 
-/// Measured cell costs (s) per variant and evaluator.
+/// Measured cell costs (s) per variant and evaluator: the sum, the count and the first
+/// cell's cost (a variant's first GPU cell also builds its pipelines).
 #[derive(Default)]
 struct CellCosts {
-    by_key: Vec<((VariantKind, Evaluator), f64, usize)>,
+    by_key: Vec<((VariantKind, Evaluator), f64, usize, f64)>,
 }
 
 impl CellCosts {
     fn add(&mut self, key: (VariantKind, Evaluator), secs: f64) {
-        match self.by_key.iter_mut().find(|(k, _, _)| *k == key) {
-            Some((_, sum, n)) => {
+        match self.by_key.iter_mut().find(|(k, ..)| *k == key) {
+            Some((_, sum, n, _)) => {
                 *sum += secs;
                 *n += 1;
             }
-            None => self.by_key.push((key, secs, 1)),
+            None => self.by_key.push((key, secs, 1, secs)),
         }
     }
 
-    /// The mean cost of `key`'s cells, else of every cell; `None` before any.
+    /// The mean cost of `key`'s cells; for a key not run yet, the mean first cell of the
+    /// keys with its evaluator (what a first cell costs, setup included), else of every
+    /// key; `None` before any cell.
     fn estimate(&self, key: (VariantKind, Evaluator)) -> Option<f64> {
-        if let Some((_, sum, n)) = self.by_key.iter().find(|(k, _, _)| *k == key) {
+        if let Some((_, sum, n, _)) = self.by_key.iter().find(|(k, ..)| *k == key) {
             return Some(sum / *n as f64);
         }
-        let (sum, n) = self
-            .by_key
-            .iter()
-            .fold((0.0, 0), |(s, c), (_, sum, n)| (s + sum, c + n));
-        (n > 0).then(|| sum / n as f64)
+        let first = |same: &dyn Fn(&(VariantKind, Evaluator)) -> bool| {
+            let (sum, n) = self
+                .by_key
+                .iter()
+                .filter(|(k, ..)| same(k))
+                .fold((0.0, 0), |(s, c), (.., first)| (s + first, c + 1));
+            (n > 0).then(|| sum / n as f64)
+        };
+        first(&|k| k.1 == key.1).or_else(|| first(&|_| true))
     }
 }
 
@@ -684,37 +724,31 @@ fn sci(x: Option<f64>) -> String {
 /// Share of the time budget the spectral matrix may take when the model axis runs after it.
 const MATRIX_SHARE: f64 = 0.75;
 
-/// Runs `diffract stability`.
+/// Runs `diffract stability`. The budget's clock starts with the run: the height field,
+/// the device and the steps that do not divide into cells (the lighting and table cases)
+/// come first, and the matrix and the model axis share what is left of the budget; a run
+/// that still ends more than 20 % over it says why in one warning line.
 pub fn run(args: &StabilityArgs) -> Result<()> {
     stability_args(args)?;
+    let start = Instant::now();
+    let beat = heartbeat::Heartbeat::start(start);
+    let mut steps = Steps::default();
+    beat.step("loading the height field");
     let mut spec = matrix_spec(args)?;
+    steps.done("loading the height field", &beat);
+    beat.step("opening the device");
     let mut renderer = if args.no_gpu {
         spec.evaluators = vec![Evaluator::Model];
         None
     } else {
         Some(Renderer::new(spec.validation)?)
     };
+    steps.done("opening the device", &beat);
     let device = renderer
         .as_ref()
         .map_or("none".to_string(), |r| r.device_name().to_string());
-    let start = Instant::now();
     let budget = spec.budget_s;
-    let matrix = MatrixSpec {
-        budget_s: budget.map(|b| if args.no_model { b } else { b * MATRIX_SHARE }),
-        ..spec.clone()
-    };
-    let total = points(&spec).len();
-    let mut done = 0;
-    let cells = run_matrix(&matrix, renderer.as_mut(), |c| {
-        done += 1;
-        report_cell(c, done, total, start, matrix.budget_s);
-    })?;
-    if let Some(r) = &renderer {
-        if r.validation_messages() > 0 {
-            return Err(Error::Validation(r.validation_messages()));
-        }
-    }
-    let table_cells = run_table_cases(&spec)?;
+    beat.step("the lighting cases");
     let lighting_cells = match &renderer {
         Some(r) => {
             let cells = lighting::run(r.device())?;
@@ -725,13 +759,68 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
         }
         None => Vec::new(),
     };
+    steps.done("the lighting cases", &beat);
+    beat.step("the table cases");
+    let table_cells = run_table_cases(&spec)?;
+    steps.done("the table cases", &beat);
+    if let Some(r) = renderer.as_mut() {
+        beat.step("building the GPU pipelines");
+        let n = build_pipelines(&spec, r)?;
+        steps.done("building the GPU pipelines", &beat);
+        beat.line(&format!("stability: {n} GPU pipeline(s) built"));
+    }
+    let before_cells = beat.elapsed_s();
+    beat.line(&format!(
+        "stability: setup in {before_cells:.1} s{}",
+        match budget {
+            Some(b) => format!(
+                "; {:.1} s of the {b} s budget left for the cells",
+                (b - before_cells).max(0.0)
+            ),
+            None => String::new(),
+        }
+    ));
+    let left = budget.map(|b| (b - before_cells).max(0.0));
+    let matrix = MatrixSpec {
+        budget_s: left.map(|l| if args.no_model { l } else { l * MATRIX_SHARE }),
+        ..spec.clone()
+    };
+    let total = points(&spec).len();
+    let mut done = 0;
+    let matrix_start = Instant::now();
+    beat.step("the spectral matrix");
+    let cells = run_matrix(&matrix, renderer.as_mut(), |c| {
+        done += 1;
+        beat.step(format!("the spectral matrix, {done}/{total} cells"));
+        report_cell(c, done, total, matrix_start, matrix.budget_s, &beat);
+    })?;
+    steps.done("the spectral matrix", &beat);
+    if let Some(r) = &renderer {
+        if r.validation_messages() > 0 {
+            return Err(Error::Validation(r.validation_messages()));
+        }
+    }
     let model_cells = if args.no_model {
         Vec::new()
     } else {
+        beat.step("the model axis");
         let deadline = budget.map(|b| start + std::time::Duration::from_secs_f64(b));
         let model = validity::ScalarModel::of(&material(&spec, Expansion::Taylor, Terms::Auto));
-        model_axis::run(&spec, &model, deadline, |_| ())?
+        let cells = model_axis::run(&spec, &model, deadline, |_| ())?;
+        steps.done("the model axis", &beat);
+        cells
     };
+    if let Some(b) = budget {
+        let secs = beat.elapsed_s();
+        if secs > 1.2 * b {
+            let (name, took) = steps.longest();
+            eprintln!(
+                "warning: stability took {secs:.0} s of its {b} s budget: {name} took {took:.1} s, \
+                 and the budget can only leave out whole cells"
+            );
+        }
+    }
+    drop(beat);
     let secs = start.elapsed().as_secs_f64();
     let skipped = cells.iter().filter(|c| c.status == Status::Skipped).count();
     let header = format!(
@@ -850,10 +939,42 @@ fn matrix_spec(args: &StabilityArgs) -> Result<MatrixSpec> {
     Ok(spec)
 }
 
+/// How long each step of a run took, for the explanation of an overrun.
+#[derive(Default)]
+struct Steps {
+    took: Vec<(&'static str, f64)>,
+    last: f64,
+}
+
+impl Steps {
+    /// Records `name` as ending now.
+    fn done(&mut self, name: &'static str, beat: &heartbeat::Heartbeat) {
+        let now = beat.elapsed_s();
+        self.took.push((name, now - self.last));
+        self.last = now;
+    }
+
+    /// The step that took longest.
+    fn longest(&self) -> (&'static str, f64) {
+        self.took
+            .iter()
+            .copied()
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .unwrap_or(("the run", self.last))
+    }
+}
+
 /// A failing cell at once on stdout (a result, for people), and progress on stderr: a
 /// line every 20 cells with the time taken and an estimate of the time left (the pace so
 /// far, at most the budget left).
-fn report_cell(c: &Cell, done: usize, total: usize, start: Instant, budget_s: Option<f64>) {
+fn report_cell(
+    c: &Cell,
+    done: usize,
+    total: usize,
+    start: Instant,
+    budget_s: Option<f64>,
+    beat: &heartbeat::Heartbeat,
+) {
     if c.status == Status::Fail {
         println!(
             "FAIL: {}, h_max {} µm, θi {}°, λ {} nm, {} {} {}: error {}, float32 error {} (bound {})",
@@ -875,13 +996,15 @@ fn report_cell(c: &Cell, done: usize, total: usize, start: Instant, budget_s: Op
         if let Some(b) = budget_s {
             left = left.min((b - secs).max(0.0));
         }
-        eprintln!("stability: {done}/{total} cells, {secs:.0} s, about {left:.0} s left");
+        beat.line(&format!(
+            "stability: {done}/{total} cells, {secs:.0} s, about {left:.0} s left"
+        ));
     }
 }
 
-/// Writes [`STABILITY_FILES`] into `dir` (created with its parents).
+/// Writes [`STABILITY_FILES`] into `dir` (created unless it exists).
 fn write_reports(dir: &Path, spec: &MatrixSpec, r: &Reports) -> Result<()> {
-    std::fs::create_dir_all(dir).map_err(|e| Error::io(dir, e))?;
+    crate::fsutil::create_output_dir(dir)?;
     crate::fsutil::write_atomic(&dir.join("stability.csv"), to_csv(r.cells).as_bytes())?;
     let mut md = to_markdown(spec, r.cells, r.header) + &table_cases_markdown(spec, r.table_cells);
     if !r.lighting_cells.is_empty() {
@@ -1506,7 +1629,7 @@ fn check_axes(args: &StabilityArgs) -> Result<()> {
         ));
     }
     if let Some(b) = args.budget_s {
-        crate::guard::in_range("budget-s", b, 1.0..=1e6, " s")?;
+        crate::guard::budget_s(b)?;
     }
     for &h in &args.h_max_um {
         if !(h.is_finite() && h >= 0.0) {
@@ -1534,48 +1657,25 @@ fn check_axes(args: &StabilityArgs) -> Result<()> {
     Ok(())
 }
 
-/// The output directory: an existing one must not hold the height field under one of
-/// [`STABILITY_FILES`]; a new one is created after the run, so its nearest existing
-/// ancestor must be a directory.
+/// The output directory ([`crate::fsutil::check_output_dir`]: an existing directory this
+/// process may write, or a new one in such a directory) and its [`STABILITY_FILES`], which
+/// must pass the output policy and not be the height field or its sidecar.
 fn check_output_dir(args: &StabilityArgs) -> Result<()> {
     let dir = &args.out;
-    if dir.as_os_str().is_empty() {
-        return Err(Error::invalid("output", "empty directory path"));
-    }
-    match std::fs::metadata(dir) {
-        Ok(m) if m.is_dir() => {
-            let outputs: Vec<(&str, PathBuf)> = STABILITY_FILES
-                .iter()
-                .map(|f| ("-o", dir.join(f)))
-                .collect();
-            let inputs = args
-                .heightfield
-                .as_deref()
-                .map(crate::guard::heightfield_inputs)
-                .unwrap_or_default();
-            crate::guard::check_outputs(&inputs, &outputs)
-        }
-        Ok(_) => Err(Error::invalid(
-            "output",
-            format!("{}: not a directory", dir.display()),
-        )),
-        // Created after the run, with its parents: the nearest existing one must be a
-        // directory. A new directory holds no input.
-        Err(_) => {
-            let mut up = dir.parent();
-            while let Some(p) = up.filter(|p| !p.as_os_str().is_empty()) {
-                if let Ok(m) = std::fs::metadata(p) {
-                    if m.is_dir() {
-                        return Ok(());
-                    }
-                    return Err(Error::invalid(
-                        "output",
-                        format!("{}: {} is not a directory", dir.display(), p.display()),
-                    ));
-                }
-                up = p.parent();
-            }
-            Ok(())
-        }
+    crate::fsutil::check_output_dir(dir)?;
+    let outputs: Vec<(&str, PathBuf)> = STABILITY_FILES
+        .iter()
+        .map(|f| ("-o", dir.join(f)))
+        .collect();
+    let inputs = args
+        .heightfield
+        .as_deref()
+        .map(crate::guard::heightfield_inputs)
+        .unwrap_or_default();
+    if dir.is_dir() {
+        crate::guard::check_outputs(&inputs, &outputs)
+    } else {
+        // A new directory holds no file yet: nothing in it can be an input.
+        crate::guard::refuse_overwrite(&inputs, &outputs)
     }
 }

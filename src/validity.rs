@@ -418,6 +418,48 @@ pub struct Check {
     pub energy_error: f64,
 }
 
+impl Check {
+    /// The rigorous solve's estimated error when it did not converge to `tolerance`: the
+    /// larger of the last refinements' changes (in harmonics, in slices); `None` when both
+    /// met it (or the solve used fixed numbers).
+    pub fn unconverged(&self, tolerance: f64) -> Option<f64> {
+        let change = self.harmonic_change.max(self.slice_change);
+        (change > tolerance).then_some(change)
+    }
+}
+
+/// Smallest normal-incidence Fresnel reflectance `R0 = ((n − 1)/(n + 1))²` the rigorous
+/// check accepts: the energy balance of the solver is held to 1e-8 (`|R + T − 1|`), and the
+/// orders it compares go down to [`rcwa::FAINT_SHARE`] of the reflectance, so a weaker
+/// interface (an index closer to 1 than about 1.0002) reflects less than the solver
+/// resolves; at `n = 1` there is no interface at all and every ratio is 0/0.
+pub const MIN_REFLECTANCE: f64 = 1e-8;
+
+/// Refuses an index the rigorous check cannot speak for: not finite, not above 1, or so
+/// close to 1 that its reflectance is below [`MIN_REFLECTANCE`].
+pub fn check_index(n: f64) -> Result<()> {
+    let r0 = ((n - 1.0) / (n + 1.0)).powi(2);
+    if n.is_finite() && n > 1.0 && r0 >= MIN_REFLECTANCE {
+        return Ok(());
+    }
+    let root = MIN_REFLECTANCE.sqrt();
+    // The smallest index that passes, rounded up to 4 decimals (1.0003).
+    let n_min = ((1.0 + root) / (1.0 - root) * 1e4).ceil() / 1e4;
+    let reflects = if n.is_finite() && n > 1.0 {
+        format!("; n = {n} reflects R0 = {r0:.1e}")
+    } else {
+        String::new()
+    };
+    Err(Error::invalid(
+        "ior",
+        format!(
+            "{n}; the rigorous check needs n ≥ {n_min}, whose interface reflects at least the \
+             {MIN_REFLECTANCE:.0e} (R0, at normal incidence) the solver resolves{reflects}; n = 1 \
+             is no interface: nothing is reflected and every order ratio is 0/0"
+        ),
+    ))
+}
+
 /// How the rigorous side is solved: converged to a tolerance, or at fixed numbers.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Solve {

@@ -549,7 +549,10 @@ pub fn first_harmonics(grating: &Grating, lambda_um: f64) -> usize {
 /// Raises the harmonics (at [`FIRST_SLICES`] slices) until no reflected order moves by more
 /// than `tolerance` ([`Pair::change_from`]), then doubles the slices at those harmonics
 /// until the same holds; stops at [`MAX_HARMONICS`] and [`MAX_SLICES`] (check
-/// [`Converged::met`]). `start` overrides the first harmonics and slices.
+/// [`Converged::met`]). `start` overrides the first harmonics and slices. Each count is
+/// refined at least once, so both changes are measured (a solve that starts at a cap is
+/// started one step below it): a change above `tolerance` is the estimated error of the
+/// answer, never a placeholder.
 pub fn converge(
     grating: &Grating,
     lambda_um: f64,
@@ -558,15 +561,15 @@ pub fn converge(
     start: Option<(usize, usize)>,
 ) -> Result<Converged> {
     let (n0, s0) = start.unwrap_or((first_harmonics(grating, lambda_um), FIRST_SLICES));
-    // A long period asks for more harmonics than the cap: start at the cap, so one solve
-    // never costs more than a converged one may.
-    let (mut n, mut s) = (n0.min(MAX_HARMONICS), s0.min(MAX_SLICES));
+    // A long period asks for more harmonics than the cap: start one step below it (45 + 15 =
+    // 60), so that one solve never costs more than a converged one may and the last step is
+    // still a measured refinement.
+    let (mut n, mut s) = (n0.min(MAX_HARMONICS * 3 / 4), s0.clamp(1, MAX_SLICES / 2));
     let mut pair = Pair::solve(grating, lambda_um, theta_i_deg, n, s)?;
-    let mut harmonic_change;
+    let mut harmonic_change = f64::INFINITY;
     loop {
         let next = (n + (n / 3).max(4)).min(MAX_HARMONICS);
         if next <= n {
-            harmonic_change = f64::INFINITY;
             break;
         }
         let finer = Pair::solve(grating, lambda_um, theta_i_deg, next, s)?;
@@ -579,11 +582,7 @@ pub fn converge(
     }
     let mut slice_change = 0.0;
     if grating.depth_um() > 0.0 {
-        loop {
-            if 2 * s > MAX_SLICES {
-                slice_change = f64::INFINITY;
-                break;
-            }
+        while 2 * s <= MAX_SLICES {
             let finer = Pair::solve(grating, lambda_um, theta_i_deg, n, 2 * s)?;
             slice_change = finer.change_from(&pair);
             s *= 2;

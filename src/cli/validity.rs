@@ -5,6 +5,7 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use crate::cli::material::MaterialArgs;
+use crate::report::Report as _;
 use crate::validity::{self, Check, Profile, ScalarModel, Solve};
 use crate::Result;
 
@@ -89,6 +90,7 @@ pub fn run(args: &ValidityArgs) -> Result<()> {
         material.ior = n;
     }
     material.validate()?;
+    validity::check_index(material.ior)?;
     let lambdas = if args.lambda_nm.is_empty() {
         validity::SUMMARY_LAMBDAS_NM.to_vec()
     } else {
@@ -119,8 +121,14 @@ pub fn run(args: &ValidityArgs) -> Result<()> {
     }
     crate::guard::check_outputs(&inputs, &outputs)?;
 
-    let hf = material.load_heightfield(&crate::report::Stderr)?;
-    let profile = validity::extract_profile(&hf)?;
+    // The loader's lines (levelling, a scan's channel, the seam) wait for validity's own
+    // check of the field: a refusal comes before any of them (its warnings only).
+    let said = Deferred::default();
+    let profile = material
+        .load_heightfield(&said)
+        .and_then(|hf| validity::extract_profile(&hf));
+    said.replay(profile.is_ok());
+    let profile = profile?;
     let model = ScalarModel::of(&material);
     println!(
         "{}: period {:.4} µm across the ridges (grating vector {:.1}° from +x), mean profile {:.4} µm deep, n = {}; the 1-D mean profile explains {:.1} % of the height variance",
@@ -135,6 +143,15 @@ pub fn run(args: &ValidityArgs) -> Result<()> {
     for &t in &thetas {
         for &l in &lambdas {
             let c = validity::check(&profile, &model, l, t, Solve::Converge(args.rcwa_tolerance))?;
+            if let Some(e) = c.unconverged(args.rcwa_tolerance) {
+                eprintln!(
+                    "warning: λ = {l} nm, θi = {t}°: the rigorous solve stopped at {} orders × {} slices without converging to {}: its last refinement moved an order by {}, the estimated error of its orders",
+                    2 * c.harmonics + 1,
+                    c.slices,
+                    validity::percent(args.rcwa_tolerance),
+                    validity::percent(e)
+                );
+            }
             print!("{}", describe(&profile, &c));
             for r in &c.rows {
                 let _ = writeln!(
@@ -178,6 +195,47 @@ pub fn run(args: &ValidityArgs) -> Result<()> {
         );
     }
     Ok(())
+}
+
+/// The loader's report, held until validity has checked the field: then every line in
+/// the order it was said, or only the warnings when the field is refused.
+#[derive(Default)]
+struct Deferred {
+    lines: std::sync::Mutex<Vec<(bool, String)>>,
+}
+
+impl Deferred {
+    fn push(&self, warning: bool, line: &str) {
+        if let Ok(mut l) = self.lines.lock() {
+            l.push((warning, line.to_string()));
+        }
+    }
+
+    /// Prints the lines (`all`), or only the warnings.
+    fn replay(&self, all: bool) {
+        let Ok(lines) = self.lines.lock() else { return };
+        for (warning, line) in lines.iter() {
+            if *warning {
+                crate::report::Stderr.warn(line);
+            } else if all {
+                crate::report::Stderr.note(line);
+            }
+        }
+    }
+}
+
+impl crate::report::Report for Deferred {
+    fn warn(&self, line: &str) {
+        self.push(true, line);
+    }
+
+    fn note(&self, line: &str) {
+        self.push(false, line);
+    }
+
+    fn progress(&self, bar: indicatif::ProgressBar) -> indicatif::ProgressBar {
+        bar
+    }
 }
 
 /// The block of one check: its numbers, a table of the orders and the verdict.

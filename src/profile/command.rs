@@ -262,7 +262,7 @@ pub fn profile_args(args: &ProfileArgs) -> Result<()> {
     }
     crate::guard::in_range("theta-i", args.theta_i, 0.0..=90.0, "°")?;
     crate::guard::finite("phi-i", args.phi_i)?;
-    crate::guard::positive("budget-s", args.budget_s, " s")?;
+    crate::guard::budget_s(args.budget_s)?;
     check_counts(&c, args)?;
     check_env(&c, args)?;
     args.table.check()?;
