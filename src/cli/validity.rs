@@ -5,7 +5,6 @@ use std::fmt::Write as _;
 use std::path::PathBuf;
 
 use crate::cli::material::MaterialArgs;
-use crate::report::Report as _;
 use crate::validity::{self, Check, Profile, ScalarModel, Solve};
 use crate::Result;
 
@@ -121,14 +120,11 @@ pub fn run(args: &ValidityArgs) -> Result<()> {
     }
     crate::guard::check_outputs(&inputs, &outputs)?;
 
-    // The loader's lines (levelling, a scan's channel, the seam) wait for validity's own
-    // check of the field: a refusal comes before any of them (its warnings only).
-    let said = Deferred::default();
-    let profile = material
-        .load_heightfield(&said)
-        .and_then(|hf| validity::extract_profile(&hf));
-    said.replay(profile.is_ok());
-    let profile = profile?;
+    // The loader's lines (levelling, a scan's channel, the seam) are held until validity
+    // has checked the field (crate::report::hold_notes): a refusal prints only its error.
+    let hf = material.load_heightfield(&crate::report::Stderr)?;
+    let profile = validity::extract_profile(&hf)?;
+    crate::report::work_begins();
     let model = ScalarModel::of(&material);
     println!(
         "{}: period {:.4} µm across the ridges (grating vector {:.1}° from +x), mean profile {:.4} µm deep, n = {}; the 1-D mean profile explains {:.1} % of the height variance",
@@ -195,47 +191,6 @@ pub fn run(args: &ValidityArgs) -> Result<()> {
         );
     }
     Ok(())
-}
-
-/// The loader's report, held until validity has checked the field: then every line in
-/// the order it was said, or only the warnings when the field is refused.
-#[derive(Default)]
-struct Deferred {
-    lines: std::sync::Mutex<Vec<(bool, String)>>,
-}
-
-impl Deferred {
-    fn push(&self, warning: bool, line: &str) {
-        if let Ok(mut l) = self.lines.lock() {
-            l.push((warning, line.to_string()));
-        }
-    }
-
-    /// Prints the lines (`all`), or only the warnings.
-    fn replay(&self, all: bool) {
-        let Ok(lines) = self.lines.lock() else { return };
-        for (warning, line) in lines.iter() {
-            if *warning {
-                crate::report::Stderr.warn(line);
-            } else if all {
-                crate::report::Stderr.note(line);
-            }
-        }
-    }
-}
-
-impl crate::report::Report for Deferred {
-    fn warn(&self, line: &str) {
-        self.push(true, line);
-    }
-
-    fn note(&self, line: &str) {
-        self.push(false, line);
-    }
-
-    fn progress(&self, bar: indicatif::ProgressBar) -> indicatif::ProgressBar {
-        bar
-    }
 }
 
 /// The block of one check: its numbers, a table of the orders and the verdict.
