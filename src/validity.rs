@@ -766,7 +766,98 @@ pub fn expected_error_line(
 
 fn summary(material: &Material, thetas_deg: &[f64], cache_dir: Option<&Path>) -> Result<String> {
     let hf = material.load_heightfield(&crate::report::Collect::default())?;
-    let profile = extract_profile(&hf)?;
+    summary_of(material, &hf, thetas_deg, cache_dir)
+}
+
+/// The fewest whole periods the field must hold across its peak's direction for the peak
+/// to be ridges: a "period" of a third of the field or more is its tilt, its bow or the
+/// seam where its tiled edges meet.
+pub const SUMMARY_MIN_PERIODS: f64 = 3.0;
+
+/// The model check of a loaded field, run beside the render it annotates
+/// ([`ModelCheck::start`]) and bounded by it ([`ModelCheck::finish`]).
+pub struct ModelCheck {
+    line: std::sync::mpsc::Receiver<String>,
+}
+
+impl ModelCheck {
+    /// Starts the check of `hf` (the field `material` loaded) on a thread of its own. Its
+    /// answer is cached per field and material in `cache_dir`, so a later render of the same
+    /// material reads it in milliseconds; the rigorous cells are cached as each one ends.
+    pub fn start(
+        material: Material,
+        hf: crate::heightfield::HeightField,
+        thetas_deg: Vec<f64>,
+        cache_dir: Option<std::path::PathBuf>,
+    ) -> Self {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let line = match summary_of(&material, &hf, &thetas_deg, cache_dir.as_deref()) {
+                Ok(line) => line,
+                Err(e) => format!("model check: not available ({e}); see diffract validity"),
+            };
+            let _ = tx.send(line);
+        });
+        Self { line: rx }
+    }
+
+    /// The check's line, waiting at most `wait` for it: a check that has not ended by then
+    /// says so (its finished cells are cached for the next run) rather than hold the command.
+    pub fn finish(self, wait: std::time::Duration) -> String {
+        self.line.recv_timeout(wait).unwrap_or_else(|_| {
+            format!(
+                "model check: not finished within {:.1} s, a tenth of the render it annotates \
+                 (its finished cells are cached for the next run); see diffract validity",
+                wait.as_secs_f64()
+            )
+        })
+    }
+}
+
+/// [`expected_error_line`]'s summary for a field already loaded: the line cached for this
+/// field, material and angles, else computed (and cached).
+fn summary_of(
+    material: &Material,
+    hf: &crate::heightfield::HeightField,
+    thetas_deg: &[f64],
+    cache_dir: Option<&Path>,
+) -> Result<String> {
+    let line_path = cache_dir.map(|d| {
+        d.join(crate::cache::file_name(
+            crate::cache::VALIDITY_FILES,
+            line_key(material, hf, thetas_deg),
+        ))
+    });
+    if let Some(line) = line_path.as_deref().and_then(read_line) {
+        return Ok(line);
+    }
+    let line = summary_uncached(material, hf, thetas_deg, cache_dir)?;
+    if let Some(p) = &line_path {
+        // A cache that cannot be written only costs the next run the check again.
+        let _ = write_line(p, &line);
+    }
+    Ok(line)
+}
+
+fn summary_uncached(
+    material: &Material,
+    hf: &crate::heightfield::HeightField,
+    thetas_deg: &[f64],
+    cache_dir: Option<&Path>,
+) -> Result<String> {
+    let profile = extract_profile(hf)?;
+    let (lx, ly) = hf.extent_um();
+    let dir = profile.direction_deg.to_radians();
+    // The field's length along the grating vector (the distance across the ridges).
+    let across = (lx / dir.cos().abs().max(1e-12)).min(ly / dir.sin().abs().max(1e-12));
+    if profile.period_um * SUMMARY_MIN_PERIODS > across {
+        return Ok(format!(
+            "model check: not run: the field's strongest \"period\", {:.1} µm, spans over a \
+             third of its {:.1} µm: a tilt, a bow or the seam of its tiled edges, not ridges \
+             (--level plane removes a tilt; --tile mirror a seam); see diffract validity",
+            profile.period_um, across
+        ));
+    }
     if profile.explained < SUMMARY_MIN_EXPLAINED || profile.depth_um() <= 0.0 {
         return Ok(format!(
             "model check: not run: the field's mean 1-D profile explains {:.0} % of its height \
@@ -792,18 +883,21 @@ fn summary(material: &Material, thetas_deg: &[f64], cache_dir: Option<&Path>) ->
         .filter(|&(t, l)| !cells.iter().any(|c| c.0 == t && c.1 == l))
         .collect();
     if !missing.is_empty() {
-        let found: Vec<(f64, f64, f64)> = missing
-            .par_iter()
-            .map(|&(t, l)| {
-                check(&profile, &model, l, t, Solve::Converge(MAP_TOLERANCE))
-                    .map(|c| (t, l, c.error))
-            })
-            .collect::<Result<_>>()?;
-        cells.extend(found);
-        if let Some(p) = &path {
-            // A cache that cannot be written only costs the next run the same few seconds.
-            let _ = write_cells(p, &cells);
-        }
+        // Each cell is cached as it ends: a run stopped before the last one (a command
+        // that does not wait for its check) leaves the next run less to do.
+        let done = std::sync::Mutex::new(cells);
+        missing.par_iter().try_for_each(|&(t, l)| {
+            let c = check(&profile, &model, l, t, Solve::Converge(MAP_TOLERANCE))?;
+            if let Ok(mut d) = done.lock() {
+                d.push((t, l, c.error));
+                if let Some(p) = &path {
+                    // A cache that cannot be written only costs the next run the same cells.
+                    let _ = write_cells(p, &d);
+                }
+            }
+            Ok::<(), Error>(())
+        })?;
+        cells = done.into_inner().unwrap_or_default();
     }
     let worst_at = |t: f64| {
         cells
@@ -837,6 +931,57 @@ pub fn percent(e: f64) -> String {
     } else {
         format!("{:.0} %", 100.0 * e)
     }
+}
+
+/// The key of a field's cached model-check line: its heights and pixel size, the
+/// material's numbers the check reads and the angles asked for.
+fn line_key(material: &Material, hf: &crate::heightfield::HeightField, thetas_deg: &[f64]) -> u64 {
+    let model = ScalarModel::of(material);
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    let mut eat = |w: f64| {
+        for b in w.to_le_bytes() {
+            h ^= u64::from(b);
+            h = h.wrapping_mul(0x0100_0000_01b3);
+        }
+    };
+    // "line", format 1.
+    eat(f64::from(0x6c69_6e65u32));
+    eat(1.0);
+    for w in [
+        hf.nx() as f64,
+        hf.ny() as f64,
+        hf.extent_um().0,
+        hf.extent_um().1,
+        model.shading.ior,
+        model.coherence_um,
+        f64::from(u8::from(model.shading.fresnel)),
+        f64::from(u8::from(model.shading.shadowing)),
+        MAP_TOLERANCE,
+        SUMMARY_MIN_PERIODS,
+    ] {
+        eat(w);
+    }
+    for &t in thetas_deg {
+        eat(t);
+    }
+    for &z in hf.heights_um() {
+        eat(z);
+    }
+    h
+}
+
+fn read_line(path: &Path) -> Option<String> {
+    let text = crate::fsutil::read_text_bounded(path, "validity cache", 1 << 16).ok()?;
+    let line = text.lines().find(|l| l.starts_with("model check: "))?;
+    Some(line.to_string())
+}
+
+fn write_line(path: &Path, line: &str) -> Result<()> {
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::invalid("validity cache", e.to_string()))?;
+    }
+    crate::fsutil::write_atomic(path, format!("# diffract model check\n{line}\n").as_bytes())
 }
 
 /// FNV-1a over the profile and the model's numbers: the cache file's name.

@@ -329,3 +329,58 @@ fn limits_table_sorts_shallow_from_deep_gratings() {
     assert_eq!(err.trim().lines().count(), 1, "{err}");
     assert!(err.contains("--limits"), "{err}");
 }
+
+/// A field of `n`² samples `dh` apart with heights `f(x, y)` (µm).
+fn field(n: usize, dh: f64, f: impl Fn(f64, f64) -> f64) -> diffract::heightfield::HeightField {
+    let h = (0..n * n)
+        .map(|i| f((i % n) as f64 * dh, (i / n) as f64 * dh))
+        .collect();
+    diffract::heightfield::HeightField::new(n, n, dh, h).unwrap()
+}
+
+#[test]
+fn the_model_check_names_a_tilt_instead_of_solving_it() {
+    use diffract::validity::ModelCheck;
+    // An unlevelled tilt over 12.8 µm: its strongest "period" below 10 µm is the ramp's.
+    let tilt = field(128, 0.1, |x, y| 0.02 * x + 0.01 * y);
+    let m = diffract::material::Material::default();
+    let line =
+        ModelCheck::start(m, tilt, vec![0.0], None).finish(std::time::Duration::from_secs(120));
+    assert!(
+        line.contains("a tilt, a bow or the seam of its tiled edges, not ridges"),
+        "{line}"
+    );
+}
+
+#[test]
+fn the_model_check_is_cached_per_field_and_waits_no_longer_than_asked() {
+    use diffract::validity::ModelCheck;
+    use std::time::Duration;
+    let dir = std::env::temp_dir().join(format!("diffract-check-{}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    // Ten periods of a shallow 1.28 µm sinusoid: ridges the rigorous solver speaks for.
+    let tau = std::f64::consts::TAU;
+    let ridges = field(64, 0.2, |x, _| 0.05 * (tau * x / 1.28).sin());
+    let m = diffract::material::Material::default();
+    let start = || ModelCheck::start(m.clone(), ridges.clone(), vec![0.0], Some(dir.clone()));
+    let cut = start().finish(Duration::ZERO);
+    assert!(cut.contains("not finished within 0.0 s"), "{cut}");
+    let full = start().finish(Duration::from_secs(300));
+    assert!(
+        full.starts_with("model check: scalar order ratios") && full.contains("1.280 µm ridges"),
+        "{full}"
+    );
+    // The line itself is cached: the next check of the same field and angles reads it.
+    let cached = std::fs::read_dir(&dir)
+        .unwrap()
+        .flatten()
+        .filter_map(|e| std::fs::read_to_string(e.path()).ok())
+        .any(|t| t.starts_with("# diffract model check\n") && t.contains(&full));
+    assert!(cached, "no cached line in {}", dir.display());
+    assert_eq!(start().finish(Duration::from_secs(300)), full);
+    // Another angle is another line.
+    let other = ModelCheck::start(m.clone(), ridges.clone(), vec![60.0], Some(dir.clone()))
+        .finish(Duration::from_secs(300));
+    assert!(other.contains("θi ≈ 60°"), "{other}");
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -122,6 +122,20 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     renderer.set_leave_out(!args.keep_all);
     let cache_dir = args.cache.dir();
     renderer.set_cache_dir(cache_dir.clone());
+    // How far the scalar model is from Maxwell's equations for this material: at the map's
+    // light angle, or over the angles a scene's surface sees the light at. It runs beside
+    // the render and is cached per material.
+    let thetas = if args.brdf_map {
+        vec![args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I)]
+    } else {
+        vec![0.0, 30.0, 60.0]
+    };
+    let model_check = crate::validity::ModelCheck::start(
+        material.clone(),
+        heightfield.clone(),
+        thetas,
+        cache_dir.clone(),
+    );
     let prepared = material.prepare_planned_deferred(heightfield, plan, cache_dir.as_deref())?;
     // Table variants show their own bar while they build; the draw after it is short.
     let spin = variant
@@ -179,16 +193,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         gpu_bytes: frame.variant.gpu_bytes,
         keep_all: args.keep_all,
     };
-    // How far the scalar model is from Maxwell's equations for this material: at the map's
-    // light angle, or over the angles a scene's surface sees the light at. Computed before
-    // the result line, so that its wall time covers the whole process.
-    let thetas = if args.brdf_map {
-        vec![args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I)]
-    } else {
-        vec![0.0, 30.0, 60.0]
-    };
-    let model_check =
-        crate::validity::expected_error_line(&material, &thetas, cache_dir.as_deref());
+    // The model check may add a tenth of the render to it, no more; it ends before the
+    // result line, so that its wall time covers the whole process.
+    let render_s = crate::report::process_wall_s().unwrap_or(frame.wall_ms * 1e-3);
+    let model_check = model_check.finish(std::time::Duration::from_secs_f64(0.1 * render_s));
     print_result(args, &scene, renderer.device_name(), &frame, &what, &timing);
     let n = renderer.validation_messages();
     if n > 0 {
