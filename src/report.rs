@@ -126,8 +126,60 @@ impl Report for Stderr {
 
     fn progress(&self, bar: ProgressBar) -> ProgressBar {
         work_begins();
+        if !std::io::IsTerminal::is_terminal(&std::io::stderr()) {
+            tick_lines(&bar);
+        }
         bar
     }
+}
+
+/// Longest silence of a long step when stderr is not a terminal (a log, a pipe, CI).
+pub const PROGRESS_PERIOD: std::time::Duration = std::time::Duration::from_secs(10);
+
+/// [`PROGRESS_PERIOD`], or `DIFFRACT_PROGRESS_SECS` (0.1 to 3600 seconds) where that is set.
+pub fn progress_period() -> std::time::Duration {
+    std::env::var("DIFFRACT_PROGRESS_SECS")
+        .ok()
+        .and_then(|v| v.trim().parse::<f64>().ok())
+        .filter(|s| (0.1..=3600.0).contains(s))
+        .map_or(PROGRESS_PERIOD, std::time::Duration::from_secs_f64)
+}
+
+/// Off a terminal a bar draws nothing: a thread prints its state as a line every
+/// [`PROGRESS_PERIOD`] until the work finishes or drops the bar.
+fn tick_lines(bar: &ProgressBar) {
+    let weak = bar.downgrade();
+    let start = std::time::Instant::now();
+    let period = progress_period();
+    std::thread::spawn(move || {
+        let step = std::time::Duration::from_millis(200);
+        let mut last = std::time::Instant::now();
+        loop {
+            std::thread::sleep(step);
+            let Some(bar) = weak.upgrade() else { return };
+            // A bar at its end whose owner keeps it (without finishing it) is done too.
+            if bar.is_finished() || bar.length().is_some_and(|l| l > 0 && bar.position() >= l) {
+                return;
+            }
+            if last.elapsed() >= period {
+                last = std::time::Instant::now();
+                let (pos, len) = (bar.position(), bar.length().unwrap_or(0));
+                let done = if len > 0 {
+                    format!("{pos}/{len} ({:.0} %)", 100.0 * pos as f64 / len as f64)
+                } else {
+                    format!("{pos}")
+                };
+                let elapsed = start.elapsed().as_secs_f64();
+                let left = if pos > 0 && len > pos {
+                    let s = elapsed * (len - pos) as f64 / pos as f64;
+                    format!(", about {s:.0} s left")
+                } else {
+                    String::new()
+                };
+                eprintln!("{}: {done} after {elapsed:.0} s{left}", bar.message());
+            }
+        }
+    });
 }
 
 /// A report that keeps every line (for tests and for callers that show them elsewhere);

@@ -269,3 +269,48 @@ fn a_second_render_reads_the_environment_table_from_the_cache() {
         .fold(0f32, |m, (x, y)| m.max((x - y).abs()));
     assert!(peak > 0.1 && worst < 1e-5 * peak, "{worst} of {peak}");
 }
+
+/// Off a terminal, a table build that outlasts the progress period prints progress lines
+/// into the log before its report line (the period shortened to 0.5 s for the test).
+#[test]
+fn a_long_environment_table_build_prints_progress_into_a_redirected_log() {
+    if gpu_util::device().is_none() {
+        return;
+    }
+    let d = dir("progress");
+    let out = Command::new(env!("CARGO_BIN_EXE_diffract"))
+        .args([
+            "render",
+            "--brdf-map",
+            "--size",
+            "4",
+            "--env",
+            "builtin:white",
+            "--env-samples",
+            "4",
+            "--table-step-nm",
+            "10",
+            "--table-texel",
+            "0.01",
+            "--no-cache",
+            "-o",
+        ])
+        .arg(d.join("p.exr"))
+        .env("DIFFRACT_PROGRESS_SECS", "0.5")
+        .output()
+        .unwrap();
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(out.status.success(), "{err}");
+    // A line of the build under way: fewer planes done than there are.
+    let mut during = err.lines().filter_map(|l| {
+        let rest = l.strip_prefix("environment table: ")?;
+        let (done, _) = rest.split_once(" (")?;
+        let (pos, len) = done.split_once('/')?;
+        Some((pos.parse::<u64>().ok()?, len.parse::<u64>().ok()?))
+    });
+    assert!(
+        during.any(|(pos, len)| pos < len),
+        "no progress line during the table build:\n{err}"
+    );
+    assert!(err.contains(" s left"), "{err}");
+}

@@ -139,23 +139,25 @@ pub fn radiance_table(
     shading: &Shading,
     spec: &TableSpec,
 ) -> Result<ChebyshevW> {
-    let slices = radiance_slices(hf, coherence_um, shading, spec)?;
+    let slices = radiance_slices(hf, coherence_um, shading, spec, &|| {})?;
     Ok(ChebyshevW::from_nodes(spec.region, &slices))
 }
 
 /// The samples of [`radiance_table`] at its Chebyshev nodes in `w`.
+/// `progress` is called once per (w node, wavelength) plane, [`radiance_planes`] times.
 pub fn radiance_slices(
     hf: &HeightField,
     coherence_um: f64,
     shading: &Shading,
     spec: &TableSpec,
+    progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
     let table = ColourTable::new(spec.step_nm)?;
     let scale = radiance_scale(&table, coherence_um, shading);
     let nodes = ChebyshevW::nodes(spec);
     let mut sum: Option<Slices> = None;
     for (j, s) in scale.iter().enumerate() {
-        let one = sample_g_kept(hf, coherence_um, spec, &nodes, Some(&[j]), &|| {})?;
+        let one = sample_g_kept(hf, coherence_um, spec, &nodes, Some(&[j]), progress)?;
         match &mut sum {
             None => {
                 let mut one = one;
@@ -178,6 +180,12 @@ pub fn radiance_slices(
         }
     }
     Ok(sum.expect("a colour table has at least two lines"))
+}
+
+/// The (w node, wavelength) planes [`radiance_slices`] samples: its progress's length.
+pub fn radiance_planes(spec: &TableSpec) -> Result<u64> {
+    let lines = ColourTable::new(spec.step_nm)?.len();
+    Ok(lines as u64 * ChebyshevW::nodes(spec).len() as u64)
 }
 
 /// A surface's tangent frame in world space.

@@ -18,7 +18,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
-use crate::brdf::env_reference::{absolute_factor, radiance_slices};
+use crate::brdf::env_reference::{absolute_factor, radiance_planes, radiance_slices};
 use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, TableSpec};
 use crate::brdf::Shading;
 use crate::colour::{linear_srgb_to_xyz, ColourTable};
@@ -258,7 +258,14 @@ impl EnvLighting {
             dir,
             Some(&tag),
             report,
-            &|| radiance_slices(hf, coherence_um, shading, spec),
+            &|| {
+                let bar = indicatif::ProgressBar::new(radiance_planes(spec)?)
+                    .with_message("environment table");
+                let bar = report.progress(bar);
+                let slices = radiance_slices(hf, coherence_um, shading, spec, &|| bar.inc(1));
+                bar.finish_and_clear();
+                slices
+            },
         )?;
         let mut table = ChebyshevW::from_nodes(spec.region, &slices);
         drop(slices);
