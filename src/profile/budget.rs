@@ -113,6 +113,10 @@ pub(super) struct Deadline {
     deadline: Option<Instant>,
     steps: std::sync::atomic::AtomicU64,
     total: std::sync::atomic::AtomicU64,
+    /// When the build's first step ended: the pace is taken from the steps after it, so
+    /// what comes once before them (the terms, a device's pipelines, the first upload)
+    /// is not multiplied by the number of steps.
+    first_step: std::sync::OnceLock<Instant>,
 }
 
 impl Deadline {
@@ -122,8 +126,27 @@ impl Deadline {
             deadline,
             steps: 0.into(),
             total: 0.into(),
+            first_step: std::sync::OnceLock::new(),
         }
     }
+
+    /// The build's projected total (s) after `done` of `total` steps: the time to its
+    /// first step, then the pace of the steps since.
+    fn projected_s(&self, done: u64, total: u64) -> f64 {
+        let first = *self.first_step.get_or_init(Instant::now);
+        let before = first.duration_since(self.start).as_secs_f64();
+        project(before, first.elapsed().as_secs_f64(), done, total)
+    }
+}
+
+/// A build's total (s) from the time to its first step (`before`), the time since
+/// (`since_first`) and the steps done of `total`: the first step's cost once, the pace
+/// of the later steps for the rest.
+fn project(before: f64, since_first: f64, done: u64, total: u64) -> f64 {
+    if done < 2 {
+        return before;
+    }
+    before + since_first / (done - 1) as f64 * (total.max(done) - 1) as f64
 }
 
 impl crate::report::Report for Deadline {
@@ -149,12 +172,11 @@ impl crate::report::Report for Deadline {
         };
         let done = self.steps.fetch_add(1, Ordering::Relaxed) + 1;
         let total = self.total.load(Ordering::Relaxed).max(done);
-        let spent = self.start.elapsed().as_secs_f64();
+        let projected = self.projected_s(done, total);
         // A few steps first, so the pace is not one step's noise.
         if done < 4 {
             return;
         }
-        let projected = spent * total as f64 / done as f64;
         let end = self.start + std::time::Duration::from_secs_f64(projected);
         if end > deadline {
             std::panic::resume_unwind(Box::new(OverBudget {
@@ -224,6 +246,17 @@ impl Pace {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_build_is_projected_from_the_pace_after_its_first_step() {
+        // 2 s of pipelines and terms before the first step, then 10 steps in 0.1 s: the
+        // total is 2 s plus the pace of the steps, not the first 2 s times the steps.
+        let p = project(2.0, 0.1, 11, 1001);
+        assert!((p - 12.0).abs() < 1e-9, "{p}");
+        // At a steady pace the projection is the plain rate.
+        assert!((project(0.5, 4.5, 10, 100) - 50.0).abs() < 1e-9);
+        assert_eq!(project(3.0, 0.0, 1, 100), 3.0);
+    }
 
     #[test]
     fn a_row_draws_its_frames_until_the_count_the_precision_or_the_deadline() {
