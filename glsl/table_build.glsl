@@ -172,9 +172,11 @@ void storeField(int which, uint i, CPLX z) {
 }
 
 // The DFT bin of shifted texel t (zero frequency at floor(n/2)); the spectrum is periodic.
+// Vulkan leaves % undefined for a negative operand (it compiles to OpSMod), so a texel left
+// of the zero frequency is reduced through its mirror image, with both operands ≥ 0.
 int binOf(int t, int n) {
-    int b = (t - n / 2) % n;
-    return b < 0 ? b + n : b;
+    int d = t - n / 2;
+    return d >= 0 ? d % n : n - 1 - (-d - 1) % n;
 }
 
 REAL gauss(REAL d, REAL sigma) {

@@ -686,10 +686,8 @@ fn read_slice(readback: &Buffer, l: &Lookups, precision: Precision) -> Result<Ve
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, Default, clap::ValueEnum)]
 #[value(rename_all = "kebab-case")]
 pub enum TableBuild {
-    /// The CPU, on every device: the device build disagrees with the CPU build on an
-    /// NVIDIA H200 (rel L2 0.52 on the default material's 65² map at θi = 60°, float64
-    /// and float32 alike, docs/results/gpu-h200.md) while it agrees to 1e-15 on lavapipe,
-    /// so it is used only where asked for (`device`, `device-f32`).
+    /// The device when it is a GPU (discrete, integrated or virtual), the CPU when the
+    /// Vulkan device itself runs on the CPU (lavapipe), where the CPU build is faster.
     #[default]
     Auto,
     /// The CPU, in float64 (the reference).
@@ -707,7 +705,9 @@ impl TableBuild {
             TableBuild::Cpu => None,
             TableBuild::Device => Some(Precision::best(dev)),
             TableBuild::DeviceF32 => Some(Precision::F32),
-            TableBuild::Auto => None,
+            TableBuild::Auto => {
+                (dev.info.device_type != vk::PhysicalDeviceType::CPU).then(|| Precision::best(dev))
+            }
         }
     }
 }
