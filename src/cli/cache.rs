@@ -10,10 +10,11 @@ use crate::{Error, Result};
 /// The cache flags shared by `render`, `view`, `profile`, `brdf` and `eval-grating`.
 #[derive(Debug, Clone, Default, clap::Args)]
 pub struct CacheArgs {
-    /// Directory of the DFT term cache (default: $DIFFRACT_CACHE or ~/.cache/diffract).
+    /// Directory of the on-disk cache: DFT terms, sampled tables, model checks, pipelines
+    /// (default: $DIFFRACT_CACHE, else $XDG_CACHE_HOME/diffract, else ~/.cache/diffract).
     #[arg(long)]
     pub cache_dir: Option<PathBuf>,
-    /// Do not read or write the term cache.
+    /// Do not read or write the on-disk cache.
     #[arg(long)]
     pub no_cache: bool,
 }

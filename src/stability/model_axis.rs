@@ -160,10 +160,24 @@ pub fn summary(cells: &[ModelCell]) -> String {
         .iter()
         .max_by(|a, b| a.error.unwrap_or(0.0).total_cmp(&b.error.unwrap_or(0.0)));
     match worst {
-        None => format!(
-            "model (scalar theory against RCWA): no cell solved of {}",
-            cells.len()
-        ),
+        None => {
+            // Why none was solved: the note of each cell (skipped by the budget, beyond the
+            // solver, refused), counted.
+            let mut why: Vec<(String, usize)> = Vec::new();
+            for c in cells {
+                let note = if c.note.is_empty() { "not solved" } else { c.note.as_str() };
+                match why.iter_mut().find(|w| w.0 == note) {
+                    Some(w) => w.1 += 1,
+                    None => why.push((note.to_string(), 1)),
+                }
+            }
+            let why: Vec<String> = why.iter().map(|(n, k)| format!("{k} {n}")).collect();
+            format!(
+                "model (scalar theory against RCWA): no cell solved of {}: {}",
+                cells.len(),
+                why.join("; ")
+            )
+        }
         Some(w) => format!(
             "model (scalar theory against RCWA): {} of {} cells solved; worst {} ({}) at h_max {} µm, θi {}°, λ {} nm",
             solved.len(),
