@@ -284,12 +284,25 @@ impl Run<'_> {
         let material = row.material(&setup.base);
         // The terms are computed (or read from the cache) only if the row's variant reads
         // them: a table variant builds from the height field.
+        // A row's preset (its T, its R) is the profile's choice, not a flag the user passed:
+        // what the planner says of it is a note on the row, in the row's words.
+        let said = crate::report::Collect::default();
         let plan = material.plan_loaded(
             &self.heightfield,
             &crate::brdf::truncation::Reach::ALL,
             crate::brdf::truncation::Precision::F32,
-            &crate::report::Stderr,
-        )?;
+            &said,
+        );
+        for line in said.notes() {
+            crate::report::Report::note(&crate::report::Stderr, &line);
+        }
+        for line in said.warnings() {
+            crate::report::Report::note(
+                &crate::report::Stderr,
+                &format!("profile: {}: {}", row.name, as_preset(&line)),
+            );
+        }
+        let plan = plan?;
         let prepared = material.prepare_planned_deferred(
             self.heightfield.clone(),
             plan,
@@ -531,5 +544,40 @@ impl Run<'_> {
             }
         }
         Ok(out)
+    }
+}
+
+/// A planner warning about a flag's value, said of a profile row's preset: `--terms 30`
+/// reads `T = 30`, `--window-radius 1` reads `R = 1`, and the advice to pass another flag
+/// goes (the row's measured error says what it costs).
+fn as_preset(line: &str) -> String {
+    let cut = ["; --terms auto chooses", "; more terms cannot fix it"]
+        .iter()
+        .filter_map(|c| line.find(c))
+        .min()
+        .unwrap_or(line.len());
+    line[..cut]
+        .replacen("--terms ", "T = ", 1)
+        .replacen("--window-radius ", "R = ", 1)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::as_preset;
+
+    #[test]
+    fn a_row_preset_is_said_without_flags() {
+        let t = "--terms 30 with taylor: expected error of ρ/C up to 9.1e-3 (tolerance 1e-3; \
+                 k|w|·h = 8.9); --terms auto chooses a sufficient T";
+        let s = as_preset(t);
+        assert!(s.starts_with("T = 30 with taylor: expected error"), "{s}");
+        assert!(!s.contains("--"), "{s}");
+        let r = "--window-radius 1: the window (std 0.64 texels) cut at R = 1 alone leaves an \
+                 error of ρ/C up to 8.5e-2 (tolerance 1e-3); more terms cannot fix it, R = 2 meets it";
+        let s = as_preset(r);
+        assert!(
+            s.starts_with("R = 1: the window") && !s.contains("--"),
+            "{s}"
+        );
     }
 }
