@@ -27,13 +27,35 @@ pub fn register_font() {
 }
 
 /// One point of an error-versus-time plot.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Default)]
 pub struct Point {
     pub label: String,
     /// GPU time (ms).
     pub time_ms: f64,
     /// Error (any positive metric).
     pub error: f64,
+    /// The error's interval (a 95 % bootstrap interval), drawn as a vertical bar.
+    pub error_range: Option<(f64, f64)>,
+    /// The time's spread (p10–p90 of the frames), drawn as a horizontal bar.
+    pub time_range: Option<(f64, f64)>,
+}
+
+impl Point {
+    /// Whether the measurements cannot tell this point from `other`: both intervals
+    /// overlap, the error's and the time's (a point without an interval is its value).
+    pub fn indistinguishable(&self, other: &Point) -> bool {
+        let overlap = |a: (f64, f64), b: (f64, f64)| a.0 <= b.1 && b.0 <= a.1;
+        let e = |p: &Point| p.error_range.unwrap_or((p.error, p.error));
+        let t = |p: &Point| p.time_range.unwrap_or((p.time_ms, p.time_ms));
+        overlap(e(self), e(other)) && overlap(t(self), t(other))
+    }
+}
+
+/// For each point, whether another point of `points` is indistinguishable from it.
+pub fn indistinguishable(points: &[Point]) -> Vec<bool> {
+    (0..points.len())
+        .map(|i| (0..points.len()).any(|j| j != i && points[i].indistinguishable(&points[j])))
+        .collect()
 }
 
 /// Indices of the Pareto front: points no other point beats in both time and error.
@@ -81,17 +103,48 @@ pub fn format_tick(v: f64) -> String {
     s.replace('-', "−")
 }
 
-/// A log axis's tick label: only 1, 2 and 5 times a power of ten are written, so the dense
-/// ticks within one decade do not overlap.
+/// A log axis's tick label (the ticks are [`log_key_points`]).
 fn log_tick(v: f64) -> String {
     if !(v.is_finite() && v > 0.0) {
         return String::new();
     }
-    let m = v / 10f64.powf((v.log10() + 1e-9).floor());
-    if [1.0, 2.0, 5.0].iter().any(|k| (m - k).abs() < 1e-6 * k) {
-        format_tick(v)
+    let digits = (-(v.log10() + 1e-9).floor()).max(0.0) as usize + 1;
+    let s = format!("{v:.digits$}");
+    let s = if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
     } else {
-        String::new()
+        s
+    };
+    if (1e-3..1e5).contains(&v) {
+        s
+    } else {
+        format_tick(v)
+    }
+}
+
+/// The ticks of a log axis over `lo..hi`: 1, 2 and 5 times each power of ten inside it,
+/// each once (a grid line and a label apiece, none crowding another); where that leaves
+/// fewer than three (a span under a factor of about 2.5), 1.5, 3 and 7 times too.
+pub fn log_key_points(lo: f64, hi: f64) -> Vec<f64> {
+    let (lo, hi) = (lo.min(hi), lo.max(hi));
+    if !(lo.is_finite() && hi.is_finite() && lo > 0.0) {
+        return Vec::new();
+    }
+    let within = |mantissas: &[f64]| -> Vec<f64> {
+        let (k0, k1) = (lo.log10().floor() as i32, hi.log10().ceil() as i32);
+        let mut v: Vec<f64> = (k0..=k1)
+            .flat_map(|k| mantissas.iter().map(move |m| m * 10f64.powi(k)))
+            .filter(|v| (lo..=hi).contains(v))
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v.dedup();
+        v
+    };
+    let ticks = within(&[1.0, 2.0, 5.0]);
+    if ticks.len() >= 3 {
+        ticks
+    } else {
+        within(&[1.0, 1.5, 2.0, 3.0, 5.0, 7.0])
     }
 }
 
@@ -154,8 +207,12 @@ pub fn error_vs_time_with(
             .x_label_area_size(50)
             .y_label_area_size(80)
             .build_cartesian_2d(
-                (t0 / 2.0..t1 * 2.0).log_scale(),
-                (e0 / 3.0..e1 * 3.0).log_scale(),
+                (t0 / 2.0..t1 * 2.0)
+                    .log_scale()
+                    .with_key_points(log_key_points(t0 / 2.0, t1 * 2.0)),
+                (e0 / 3.0..e1 * 3.0)
+                    .log_scale()
+                    .with_key_points(log_key_points(e0 / 3.0, e1 * 3.0)),
             )
             .map_err(plot_error)?;
         chart
@@ -194,6 +251,39 @@ pub fn error_vs_time_with(
                 .legend(move |(x, y)| {
                     PathElement::new(vec![(x, y), (x + 20, y)], green.stroke_width(2))
                 });
+        }
+        // Each point's intervals: the error's (vertical) and the time's (horizontal).
+        let grey = RGBColor(110, 110, 110);
+        for p in &all {
+            let (t, e) = at_of(p);
+            let mut bars = Vec::new();
+            if let Some((lo, hi)) = p.error_range {
+                bars.push(vec![(t, clamp(lo, e0)), (t, clamp(hi, e0))]);
+            }
+            if let Some((lo, hi)) = p.time_range {
+                bars.push(vec![(clamp(lo, t0), e), (clamp(hi, t0), e)]);
+            }
+            chart
+                .draw_series(
+                    bars.into_iter()
+                        .map(|b| PathElement::new(b, grey.stroke_width(1))),
+                )
+                .map_err(plot_error)?;
+        }
+        // A point that another cannot be told from (both intervals overlap) gets a ring.
+        let alike = indistinguishable(points);
+        if alike.iter().any(|&a| a) {
+            chart
+                .draw_series(
+                    points
+                        .iter()
+                        .zip(&alike)
+                        .filter(|(_, &a)| a)
+                        .map(|(p, _)| Circle::new(at_of(p), 9, grey.stroke_width(2))),
+                )
+                .map_err(plot_error)?
+                .label("ring: not distinguishable from another point (both intervals overlap)")
+                .legend(move |(x, y)| Circle::new((x + 10, y), 6, grey.stroke_width(2)));
         }
         let at: Vec<(f64, f64)> = all.iter().map(at_of).collect();
         for (k, &at) in at.iter().enumerate() {
@@ -989,8 +1079,67 @@ mod tests {
     use super::*;
 
     #[test]
+    fn points_whose_intervals_both_overlap_are_not_distinguishable() {
+        let p = |t: f64, e: f64, dt: f64, de: f64| Point {
+            label: String::new(),
+            time_ms: t,
+            error: e,
+            error_range: Some((e - de, e + de)),
+            time_range: Some((t - dt, t + dt)),
+        };
+        let a = p(10.0, 1e-3, 1.0, 2e-4);
+        // Overlapping in both: alike.
+        assert!(a.indistinguishable(&p(10.5, 1.1e-3, 1.0, 2e-4)));
+        // Apart in error, or apart in time: told apart.
+        assert!(!a.indistinguishable(&p(10.5, 2e-3, 1.0, 2e-4)));
+        assert!(!a.indistinguishable(&p(20.0, 1.1e-3, 1.0, 2e-4)));
+        // Without intervals a point is its value.
+        let bare = Point {
+            label: String::new(),
+            time_ms: 10.0,
+            error: 1e-3,
+            ..Default::default()
+        };
+        assert!(a.indistinguishable(&bare));
+        assert_eq!(
+            indistinguishable(&[
+                a.clone(),
+                p(10.5, 1.1e-3, 1.0, 2e-4),
+                p(50.0, 5e-2, 1.0, 1e-3)
+            ]),
+            vec![true, true, false]
+        );
+    }
+
+    #[test]
+    fn log_axes_get_one_tick_per_value_and_enough_of_them() {
+        assert_eq!(
+            log_key_points(0.003, 0.6),
+            vec![0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5]
+        );
+        let narrow = log_key_points(40.0, 100.0);
+        assert!(narrow.len() >= 3, "{narrow:?}");
+        let labels: Vec<String> = log_key_points(0.003, 0.6)
+            .iter()
+            .map(|v| log_tick(*v))
+            .collect();
+        assert_eq!(
+            labels,
+            ["0.005", "0.01", "0.02", "0.05", "0.1", "0.2", "0.5"]
+        );
+        let mut unique = labels.clone();
+        unique.dedup();
+        assert_eq!(unique, labels, "a label printed twice");
+        assert_eq!(log_tick(1.5), "1.5");
+        assert_eq!(log_tick(200.0), "200");
+        assert_eq!(log_tick(2e-5), format_tick(2e-5));
+    }
+
+    #[test]
     fn pareto_front_keeps_only_unbeaten_points() {
         let p = |t, e| Point {
+            error_range: None,
+            time_range: None,
             label: String::new(),
             time_ms: t,
             error: e,
@@ -1225,6 +1374,8 @@ mod heat_tests {
     fn error_plot_has_labelled_axes() {
         let p = scratch("error.png");
         let point = |label: &str, t, e| Point {
+            error_range: None,
+            time_range: None,
             label: label.into(),
             time_ms: t,
             error: e,
@@ -1251,6 +1402,8 @@ mod heat_tests {
     fn a_side_curve_is_drawn_in_green_beside_the_front() {
         let p = scratch("curve.png");
         let point = |label: &str, t, e| Point {
+            error_range: None,
+            time_range: None,
             label: label.into(),
             time_ms: t,
             error: e,
@@ -1288,7 +1441,7 @@ mod heat_tests {
         assert_eq!(format_tick(2000.0), "2000");
         assert_eq!(format_tick(0.05), "0.05");
         assert_eq!(format_tick(1e-4), "1e−4");
-        assert_eq!(log_tick(300.0), "");
+        assert_eq!(log_tick(300.0), "300");
         assert_eq!(log_tick(500.0), "500");
         assert_eq!(nice_step(300.0, 8), 50.0);
         assert_eq!(nice_step(13.7, 6), 5.0);

@@ -490,6 +490,8 @@ pub(super) fn write_plot(
                 label: r.variant.name.clone(),
                 time_ms: t,
                 error: r.vs_reference.rel_l2,
+                error_range: Some((r.intervals.rel_l2.lo, r.intervals.rel_l2.hi)),
+                time_range: r.spread_ms,
             })
         })
         .collect();
@@ -503,6 +505,7 @@ pub(super) fn write_plot(
             label: format!("{} (mesh)", r.variant.name),
             time_ms: r.mesh_gpu_ms.unwrap_or(f64::NAN),
             error: e.rel_l2,
+            ..Default::default()
         })
     }));
     // The environment rows' errors are against their own reference: a curve of their
@@ -519,6 +522,8 @@ pub(super) fn write_plot(
                 label: r.name(),
                 time_ms: r.gpu_ms,
                 error: r.vs_reference.rel_l2,
+                error_range: Some((r.intervals.rel_l2.lo, r.intervals.rel_l2.hi)),
+                time_range: r.spread_ms,
             })
             .collect(),
     });
