@@ -606,6 +606,10 @@ pub struct Map {
     pub error: Vec<Vec<f64>>,
     pub harmonics: usize,
     pub slices: usize,
+    /// Where the solve at the hardest cell (the shortest wavelength, the steepest angle) that
+    /// chose `harmonics` and `slices` did not converge to the tolerance: its last refinement's
+    /// change, the estimated error of every cell's orders.
+    pub unconverged: Option<f64>,
 }
 
 /// The map's angles and wavelengths: θi = 0..80° by 10°, λ = 400..700 nm by 25 nm.
@@ -625,6 +629,17 @@ pub fn map_numbers(
     theta_deg: f64,
     tolerance: f64,
 ) -> Result<(usize, usize)> {
+    map_solve(profile, model, lambda_nm, theta_deg, tolerance).map(|(n, s, _)| (n, s))
+}
+
+/// [`map_numbers`] and, where they did not converge to `tolerance`, the last change.
+fn map_solve(
+    profile: &Profile,
+    model: &ScalarModel,
+    lambda_nm: f64,
+    theta_deg: f64,
+    tolerance: f64,
+) -> Result<(usize, usize, Option<f64>)> {
     let c = rcwa::converge(
         &profile.grating(model.shading.ior),
         lambda_nm * 1e-3,
@@ -632,7 +647,9 @@ pub fn map_numbers(
         tolerance,
         None,
     )?;
-    Ok((c.pair.te.harmonics, c.pair.te.slices))
+    let change = c.harmonic_change.max(c.slice_change);
+    let unconverged = (!c.met(tolerance)).then_some(change);
+    Ok((c.pair.te.harmonics, c.pair.te.slices, unconverged))
 }
 
 /// Computes the validity map over `thetas_deg × lambdas_nm` (rayon), ticking `progress`.
@@ -646,7 +663,7 @@ pub fn map(
 ) -> Result<Map> {
     let l_min = lambdas_nm.iter().copied().fold(f64::INFINITY, f64::min);
     let t_max = thetas_deg.iter().copied().fold(0.0, f64::max);
-    let (harmonics, slices) = map_numbers(profile, model, l_min, t_max, tolerance)?;
+    let (harmonics, slices, unconverged) = map_solve(profile, model, l_min, t_max, tolerance)?;
     let how = Solve::Fixed { harmonics, slices };
     let cells: Vec<(usize, usize)> = (0..thetas_deg.len())
         .flat_map(|i| (0..lambdas_nm.len()).map(move |j| (i, j)))
@@ -669,6 +686,7 @@ pub fn map(
         error,
         harmonics,
         slices,
+        unconverged,
     })
 }
 
@@ -725,7 +743,11 @@ pub fn limits_table(
             for &d in depths {
                 let g = Profile::sinusoid(p * lambda_um, d * lambda_um);
                 let c = check(&g, model, lambda_nm, theta, Solve::Converge(tolerance))?;
-                cells.push(percent(c.error));
+                // An unconverged cell shows its estimated error beside its value.
+                cells.push(match c.unconverged(tolerance) {
+                    Some(e) => format!("{} (±{}, unconverged)", percent(c.error), percent(e)),
+                    None => percent(c.error),
+                });
                 progress();
             }
             let _ = writeln!(out, "| {p} | {} |", cells.join(" | "));
@@ -882,12 +904,17 @@ fn summary_uncached(
         .flat_map(|&t| SUMMARY_LAMBDAS_NM.iter().map(move |&l| (t, l)))
         .filter(|&(t, l)| !cells.iter().any(|c| c.0 == t && c.1 == l))
         .collect();
+    // The largest estimated error of a solve that stopped short of the tolerance.
+    let short = std::sync::Mutex::new(None::<f64>);
     if !missing.is_empty() {
         // Each cell is cached as it ends: a run stopped before the last one (a command
         // that does not wait for its check) leaves the next run less to do.
         let done = std::sync::Mutex::new(cells);
         missing.par_iter().try_for_each(|&(t, l)| {
             let c = check(&profile, &model, l, t, Solve::Converge(MAP_TOLERANCE))?;
+            if let (Some(e), Ok(mut s)) = (c.unconverged(MAP_TOLERANCE), short.lock()) {
+                *s = Some(s.map_or(e, |m| m.max(e)));
+            }
             if let Ok(mut d) = done.lock() {
                 d.push((t, l, c.error));
                 if let Some(p) = &path {
@@ -911,8 +938,16 @@ fn summary_uncached(
         .map(|&t| format!("{} at θi ≈ {t}°", percent(worst_at(t))))
         .collect();
     let worst = thetas.iter().map(|&t| worst_at(t)).fold(0.0, f64::max);
+    let unconverged = match short.into_inner().ok().flatten() {
+        Some(e) => format!(
+            " (a rigorous solve stopped short of {} convergence: its orders ±{})",
+            percent(MAP_TOLERANCE),
+            percent(e)
+        ),
+        None => String::new(),
+    };
     Ok(format!(
-        "model check: scalar order ratios vs rigorous (RCWA, n = {}) for the {:.3} µm ridges ({:.0} % of the field), 450–650 nm: off by up to {} ({}): {}; see diffract validity",
+        "model check: scalar order ratios vs rigorous (RCWA, n = {}) for the {:.3} µm ridges ({:.0} % of the field), 450–650 nm: off by up to {} ({}){unconverged}: {}; see diffract validity",
         model.shading.ior,
         profile.period_um,
         100.0 * profile.explained,

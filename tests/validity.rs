@@ -384,3 +384,21 @@ fn the_model_check_is_cached_per_field_and_waits_no_longer_than_asked() {
     assert!(other.contains("θi ≈ 60°"), "{other}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+#[test]
+fn an_unconverged_cell_of_the_limits_table_shows_its_estimated_error() {
+    // A 2.5 µm sinusoid 0.2 µm deep at 450 nm and 30°: the solver's 128 slices leave a
+    // change of about 3 % in its orders, above a 2 % tolerance.
+    let m = model(1.5);
+    let (period, depth) = (2.5 / 0.45, 0.2 / 0.45);
+    let table =
+        validity::limits_table(&m, 450.0, &[30.0], &[period], &[depth], 0.02, || {}).unwrap();
+    assert!(
+        table.contains("unconverged") && table.contains("(±"),
+        "{table}"
+    );
+    // Converged at a looser tolerance: the plain figure.
+    let loose =
+        validity::limits_table(&m, 450.0, &[30.0], &[period], &[depth], 0.1, || {}).unwrap();
+    assert!(!loose.contains("unconverged"), "{loose}");
+}

@@ -175,6 +175,15 @@ pub fn run(args: &ValidityArgs) -> Result<()> {
         let bar = crate::progress::bar((ts.len() * ls.len()) as u64, "validity map");
         let map = validity::map(&profile, &model, &ts, &ls, validity::MAP_TOLERANCE, &bar)?;
         bar.finish_and_clear();
+        if let Some(e) = map.unconverged {
+            eprintln!(
+                "warning: validity map: the rigorous solve at its hardest cell stopped at {} orders × {} slices without converging to {}: its last refinement moved an order by {}, the estimated error of every cell",
+                2 * map.harmonics + 1,
+                map.slices,
+                validity::percent(validity::MAP_TOLERANCE),
+                validity::percent(e)
+            );
+        }
         let title = format!(
             "Scalar model vs RCWA: {}, Λ = {:.3} µm, d = {:.3} µm, n = {}",
             crate::plot::source_name(&material.heightfield),
