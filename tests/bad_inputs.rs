@@ -9,9 +9,12 @@
 //! be found before the device is opened, so a missing driver message instead of the expected
 //! one means the check came too late.
 
-use std::collections::BTreeMap;
+mod files_util;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
+
+use files_util::snapshot;
 
 /// What a case must produce.
 #[derive(Clone, Copy)]
@@ -1421,34 +1424,6 @@ const SCENE_HF_ONLY: &str =
     "[material]\nheightfield = \"hf.png\"\nterms = 1\n\n[output]\nwidth = 8\nheight = 8\n";
 
 // ---- the runner ---------------------------------------------------------------------------
-
-/// Every file under `dir` (not following links), with its bytes or link target.
-fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        let Ok(rd) = std::fs::read_dir(&d) else {
-            continue;
-        };
-        for e in rd.flatten() {
-            let p = e.path();
-            let meta = std::fs::symlink_metadata(&p).unwrap();
-            if meta.is_dir() {
-                out.insert(p.clone(), b"<dir>".to_vec());
-                stack.push(p);
-            } else if meta.file_type().is_symlink() {
-                let t = std::fs::read_link(&p).unwrap();
-                out.insert(p, t.to_string_lossy().as_bytes().to_vec());
-            } else if !meta.is_file() {
-                // A FIFO would block a read: its kind is what is compared.
-                out.insert(p, b"<not a regular file>".to_vec());
-            } else {
-                out.insert(p.clone(), std::fs::read(&p).unwrap());
-            }
-        }
-    }
-    out
-}
 
 /// A case that runs longer than this hangs (a FIFO read, a loop): it fails and is killed.
 const HANG_SECS: u64 = 120;

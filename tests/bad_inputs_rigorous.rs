@@ -4,12 +4,14 @@
 //! before any work, with every file left as it was; an answer the solver could not
 //! converge carries a `warning:` line with its estimated error.
 
+mod files_util;
 mod gpu_util;
 
-use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 use std::time::{Duration, Instant};
+
+use files_util::snapshot;
 
 fn scratch(name: &str) -> PathBuf {
     let d = std::env::temp_dir().join(format!("diffract-rig-{name}-{}", std::process::id()));
@@ -28,36 +30,6 @@ fn diffract(args: &[&str], vulkan: bool) -> Command {
             .env("VK_DRIVER_FILES", "/nonexistent/icd.json");
     }
     c
-}
-
-/// Every file under `dir` (not following links), with its bytes or link target.
-fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
-    let mut out = BTreeMap::new();
-    let mut stack = vec![dir.to_path_buf()];
-    while let Some(d) = stack.pop() {
-        let Ok(rd) = std::fs::read_dir(&d) else {
-            continue;
-        };
-        for e in rd.flatten() {
-            let p = e.path();
-            let meta = std::fs::symlink_metadata(&p).unwrap();
-            if meta.is_dir() {
-                out.insert(p.clone(), b"<dir>".to_vec());
-                stack.push(p);
-            } else if meta.file_type().is_symlink() {
-                out.insert(
-                    p.clone(),
-                    std::fs::read_link(&p)
-                        .unwrap()
-                        .into_os_string()
-                        .into_encoded_bytes(),
-                );
-            } else {
-                out.insert(p.clone(), std::fs::read(&p).unwrap_or_default());
-            }
-        }
-    }
-    out
 }
 
 /// Runs `cmd` and checks a refusal: exit 1, one `error:` line holding `needle`, nothing
