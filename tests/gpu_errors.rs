@@ -186,3 +186,49 @@ fn the_completion_line_names_the_png_beside_the_exr() {
     );
     assert!(png.exists());
 }
+
+/// A BRDF map's PNG without `--exposure` gets one chosen from the map and says which: its
+/// diffraction shows (many lit pixels), where exposure 1 leaves the map nearly black; an
+/// exposure asked for is kept and not said.
+#[test]
+fn a_map_png_without_an_exposure_shows_its_orders_and_says_its_exposure() {
+    let Some(_) = renderer() else { return };
+    let run = |name: &str, extra: &[&str]| {
+        let out = tmp(name);
+        let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+            .args([
+                "render",
+                "--brdf-map",
+                "--size",
+                "65",
+                "--table-step-nm",
+                "20",
+                "--table-texel",
+                "0.01",
+                "--no-cache",
+                "-o",
+            ])
+            .arg(&out)
+            .args(extra)
+            .env("DIFFRACT_VALIDATION", "1")
+            .output()
+            .expect("run diffract");
+        let err = String::from_utf8_lossy(&o.stderr).into_owned();
+        assert!(o.status.success(), "{err}");
+        let img = image::open(&out).unwrap().to_rgb8();
+        let lit = img.pixels().filter(|p| p.0.iter().any(|&c| c > 24)).count();
+        (err, lit)
+    };
+    let (said, lit_auto) = run("auto.png", &[]);
+    let line = said
+        .lines()
+        .find(|l| l.starts_with("exposure of the PNG: "))
+        .unwrap_or_else(|| panic!("no exposure line:\n{said}"));
+    assert!(line.contains("--exposure sets it"), "{line}");
+    let (said, lit_one) = run("one.png", &["--exposure", "1"]);
+    assert!(!said.contains("exposure of the PNG"), "{said}");
+    assert!(
+        lit_auto > 4 * lit_one.max(1),
+        "lit pixels: chosen {lit_auto}, at 1 {lit_one}"
+    );
+}

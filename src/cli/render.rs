@@ -166,11 +166,14 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let timing = Timing::of(frame.gpu_ms, repeated);
     frame.gpu_ms = timing.gpu_ms;
     all_finite(&frame, &args.out)?;
+    let mut chosen_exposure = None;
     let what = if inputs.is_some() {
         crate::image_io::write_image(&args.out, frame.width, frame.height, &frame.rgb, 1.0)?;
         "scene".to_string()
     } else {
-        write_map(args, &frame)?;
+        if let Some(Exposure::Auto(e)) = write_map(args, &frame)? {
+            chosen_exposure = Some(e);
+        }
         match args.lambda_nm {
             Some(l) => format!("BRDF map ρ at {l} nm"),
             None => "BRDF map (XYZ)".to_string(),
@@ -208,6 +211,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         for line in report.details() {
             eprintln!("{line}");
         }
+    }
+    if let Some(e) = chosen_exposure {
+        eprintln!(
+            "exposure of the PNG: {} (the 99.9th percentile of the lit pixels' luminance at half of white; --exposure sets it)",
+            crate::plot::format_tick(f64::from(e))
+        );
     }
     eprintln!("{model_check}");
     Ok(())
@@ -348,8 +357,13 @@ fn print_result(
 
 /// Writes a BRDF map: an EXR holds the raw channels (XYZ or ρ); a PNG shows XYZ as sRGB
 /// (or ρ as grey). `--png` with an EXR output adds the PNG beside it.
-fn write_map(args: &RenderArgs, frame: &Picture) -> Result<()> {
-    let exposure = args.scene.exposure.unwrap_or(1.0);
+fn write_map(args: &RenderArgs, frame: &Picture) -> Result<Option<Exposure>> {
+    let exposure = match args.scene.exposure {
+        Some(e) => Exposure::Given(e),
+        None => Exposure::Auto(auto_exposure(frame, args.lambda_nm.is_none())),
+    };
+    let shown = exposure;
+    let exposure = exposure.value();
     let viewable = || -> Vec<[f32; 3]> {
         if args.lambda_nm.is_some() {
             frame.rgb.clone()
@@ -373,8 +387,9 @@ fn write_map(args: &RenderArgs, frame: &Picture) -> Result<()> {
                     &viewable(),
                     exposure,
                 )?;
+                return Ok(Some(shown));
             }
-            Ok(())
+            Ok(None)
         }
         _ => crate::image_io::write_image(
             &args.out,
@@ -382,8 +397,44 @@ fn write_map(args: &RenderArgs, frame: &Picture) -> Result<()> {
             frame.height,
             &viewable(),
             exposure,
-        ),
+        )
+        .map(|()| Some(shown)),
     }
+}
+
+/// The exposure of a BRDF map's PNG: the one asked for, or one chosen from the map.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Exposure {
+    Given(f32),
+    Auto(f32),
+}
+
+impl Exposure {
+    fn value(self) -> f32 {
+        match self {
+            Exposure::Given(e) | Exposure::Auto(e) => e,
+        }
+    }
+}
+
+/// A BRDF map's values span decades (the specular peak, its orders, their tails), so no
+/// fixed exposure shows them: the one that puts the 99.9th percentile of the lit pixels'
+/// luminance (Y of XYZ, or ρ) at half of white, within the exposures `--exposure` takes
+/// (1 for a dark map). The brightest orders then show, the specular peak clips.
+fn auto_exposure(frame: &Picture, xyz: bool) -> f32 {
+    let mut lit: Vec<f32> = frame
+        .rgb
+        .iter()
+        .map(|p| if xyz { p[1] } else { p[0] })
+        .filter(|y| y.is_finite() && *y > 0.0)
+        .collect();
+    if lit.is_empty() {
+        return 1.0;
+    }
+    let k = ((lit.len() - 1) as f64 * 0.999).round() as usize;
+    let (_, y, _) = lit.select_nth_unstable_by(k, f32::total_cmp);
+    let (lo, hi) = (crate::scene::MIN_EXPOSURE, crate::scene::MAX_EXPOSURE);
+    (0.5 / *y).clamp(lo, hi)
 }
 
 /// No variant's numbers are written unchecked: a pixel that is not a finite number is a

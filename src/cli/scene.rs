@@ -19,7 +19,7 @@ pub struct SceneArgs {
     pub height: Option<u32>,
     /// Exposure (linear multiplier before the sRGB curve): overrides the scene's (the
     /// viewer's first value); for BRDF maps it scales the PNG only (the EXR keeps the raw
-    /// values).
+    /// values) [default for a map's PNG: chosen from the map, and said].
     #[arg(long, allow_negative_numbers = true)]
     pub exposure: Option<f32>,
 }
