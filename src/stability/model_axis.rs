@@ -81,11 +81,28 @@ pub fn run(
                         spent += t.elapsed().as_secs_f64();
                         solved += 1;
                         cell.error = Some(c.error);
-                        cell.note = c.error_of;
+                        cell.note = c.error_of.clone();
+                        // A solve short of the tolerance says so, with its estimated error.
+                        let short = c.unconverged(validity::MAP_TOLERANCE).map(|e| {
+                            format!(
+                                "unconverged at {} orders × {} slices: its orders ±{}",
+                                2 * c.harmonics + 1,
+                                c.slices,
+                                validity::percent(e)
+                            )
+                        });
+                        if let Some(s) = &short {
+                            cell.note = if cell.note.is_empty() {
+                                s.clone()
+                            } else {
+                                format!("{}; {s}", cell.note)
+                            };
+                        }
                         eprintln!(
-                            "stability: model h_max {h} µm, θi {theta}°, λ {lambda} nm: {} ({}), {:.1} s",
+                            "stability: model h_max {h} µm, θi {theta}°, λ {lambda} nm: {} ({}){}, {:.1} s",
                             validity::percent(c.error),
                             cell.verdict(),
+                            short.map_or(String::new(), |s| format!(", {s}")),
                             t.elapsed().as_secs_f64()
                         );
                     }
