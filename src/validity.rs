@@ -972,17 +972,11 @@ pub fn percent(e: f64) -> String {
 /// material's numbers the check reads and the angles asked for.
 fn line_key(material: &Material, hf: &crate::heightfield::HeightField, thetas_deg: &[f64]) -> u64 {
     let model = ScalarModel::of(material);
-    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
-    let mut eat = |w: f64| {
-        for b in w.to_le_bytes() {
-            h ^= u64::from(b);
-            h = h.wrapping_mul(0x0100_0000_01b3);
-        }
-    };
-    // "line", format 1.
-    eat(f64::from(0x6c69_6e65u32));
-    eat(1.0);
-    for w in [
+    let mut h = crate::cache::Fnv1a::new();
+    // "line", format 1; then the numbers, the angles and the heights as f64 bits.
+    let words = [
+        f64::from(0x6c69_6e65u32),
+        1.0,
         hf.nx() as f64,
         hf.ny() as f64,
         hf.extent_um().0,
@@ -993,16 +987,11 @@ fn line_key(material: &Material, hf: &crate::heightfield::HeightField, thetas_de
         f64::from(u8::from(model.shading.shadowing)),
         MAP_TOLERANCE,
         SUMMARY_MIN_PERIODS,
-    ] {
-        eat(w);
+    ];
+    for &w in words.iter().chain(thetas_deg).chain(hf.heights_um()) {
+        h.u64(w.to_bits());
     }
-    for &t in thetas_deg {
-        eat(t);
-    }
-    for &z in hf.heights_um() {
-        eat(z);
-    }
-    h
+    h.finish()
 }
 
 fn read_line(path: &Path) -> Option<String> {
