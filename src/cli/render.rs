@@ -122,20 +122,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     renderer.set_leave_out(!args.keep_all);
     let cache_dir = args.cache.dir();
     renderer.set_cache_dir(cache_dir.clone());
-    // How far the scalar model is from Maxwell's equations for this material: at the map's
-    // light angle, or over the angles a scene's surface sees the light at. It runs beside
-    // the render and is cached per material.
-    let thetas = if args.brdf_map {
-        vec![args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I)]
-    } else {
-        vec![0.0, 30.0, 60.0]
-    };
-    let model_check = crate::validity::ModelCheck::start(
-        material.clone(),
-        heightfield.clone(),
-        thetas,
-        cache_dir.clone(),
-    );
+    let model_check = start_model_check(args, &material, &heightfield, cache_dir.clone());
     let prepared = material.prepare_planned_deferred(heightfield, plan, cache_dir.as_deref())?;
     // Table variants show their own bar while they build; the draw after it is short.
     let spin = variant
@@ -220,6 +207,23 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     eprintln!("{model_check}");
     Ok(())
+}
+
+/// How far the scalar model is from Maxwell's equations for this material: at the map's
+/// light angle, or over the angles a scene's surface sees the light at. It runs beside the
+/// render and is cached per material.
+fn start_model_check(
+    args: &RenderArgs,
+    material: &crate::material::Material,
+    heightfield: &crate::heightfield::HeightField,
+    cache_dir: Option<std::path::PathBuf>,
+) -> crate::validity::ModelCheck {
+    let thetas = if args.brdf_map {
+        vec![args.theta_i.unwrap_or(crate::render::DEFAULT_MAP_THETA_I)]
+    } else {
+        vec![0.0, 30.0, 60.0]
+    };
+    crate::validity::ModelCheck::start(material.clone(), heightfield.clone(), thetas, cache_dir)
 }
 
 /// `render --brdf-map --env SOURCE`: the environment-lit BRDF map (linear-sRGB radiance ×
