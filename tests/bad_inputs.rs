@@ -1430,23 +1430,7 @@ const HANG_SECS: u64 = 120;
 
 /// Runs `cmd` to its end and collects its output, or kills it after `secs` (`None`).
 fn output_within(cmd: &mut Command, secs: u64) -> Option<Output> {
-    use std::io::Read;
-    use std::process::Stdio;
-    let mut child = cmd
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let drain = |mut r: Box<dyn Read + Send>| {
-        std::thread::spawn(move || {
-            let mut v = Vec::new();
-            let _ = r.read_to_end(&mut v);
-            v
-        })
-    };
-    let out = drain(Box::new(child.stdout.take().unwrap()));
-    let err = drain(Box::new(child.stderr.take().unwrap()));
+    let (mut child, drained) = files_util::spawn_drained(cmd);
     let start = std::time::Instant::now();
     let status = loop {
         if let Some(s) = child.try_wait().unwrap() {
@@ -1459,10 +1443,11 @@ fn output_within(cmd: &mut Command, secs: u64) -> Option<Output> {
         }
         std::thread::sleep(std::time::Duration::from_millis(20));
     };
+    let (stdout, stderr) = drained.join();
     Some(Output {
         status,
-        stdout: out.join().unwrap(),
-        stderr: err.join().unwrap(),
+        stdout,
+        stderr,
     })
 }
 

@@ -2,6 +2,8 @@
 //! Ctrl-C, cleaned after a crash), its size cap and `diffract cache list|clear`, and the
 //! memory limit of the precompute, all through the binary.
 
+mod files_util;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
@@ -263,23 +265,8 @@ fn precompute_beyond_the_memory_limit_is_refused_before_any_work() {
 // The child is reaped by `wait4` below, which clippy does not see.
 #[allow(clippy::zombie_processes)]
 fn peak_kb(cmd: &mut Command) -> (u64, std::process::Output) {
-    use std::io::Read;
     use std::os::unix::process::ExitStatusExt;
-    let mut child = cmd
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let drain = |mut r: Box<dyn Read + Send>| {
-        std::thread::spawn(move || {
-            let mut v = Vec::new();
-            r.read_to_end(&mut v).unwrap();
-            v
-        })
-    };
-    let out = drain(Box::new(child.stdout.take().unwrap()));
-    let err = drain(Box::new(child.stderr.take().unwrap()));
+    let (child, drained) = files_util::spawn_drained(cmd);
     let pid = child.id() as libc::pid_t;
     let mut status = 0;
     // SAFETY: an all-zero `rusage` is a valid value of this plain C struct.
@@ -294,10 +281,11 @@ fn peak_kb(cmd: &mut Command) -> (u64, std::process::Output) {
         let e = std::io::Error::last_os_error();
         assert_eq!(e.kind(), std::io::ErrorKind::Interrupted, "wait4: {e}");
     }
+    let (stdout, stderr) = drained.join();
     let o = std::process::Output {
         status: std::process::ExitStatus::from_raw(status),
-        stdout: out.join().unwrap(),
-        stderr: err.join().unwrap(),
+        stdout,
+        stderr,
     };
     // Linux reports ru_maxrss in kB.
     (usage.ru_maxrss as u64, o)

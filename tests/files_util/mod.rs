@@ -1,8 +1,48 @@
-//! File helpers shared by the bad-input tests: what a directory holds, to show that a
-//! refused command changed nothing.
+//! Helpers shared by the bad-input and hardening tests: what a directory holds, to show
+//! that a refused command changed nothing, and a child whose output is read while it runs.
+
+// Each test binary that includes this module uses its own part of it.
+#![allow(dead_code)]
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::thread::JoinHandle;
+
+/// A child's stdout and stderr, read to their ends on threads of their own, so that a
+/// child writing more than a pipe holds cannot block while the caller waits for it.
+pub struct Drained {
+    out: JoinHandle<Vec<u8>>,
+    err: JoinHandle<Vec<u8>>,
+}
+
+impl Drained {
+    /// Stdout and stderr, once the child has closed them.
+    pub fn join(self) -> (Vec<u8>, Vec<u8>) {
+        (self.out.join().unwrap(), self.err.join().unwrap())
+    }
+}
+
+/// Starts `cmd` with no stdin and its stdout and stderr [`Drained`].
+pub fn spawn_drained(cmd: &mut Command) -> (Child, Drained) {
+    use std::io::Read;
+    let mut child = cmd
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let drain = |mut r: Box<dyn Read + Send>| {
+        std::thread::spawn(move || {
+            let mut v = Vec::new();
+            r.read_to_end(&mut v).unwrap();
+            v
+        })
+    };
+    let out = drain(Box::new(child.stdout.take().unwrap()));
+    let err = drain(Box::new(child.stderr.take().unwrap()));
+    (child, Drained { out, err })
+}
 
 /// Every file under `dir` (not following links), with its bytes or link target.
 pub fn snapshot(dir: &Path) -> BTreeMap<PathBuf, Vec<u8>> {
