@@ -162,7 +162,8 @@ impl crate::report::Report for Deadline {
         use std::sync::atomic::Ordering;
         self.total
             .fetch_add(bar.length().unwrap_or(0), Ordering::Relaxed);
-        bar
+        // Shown as the command line shows every bar (lines every 10 s off a terminal).
+        crate::report::Stderr.progress(bar)
     }
 
     fn checkpoint(&self) {
