@@ -49,7 +49,7 @@ use crate::light::env::EnvMap;
 use crate::light::DiskSample;
 use crate::Result;
 
-use super::table::{sample_g_kept, ChebyshevW, Slices, TableSpec};
+use super::table::{sample_g_lines, ChebyshevW, Slices, TableSpec};
 use super::{gain, schlick_r0, Shading};
 
 /// `A_λ = k²σs²/π` times `R0` when Fresnel is on: `f_r = absolute_factor · ρ` (module notes).
@@ -131,7 +131,7 @@ impl FlatLobe {
 }
 
 /// The radiance-weighted `G` of a height field as the f64 `chebyshev-w` model holds it:
-/// each wavelength's `|P̂|²` sampled exactly ([`sample_g_kept`]) and summed with
+/// each wavelength's `|P̂|²` sampled exactly ([`sample_g_lines`]) and summed with
 /// [`radiance_scale`] over the spec's region, Chebyshev in `w`, cubic splines in `(u, v)`.
 pub fn radiance_table(
     hf: &HeightField,
@@ -155,31 +155,14 @@ pub fn radiance_slices(
     let table = ColourTable::new(spec.step_nm)?;
     let scale = radiance_scale(&table, coherence_um, shading);
     let nodes = ChebyshevW::nodes(spec);
-    let mut sum: Option<Slices> = None;
-    for (j, s) in scale.iter().enumerate() {
-        let one = sample_g_kept(hf, coherence_um, spec, &nodes, Some(&[j]), progress)?;
-        match &mut sum {
-            None => {
-                let mut one = one;
-                for plane in &mut one.data {
-                    plane
-                        .iter_mut()
-                        .for_each(|g| *g = [0, 1, 2].map(|c| g[c] * s[c]));
-                }
-                sum = Some(one);
-            }
-            Some(acc) => {
-                for (a, o) in acc.data.iter_mut().zip(&one.data) {
-                    for (x, y) in a.iter_mut().zip(o) {
-                        for c in 0..3 {
-                            x[c] += y[c] * s[c];
-                        }
-                    }
-                }
-            }
-        }
-    }
-    Ok(sum.expect("a colour table has at least two lines"))
+    let lines: Vec<(f64, [f64; 3])> = table
+        .lambdas_nm
+        .iter()
+        .zip(&table.weights)
+        .zip(&scale)
+        .map(|((&l, w), s)| (l, [0, 1, 2].map(|c| w[c] * s[c])))
+        .collect();
+    sample_g_lines(hf, coherence_um, spec, &nodes, &lines, progress)
 }
 
 /// The (w node, wavelength) planes [`radiance_slices`] samples: its progress's length.

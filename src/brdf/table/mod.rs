@@ -29,5 +29,5 @@ pub use nodes::{
 };
 pub use region::{Region, Slices, TableSpec, MAX_NODES_UV, MAX_NODES_W, MAX_SAMPLES};
 pub use representation::{clenshaw, ChebyshevW, Dhillon, GTable, Volume, F32_ROUNDOFF};
-pub use sample::{sample_g, sample_g_kept};
+pub use sample::{sample_g, sample_g_kept, sample_g_lines};
 pub use spline::{spline_plane, spline_weights};

@@ -43,6 +43,21 @@ pub fn sample_g_kept(
     keep: Option<&[usize]>,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
+    let samples = spec.spectral_samples(keep)?;
+    sample_g_lines(hf, coherence_um, spec, w_nodes, &samples, progress)
+}
+
+/// [`sample_g`] with the spectral lines given: `Σ_λ |P̂_λ|²·weight_λ` over `lines`
+/// (`(λ in nm, XYZ weight)`), with every `(w, λ)` job reading the one shared term band. A
+/// weight may carry more than the colour table's (the environment's radiance scale).
+pub fn sample_g_lines(
+    hf: &HeightField,
+    coherence_um: f64,
+    spec: &TableSpec,
+    w_nodes: &[f64],
+    lines: &[(f64, [f64; 3])],
+    progress: &(dyn Fn() + Sync),
+) -> Result<Slices> {
     let (nu, nv) = spec.validate()?;
     if !(coherence_um.is_finite() && coherence_um > 0.0) {
         return Err(Error::invalid(
@@ -50,7 +65,10 @@ pub fn sample_g_kept(
             format!("{coherence_um} µm; must be positive"),
         ));
     }
-    let samples = spec.spectral_samples(keep)?;
+    if lines.is_empty() {
+        return Err(Error::invalid("table build", "no spectral lines to sum"));
+    }
+    let samples = lines;
     let (u, v) = spec.node_coords(nu, nv);
     let mut spectrum = PhaseSpectrum::new(hf, coherence_um);
     let (l_min, l_max) = samples.iter().fold((f64::INFINITY, 0.0f64), |(a, b), s| {
@@ -68,7 +86,7 @@ pub fn sample_g_kept(
     let spectrum = spectrum;
     let data = w_nodes
         .iter()
-        .map(|&w| spectrum.slice(&u, &v, w, &samples, progress))
+        .map(|&w| spectrum.slice(&u, &v, w, samples, progress))
         .collect();
     Ok(Slices {
         nu,
