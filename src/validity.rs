@@ -814,9 +814,21 @@ impl ModelCheck {
     ) -> Self {
         let (tx, rx) = std::sync::mpsc::channel();
         std::thread::spawn(move || {
-            let line = match summary_of(&material, &hf, &thetas_deg, cache_dir.as_deref()) {
+            background_priority();
+            let check = || match summary_of(&material, &hf, &thetas_deg, cache_dir.as_deref()) {
                 Ok(line) => line,
                 Err(e) => format!("model check: not available ({e}); see diffract validity"),
+            };
+            // Its parallel loops run on a pool of its own (the caller's table build keeps
+            // the global one), on this one low-priority thread.
+            let line = match rayon::ThreadPoolBuilder::new()
+                .num_threads(1)
+                .thread_name(|_| "model check".into())
+                .start_handler(|_| background_priority())
+                .build()
+            {
+                Ok(pool) => pool.install(check),
+                Err(_) => check(),
             };
             let _ = tx.send(line);
         });
@@ -833,6 +845,18 @@ impl ModelCheck {
                 wait.as_secs_f64()
             )
         })
+    }
+}
+
+/// Lowers the calling thread's scheduling priority to the lowest (nice 19, Linux), so a
+/// check beside a render takes only the CPU the render leaves idle. Best effort.
+fn background_priority() {
+    #[cfg(target_os = "linux")]
+    // SAFETY: gettid and setpriority take no pointers; on Linux PRIO_PROCESS with a thread
+    // id sets that thread's nice value only.
+    unsafe {
+        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
+        libc::setpriority(libc::PRIO_PROCESS, tid, 19);
     }
 }
 

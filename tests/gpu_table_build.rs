@@ -214,7 +214,8 @@ fn float32_device_table_stays_within_its_bound() {
 }
 
 /// `render --table-build` builds where it is told and says so on its `table:` line; the
-/// two builds give the same picture.
+/// builds give the same picture. (This small table is cheaper per job by direct transforms
+/// than through the term band, so the fast CPU build is float64 here and says so.)
 #[test]
 fn render_says_where_the_table_was_built() {
     if device().is_none() {
@@ -225,6 +226,7 @@ fn render_says_where_the_table_was_built() {
     let mut pictures = Vec::new();
     for (build, want) in [
         ("cpu", "built on CPU (f64) in "),
+        ("cpu-f64", "built on CPU (f64) in "),
         ("device", "built on device ("),
     ] {
         let out = dir.join(format!("{build}.png"));
@@ -265,12 +267,14 @@ fn render_says_where_the_table_was_built() {
         pictures.push(image::open(&out).unwrap().to_rgb8());
     }
     // The tables agree to float32 rounding, so the 8-bit pictures are the same.
-    let differ = pictures[0]
-        .pixels()
-        .zip(pictures[1].pixels())
-        .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 1))
-        .count();
-    assert_eq!(differ, 0);
+    for other in &pictures[1..] {
+        let differ = pictures[0]
+            .pixels()
+            .zip(other.pixels())
+            .filter(|(a, b)| a.0.iter().zip(b.0).any(|(x, y)| x.abs_diff(y) > 1))
+            .count();
+        assert_eq!(differ, 0);
+    }
     let bad = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
         .args(["render", "--table-build", "gpu"])
         .output()

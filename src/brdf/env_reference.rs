@@ -49,7 +49,8 @@ use crate::light::env::EnvMap;
 use crate::light::DiskSample;
 use crate::Result;
 
-use super::table::{sample_g_lines, ChebyshevW, Slices, TableSpec};
+use super::table::{sample_g_lines_in, ChebyshevW, Sampled, Slices, TableSpec};
+use super::truncation::Precision;
 use super::{gain, schlick_r0, Shading};
 
 /// `A_λ = k²σs²/π` times `R0` when Fresnel is on: `f_r = absolute_factor · ρ` (module notes).
@@ -131,7 +132,7 @@ impl FlatLobe {
 }
 
 /// The radiance-weighted `G` of a height field as the f64 `chebyshev-w` model holds it:
-/// each wavelength's `|P̂|²` sampled exactly ([`sample_g_lines`]) and summed with
+/// each wavelength's `|P̂|²` sampled exactly ([`sample_g_lines_in`]) and summed with
 /// [`radiance_scale`] over the spec's region, Chebyshev in `w`, cubic splines in `(u, v)`.
 pub fn radiance_table(
     hf: &HeightField,
@@ -152,6 +153,19 @@ pub fn radiance_slices(
     spec: &TableSpec,
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
+    radiance_slices_in(hf, coherence_um, shading, spec, Precision::F64, progress).map(|s| s.slices)
+}
+
+/// [`radiance_slices`] with the sums in `precision` ([`sample_g_lines_in`]: float32 is the
+/// fast build, its measured difference from float64 in [`Sampled::probe`]).
+pub fn radiance_slices_in(
+    hf: &HeightField,
+    coherence_um: f64,
+    shading: &Shading,
+    spec: &TableSpec,
+    precision: Precision,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Sampled> {
     let table = ColourTable::new(spec.step_nm)?;
     let scale = radiance_scale(&table, coherence_um, shading);
     let nodes = ChebyshevW::nodes(spec);
@@ -162,7 +176,7 @@ pub fn radiance_slices(
         .zip(&scale)
         .map(|((&l, w), s)| (l, [0, 1, 2].map(|c| w[c] * s[c])))
         .collect();
-    sample_g_lines(hf, coherence_um, spec, &nodes, &lines, progress)
+    sample_g_lines_in(hf, coherence_um, spec, &nodes, &lines, precision, progress)
 }
 
 /// The (w node, wavelength) planes [`radiance_slices`] samples: its progress's length.

@@ -337,7 +337,11 @@ fn table_line(lighting: &EnvLighting, spec: &TableSpec, built: bool) -> String {
     let t = &lighting.table;
     let mb = (t.nu + 2) * (t.nv + 2) * t.coeffs.len() * 12;
     let origin = if built {
-        format!("built on the CPU in {:.1} s", lighting.build_ms / 1e3)
+        let sums = match lighting.probe {
+            Some(e) => format!(" (f32 sums, within {e:.1e} of f64 at its peak)"),
+            None => String::new(),
+        };
+        format!("built on the CPU{sums} in {:.1} s", lighting.build_ms / 1e3)
     } else {
         format!(
             "samples read from the cache, prepared in {:.1} s",

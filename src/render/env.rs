@@ -18,7 +18,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
-use crate::brdf::env_reference::{absolute_factor, radiance_planes, radiance_slices};
+use crate::brdf::env_reference::{absolute_factor, radiance_planes, radiance_slices_in};
 use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, TableSpec};
 use crate::brdf::Shading;
 use crate::colour::{linear_srgb_to_xyz, ColourTable};
@@ -200,6 +200,9 @@ pub struct EnvLighting {
     /// Chebyshev terms sampled but left out ([`TERM_TOLERANCE`]).
     pub dropped: usize,
     pub build_ms: f64,
+    /// A fresh float32 build's measured difference from float64, relative to the peak
+    /// ([`crate::brdf::table::Sampled::probe`]); `None` for a float64 build or a cached one.
+    pub probe: Option<f64>,
 }
 
 /// The most the Chebyshev terms left out of an environment table may add to `G`, relative
@@ -249,6 +252,7 @@ impl EnvLighting {
             shading.fresnel,
             shading.ior.to_bits()
         );
+        let probe = std::cell::Cell::new(None);
         let (slices, cached) = crate::brdf::table_cache::sample_g_cached_by(
             hf,
             coherence_um,
@@ -256,15 +260,24 @@ impl EnvLighting {
             &ChebyshevW::nodes(spec),
             None,
             dir,
-            Some(&tag),
+            Some(&format!("{tag}, f32 sums")),
             report,
             &|| {
                 let bar = indicatif::ProgressBar::new(radiance_planes(spec)?)
                     .with_message("environment table");
                 let bar = report.progress(bar);
-                let slices = radiance_slices(hf, coherence_um, shading, spec, &|| bar.inc(1));
+                let sampled = radiance_slices_in(
+                    hf,
+                    coherence_um,
+                    shading,
+                    spec,
+                    crate::brdf::truncation::Precision::F32,
+                    &|| bar.inc(1),
+                );
                 bar.finish_and_clear();
-                slices
+                let sampled = sampled?;
+                probe.set(sampled.probe);
+                Ok(sampled.slices)
             },
         )?;
         let mut table = ChebyshevW::from_nodes(spec.region, &slices);
@@ -294,6 +307,7 @@ impl EnvLighting {
             mirror_scale,
             dropped,
             build_ms: start.elapsed().as_secs_f64() * 1e3,
+            probe: probe.get(),
         };
         Ok((lighting, cached))
     }

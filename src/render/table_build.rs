@@ -690,8 +690,11 @@ pub enum TableBuild {
     /// Vulkan device itself runs on the CPU (lavapipe), where the CPU build is faster.
     #[default]
     Auto,
-    /// The CPU, in float64 (the reference).
+    /// The CPU, its sums in float32 (the fast build; its report states its measured
+    /// difference from float64).
     Cpu,
+    /// The CPU in float64 throughout (the reference).
+    CpuF64,
     /// The device: float64 where it has shaderFloat64, else float32.
     Device,
     /// The device in float32, even where it has float64 (to measure float32's error).
@@ -702,7 +705,7 @@ impl TableBuild {
     /// The device precision this choice builds in on `dev`; `None`: the CPU.
     pub fn on(self, dev: &Device) -> Option<Precision> {
         match self {
-            TableBuild::Cpu => None,
+            TableBuild::Cpu | TableBuild::CpuF64 => None,
             TableBuild::Device => Some(Precision::best(dev)),
             TableBuild::DeviceF32 => Some(Precision::F32),
             TableBuild::Auto => {
@@ -715,8 +718,13 @@ impl TableBuild {
 /// How a table's samples were obtained, for the render and profile reports.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Built {
-    /// Built on the CPU in float64, in `seconds`.
-    Cpu { seconds: f64 },
+    /// Built on the CPU in `seconds`, its sums in `precision`; a float32 build's largest
+    /// difference from float64 over its probe, relative to the probe's peak.
+    Cpu {
+        seconds: f64,
+        precision: crate::brdf::truncation::Precision,
+        probe: Option<f64>,
+    },
     /// Built on the device `device` in `precision`, in `seconds`.
     Device {
         device: String,
@@ -730,7 +738,15 @@ pub enum Built {
 impl std::fmt::Display for Built {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Built::Cpu { seconds } => write!(f, "built on CPU (f64) in {seconds:.1} s"),
+            Built::Cpu {
+                seconds,
+                probe: Some(e),
+                ..
+            } => write!(
+                f,
+                "built on CPU (f32 sums, within {e:.1e} of f64 at its peak) in {seconds:.1} s"
+            ),
+            Built::Cpu { seconds, .. } => write!(f, "built on CPU (f64) in {seconds:.1} s"),
             Built::Device {
                 device,
                 precision,
@@ -768,11 +784,32 @@ pub fn sample_g_built(
 ) -> Result<(Slices, Built)> {
     let precision = build.on(dev);
     let start = std::time::Instant::now();
+    let sums = match build {
+        TableBuild::CpuF64 => crate::brdf::truncation::Precision::F64,
+        _ => crate::brdf::truncation::Precision::F32,
+    };
+    let cpu = std::cell::Cell::new(None);
     let make = || match precision {
-        None => crate::brdf::table::sample_g_kept(hf, coherence_um, spec, w_nodes, keep, progress),
+        None => {
+            let s = crate::brdf::table::sample_g_kept_in(
+                hf,
+                coherence_um,
+                spec,
+                w_nodes,
+                keep,
+                sums,
+                progress,
+            )?;
+            cpu.set(Some((s.precision, s.probe)));
+            Ok(s.slices)
+        }
         Some(p) => sample_g_device(dev, hf, coherence_um, spec, w_nodes, keep, p, progress),
     };
-    let tag = (precision == Some(Precision::F32)).then_some("device f32");
+    let tag = match (precision, sums) {
+        (Some(Precision::F32), _) => Some("device f32"),
+        (None, crate::brdf::truncation::Precision::F32) => Some("cpu f32 sums"),
+        _ => None,
+    };
     let (slices, cached) = crate::brdf::table_cache::sample_g_cached_by(
         hf,
         coherence_um,
@@ -787,7 +824,14 @@ pub fn sample_g_built(
     let seconds = start.elapsed().as_secs_f64();
     let built = match (cached, precision) {
         (true, _) => Built::Cached,
-        (false, None) => Built::Cpu { seconds },
+        (false, None) => {
+            let (precision, probe) = cpu.get().unwrap_or((sums, None));
+            Built::Cpu {
+                seconds,
+                precision,
+                probe,
+            }
+        }
         (false, Some(precision)) => Built::Device {
             device: dev.info.name.clone(),
             precision,

@@ -29,5 +29,8 @@ pub use nodes::{
 };
 pub use region::{Region, Slices, TableSpec, MAX_NODES_UV, MAX_NODES_W, MAX_SAMPLES};
 pub use representation::{clenshaw, ChebyshevW, Dhillon, GTable, Volume, F32_ROUNDOFF};
-pub use sample::{sample_g, sample_g_kept, sample_g_lines};
+pub use sample::{
+    sample_g, sample_g_kept, sample_g_kept_in, sample_g_lines, sample_g_lines_in, Sampled,
+    FAST_BUILD_TOLERANCE,
+};
 pub use spline::{spline_plane, spline_weights};

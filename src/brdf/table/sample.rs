@@ -1,18 +1,26 @@
-//! `G` sampled exactly in f64 (MODEL §7): the windowed spectrum of `exp(i·s·h)` from one FFT
-//! of the phase field per `(w, λ)`, or from the shared Jacobi–Anger band of Chebyshev-term
-//! spectra, with the Gaussian window applied at the lookups by AVX2 kernels where the CPU
-//! has them.
+//! `G` sampled exactly (MODEL §7): the windowed spectrum of `exp(i·s·h)` from one FFT of
+//! the phase field per `(w, λ)`, or from the shared Jacobi–Anger band of Chebyshev-term
+//! spectra, with the Gaussian window applied at the lookups by the kernels of [`kernels`]
+//! (AVX-512 or AVX2 where the CPU has them). The reference build runs in f64 throughout;
+//! the fast build ([`sample_g_kept_in`] with [`Precision::F32`]) sums the band and the
+//! window in f32 from f64 transforms, within [`FAST_BUILD_TOLERANCE`] of the reference,
+//! and measures its own difference on a probe of nodes.
 
 use std::sync::Arc;
 
 use rayon::prelude::*;
 use rustfft::{Fft, FftPlanner};
 
+use crate::brdf::truncation::Precision;
 use crate::heightfield::HeightField;
-use crate::spectrum::num_complex::Complex64;
+use crate::spectrum::num_complex::{Complex, Complex32, Complex64};
 use crate::{Error, Result};
 
 use super::{Slices, TableSpec};
+
+mod kernels;
+
+use kernels::Real;
 
 /// Samples `G(u_i, v_j, w)` for every `w` in `w_nodes` (MODEL §7, exact in f64).
 ///
@@ -58,6 +66,73 @@ pub fn sample_g_lines(
     lines: &[(f64, [f64; 3])],
     progress: &(dyn Fn() + Sync),
 ) -> Result<Slices> {
+    sample_g_lines_in(
+        hf,
+        coherence_um,
+        spec,
+        w_nodes,
+        lines,
+        Precision::F64,
+        progress,
+    )
+    .map(|s| s.slices)
+}
+
+/// A table's samples and the arithmetic that made them.
+#[derive(Debug, Clone)]
+pub struct Sampled {
+    pub slices: Slices,
+    /// The arithmetic of the sums: f32 only where asked for and where the shared term band
+    /// is used (the per-job transforms are f64 either way).
+    pub precision: Precision,
+    /// For an f32 build: its largest difference from the f64 build over a probe of nodes
+    /// (rows around the brightest row of the middle `w` node), relative to the probe's peak.
+    pub probe: Option<f64>,
+}
+
+/// The most an f32 build may differ from the f64 build anywhere, relative to the slice
+/// peak: a fiftieth of the stored table's float16 rounding (4.9e-4). Measured: 1e-7 on the
+/// default table (tests/fast_table_build.rs checks three fields against it).
+pub const FAST_BUILD_TOLERANCE: f64 = 1e-5;
+
+/// Rows of nodes an f32 build is probed on against f64 ([`Sampled::probe`]).
+const PROBE_ROWS: usize = 8;
+
+/// [`sample_g_kept`] with the sums in `precision`. The transforms of the terms are f64
+/// either way; in f32 the Jacobi–Anger sums and the Gaussian window run in float32 (twice
+/// the lanes, half the memory traffic), a few parts in 1e7 of the peak, far below the
+/// stored table's float16 rounding (4.9e-4). The result says what it measured against f64.
+pub fn sample_g_kept_in(
+    hf: &HeightField,
+    coherence_um: f64,
+    spec: &TableSpec,
+    w_nodes: &[f64],
+    keep: Option<&[usize]>,
+    precision: Precision,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Sampled> {
+    let samples = spec.spectral_samples(keep)?;
+    sample_g_lines_in(
+        hf,
+        coherence_um,
+        spec,
+        w_nodes,
+        &samples,
+        precision,
+        progress,
+    )
+}
+
+/// [`sample_g_lines`] with the sums in `precision` ([`sample_g_kept_in`]).
+pub fn sample_g_lines_in(
+    hf: &HeightField,
+    coherence_um: f64,
+    spec: &TableSpec,
+    w_nodes: &[f64],
+    lines: &[(f64, [f64; 3])],
+    precision: Precision,
+    progress: &(dyn Fn() + Sync),
+) -> Result<Sampled> {
     let (nu, nv) = spec.validate()?;
     if !(coherence_um.is_finite() && coherence_um > 0.0) {
         return Err(Error::invalid(
@@ -82,17 +157,56 @@ pub fn sample_g_lines(
         [l_min * 1e-3, l_max * 1e-3],
         s_max,
         w_nodes.len() * samples.len(),
+        precision,
     );
     let spectrum = spectrum;
-    let data = w_nodes
+    let used = match &spectrum.terms {
+        Some(band) if band.fast.is_some() => Precision::F32,
+        _ => Precision::F64,
+    };
+    let data: Vec<Vec<[f64; 3]>> = w_nodes
         .iter()
-        .map(|&w| spectrum.slice(&u, &v, w, samples, progress))
+        .map(|&w| spectrum.slice(&u, &v, w, samples, used, progress))
         .collect();
-    Ok(Slices {
-        nu,
-        nv,
-        w: w_nodes.to_vec(),
-        data,
+    let probe = (used == Precision::F32 && !w_nodes.is_empty()).then(|| {
+        let k = w_nodes.len() / 2;
+        let brightest = (0..nv)
+            .max_by(|&a, &b| {
+                let row = |j: usize| {
+                    data[k][j * nu..(j + 1) * nu]
+                        .iter()
+                        .fold(0.0f64, |m, g| m.max(g[1]))
+                };
+                row(a).total_cmp(&row(b))
+            })
+            .unwrap_or(0);
+        let j0 = brightest
+            .saturating_sub(PROBE_ROWS / 2)
+            .min(nv.saturating_sub(PROBE_ROWS));
+        let j1 = (j0 + PROBE_ROWS).min(nv);
+        let exact = spectrum.slice(&u, &v[j0..j1], w_nodes[k], samples, Precision::F64, &|| {});
+        let fast = &data[k][j0 * nu..j1 * nu];
+        let peak = exact.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
+        let diff = exact
+            .iter()
+            .flatten()
+            .zip(fast.iter().flatten())
+            .fold(0.0f64, |m, (a, b)| m.max((a - b).abs()));
+        if peak > 0.0 {
+            diff / peak
+        } else {
+            diff
+        }
+    });
+    Ok(Sampled {
+        slices: Slices {
+            nu,
+            nv,
+            w: w_nodes.to_vec(),
+            data,
+        },
+        precision: used,
+        probe,
     })
 }
 
@@ -127,6 +241,8 @@ struct TermBand {
     half_range: f64,
     /// `spectra[n][r·cols + c]` = DFT[T_n(x)] / (N_x N_y) at shifted texel `t0 + (c, r)`.
     spectra: Vec<Vec<Complex64>>,
+    /// The same rounded to float32, for a build whose sums run in f32.
+    fast: Option<Vec<Vec<Complex32>>>,
 }
 
 /// Largest shared term band (complex samples over all terms): beyond it each job transforms
@@ -185,6 +301,7 @@ impl PhaseSpectrum {
         lambda_um: [f64; 2],
         s_max: f64,
         jobs: usize,
+        precision: Precision,
     ) {
         let (lo, hi) = self
             .heights
@@ -219,11 +336,7 @@ impl PhaseSpectrum {
             return;
         }
         let mid = lo + half_range;
-        let (nx, ny) = (self.nx, self.ny);
-        let bin = |t: i64, n: usize| (t - (n / 2) as i64).rem_euclid(n as i64) as usize;
-        let norm = 1.0 / (nx * ny) as f64;
-        // T_n(x) = cos(n·θ) with θ = acos x, taken once per texel.
-        let thetas: Vec<f64> = self
+        let xs: Vec<f64> = self
             .heights
             .iter()
             .map(|h| {
@@ -232,41 +345,146 @@ impl PhaseSpectrum {
                 } else {
                     0.0
                 }
-                .acos()
             })
             .collect();
-        let spectra = (0..count)
-            .into_par_iter()
-            .map(|n| {
-                let mut field: Vec<Complex64> = thetas
-                    .iter()
-                    .map(|&t| Complex64::new((n as f64 * t).cos(), 0.0))
-                    .collect();
-                for row in field.chunks_exact_mut(nx) {
-                    self.row_fft.process(row);
-                }
-                let mut band = vec![Complex64::new(0.0, 0.0); rows * cols];
-                let mut column = vec![Complex64::new(0.0, 0.0); ny];
-                for c in 0..cols {
-                    let fx = bin(x0 + c as i64, nx);
-                    for (r, z) in column.iter_mut().enumerate() {
-                        *z = field[r * nx + fx];
-                    }
-                    self.col_fft.process(&mut column);
-                    for r in 0..rows {
-                        band[r * cols + c] = column[bin(y0 + r as i64, ny)] * norm;
-                    }
-                }
-                band
-            })
-            .collect();
+        let spectra = self.term_spectra(&xs, count, [x0, y0], [cols, rows]);
+        let fast = (precision == Precision::F32).then(|| {
+            spectra
+                .iter()
+                .map(|t| {
+                    t.iter()
+                        .map(|z| Complex32::new(z.re as f32, z.im as f32))
+                        .collect()
+                })
+                .collect()
+        });
         self.terms = Some(TermBand {
             t0: [x0, y0],
             cols,
             rows,
             half_range,
             spectra,
+            fast,
         });
+    }
+
+    /// `DFT[T_n(x)]/(N_x N_y)` for `n < count` over the band of shifted texels from `t0`,
+    /// `size = [cols, rows]` (row-major), where `xs` holds `x ∈ [−1, 1]` per texel.
+    ///
+    /// Two real terms share one complex transform: `z = T_a + i·T_b` gives
+    /// `A(k) = (Z(k) + conj Z(−k))/2` and `B(k) = (Z(k) − conj Z(−k))/(2i)`, so the rows are
+    /// transformed once per pair and the columns once per band column and its mirror. The
+    /// terms come from the recurrence `T_{n+1} = 2x·T_n − T_{n−1}` (its error grows like
+    /// `n²·ε`, 1e-13 at the largest `n` kept), started from `cos(n·acos x)` once per task.
+    fn term_spectra(
+        &self,
+        xs: &[f64],
+        count: usize,
+        [x0, y0]: [i64; 2],
+        [cols, rows]: [usize; 2],
+    ) -> Vec<Vec<Complex64>> {
+        let (nx, ny) = (self.nx, self.ny);
+        let bin = |t: i64, n: usize| (t - (n / 2) as i64).rem_euclid(n as i64) as usize;
+        let norm = 1.0 / (nx * ny) as f64;
+        // The columns to transform (the band's and their mirrors), each once.
+        let band_cols: Vec<usize> = (0..cols).map(|c| bin(x0 + c as i64, nx)).collect();
+        let mut slot = vec![usize::MAX; nx];
+        let mut needed = Vec::new();
+        for &fx in &band_cols {
+            for f in [fx, (nx - fx) % nx] {
+                if slot[f] == usize::MAX {
+                    slot[f] = needed.len();
+                    needed.push(f);
+                }
+            }
+        }
+        let band_rows: Vec<usize> = (0..rows).map(|r| bin(y0 + r as i64, ny)).collect();
+        // Pairs of terms, in as many runs as there are threads (each run keeps its own
+        // recurrence).
+        let pairs = count.div_ceil(2);
+        let runs = rayon::current_num_threads().clamp(1, pairs.max(1));
+        let per_run = pairs.div_ceil(runs);
+        let zero = Complex64::new(0.0, 0.0);
+        let out: Vec<Vec<Vec<Complex64>>> = (0..runs)
+            .into_par_iter()
+            .map(|run| {
+                let first = 2 * run * per_run;
+                let last = (2 * (run + 1) * per_run).min(count);
+                let mut out = Vec::new();
+                if first >= last {
+                    return out;
+                }
+                // T_{n−1} and T_n at the run's first n.
+                let start = |n: usize| -> Vec<f64> {
+                    xs.iter().map(|&x| (n as f64 * x.acos()).cos()).collect()
+                };
+                let mut prev = if first == 0 {
+                    vec![0.0; xs.len()]
+                } else {
+                    start(first - 1)
+                };
+                let mut cur = start(first);
+                let step = |prev: &mut Vec<f64>, cur: &mut Vec<f64>, n: usize| {
+                    // Advances (T_{n−1}, T_n) to (T_n, T_{n+1}); T_1 = x.
+                    for ((p, c), &x) in prev.iter_mut().zip(cur.iter_mut()).zip(xs) {
+                        let next = if n == 0 { x } else { 2.0 * x * *c - *p };
+                        *p = *c;
+                        *c = next;
+                    }
+                };
+                let mut field = vec![zero; xs.len()];
+                let mut columns = vec![zero; needed.len() * ny];
+                let mut scratch = vec![
+                    zero;
+                    self.row_fft
+                        .get_inplace_scratch_len()
+                        .max(self.col_fft.get_inplace_scratch_len())
+                ];
+                let mut n = first;
+                while n < last {
+                    let pair = n + 1 < last;
+                    for (z, &a) in field.iter_mut().zip(&cur) {
+                        *z = Complex64::new(a, 0.0);
+                    }
+                    step(&mut prev, &mut cur, n);
+                    if pair {
+                        for (z, &b) in field.iter_mut().zip(&cur) {
+                            z.im = b;
+                        }
+                        step(&mut prev, &mut cur, n + 1);
+                    }
+                    self.row_fft.process_with_scratch(&mut field, &mut scratch);
+                    gather_columns(&field, nx, &needed, &mut columns);
+                    self.col_fft
+                        .process_with_scratch(&mut columns, &mut scratch);
+                    let mut a = vec![zero; rows * cols];
+                    let mut b = vec![zero; if pair { rows * cols } else { 0 }];
+                    for (c, &fx) in band_cols.iter().enumerate() {
+                        let here = &columns[slot[fx] * ny..(slot[fx] + 1) * ny];
+                        let mirror = slot[(nx - fx) % nx];
+                        let there = &columns[mirror * ny..(mirror + 1) * ny];
+                        for (r, &fy) in band_rows.iter().enumerate() {
+                            let z = here[fy];
+                            if !pair {
+                                a[r * cols + c] = z * norm;
+                                continue;
+                            }
+                            let m = there[(ny - fy) % ny].conj();
+                            let (s, d) = (z + m, z - m);
+                            a[r * cols + c] = s * (0.5 * norm);
+                            b[r * cols + c] = Complex64::new(d.im, -d.re) * (0.5 * norm);
+                        }
+                    }
+                    out.push(a);
+                    if pair {
+                        out.push(b);
+                    }
+                    n += if pair { 2 } else { 1 };
+                }
+                out
+            })
+            .collect();
+        out.into_iter().flatten().collect()
     }
 
     /// The lookups of one wavelength over the node grid `u × v`.
@@ -307,20 +525,20 @@ impl PhaseSpectrum {
         v: &[f64],
         w: f64,
         samples: &[(f64, [f64; 3])],
+        precision: Precision,
         progress: &(dyn Fn() + Sync),
     ) -> Vec<[f64; 3]> {
-        // Accumulators are planar (X, then Y, then Z, each row-major over the nodes).
-        let n = u.len() * v.len();
+        // Accumulators are planar (X, then Y, then Z), each column-major over the nodes
+        // (`i·nv + j`); the slice is row-major (`j·nu + i`).
+        let (nu, nv) = (u.len(), v.len());
+        let n = nu * nv;
         let zero = || vec![0.0f64; 3 * n];
-        let add = |mut a: Vec<f64>, b: Vec<f64>| {
-            for (x, y) in a.iter_mut().zip(&b) {
-                *x += y;
-            }
-            a
-        };
         let interleave = |acc: Vec<f64>| -> Vec<[f64; 3]> {
             (0..n)
-                .map(|p| [acc[p], acc[n + p], acc[2 * n + p]])
+                .map(|p| {
+                    let at = (p % nu) * nv + p / nu;
+                    [acc[at], acc[n + at], acc[2 * n + at]]
+                })
                 .collect()
         };
         let s_of = |lambda_um: f64| 2.0 * std::f64::consts::PI * w / lambda_um;
@@ -340,14 +558,37 @@ impl PhaseSpectrum {
                     .fold(zero, |mut acc, (g, &(_, weight))| {
                         let mut spectrum = vec![Complex64::new(0.0, 0.0); g.len()];
                         self.transform(s_of(g.lambda_um), g.t0, g.size, &mut spectrum);
-                        self.window(g, &spectrum, weight, &mut acc);
+                        self.window::<f64>(&[(g, &spectrum, weight)], &mut acc);
                         progress();
                         acc
                     })
-                    .reduce(zero, add),
+                    .reduce(zero, add_planes),
             );
         };
-        // Groups of wavelengths whose inputs together stay within TERM_GROUP_SAMPLES.
+        let acc = match (&band.fast, precision) {
+            (Some(fast), Precision::F32) => {
+                self.band_slice(band, fast, &looks, samples, w, progress)
+            }
+            _ => self.band_slice(band, &band.spectra, &looks, samples, w, progress),
+        };
+        interleave(acc)
+    }
+
+    /// The planar accumulators of [`Self::slice`] from the shared band, its terms and sums
+    /// in `T`. Wavelengths go in groups whose inputs together stay within
+    /// [`TERM_GROUP_SAMPLES`]; within a group the inputs are summed band row by band row
+    /// ([`TermBand::sum`]), then windowed per wavelength in parallel.
+    fn band_slice<T: Real>(
+        &self,
+        band: &TermBand,
+        terms: &[Vec<Complex<T>>],
+        looks: &[Lookups],
+        samples: &[(f64, [f64; 3])],
+        w: f64,
+        progress: &(dyn Fn() + Sync),
+    ) -> Vec<f64> {
+        let n = looks.first().map_or(0, |g| g.qx.len() * g.qy.len());
+        let zero = || vec![0.0f64; 3 * n];
         let mut acc = zero();
         let mut first = 0;
         while first < looks.len() {
@@ -358,8 +599,11 @@ impl PhaseSpectrum {
                 last += 1;
             }
             let group = &looks[first..last];
-            let s: Vec<f64> = group.iter().map(|g| s_of(g.lambda_um)).collect();
-            let inputs = band.sum(&s, group);
+            let s: Vec<f64> = group
+                .iter()
+                .map(|g| 2.0 * std::f64::consts::PI * w / g.lambda_um)
+                .collect();
+            let inputs = band.sum(terms, &s, group);
             // One accumulator per thread's share of the group (not one per split).
             let share = group.len().div_ceil(rayon::current_num_threads().max(1));
             let part = group
@@ -368,17 +612,23 @@ impl PhaseSpectrum {
                 .zip(samples[first..last].par_chunks(share))
                 .map(|((gs, spectra), weights)| {
                     let mut acc = zero();
-                    for ((g, spectrum), &(_, weight)) in gs.iter().zip(spectra).zip(weights) {
-                        self.window(g, spectrum, weight, &mut acc);
-                        progress();
+                    let jobs: Vec<kernels::WindowJob<'_, T>> = gs
+                        .iter()
+                        .zip(spectra)
+                        .zip(weights)
+                        .map(|((g, spectrum), &(_, weight))| (g, spectrum.as_slice(), weight))
+                        .collect();
+                    for block in jobs.chunks(kernels::WINDOW_BLOCK) {
+                        self.window(block, &mut acc);
+                        block.iter().for_each(|_| progress());
                     }
                     acc
                 })
-                .reduce(zero, add);
-            acc = add(acc, part);
+                .reduce(zero, add_planes);
+            acc = add_planes(acc, part);
             first = last;
         }
-        interleave(acc)
+        acc
     }
 
     /// The windowed-spectrum input of one job by direct transform: `spectrum[r·cols + c]`
@@ -398,135 +648,52 @@ impl PhaseSpectrum {
             .iter()
             .map(|h| Complex64::from_polar(1.0, s * h))
             .collect();
-        for row in field.chunks_exact_mut(nx) {
-            self.row_fft.process(row);
-        }
+        let zero = Complex64::new(0.0, 0.0);
+        let mut scratch = vec![
+            zero;
+            self.row_fft
+                .get_inplace_scratch_len()
+                .max(self.col_fft.get_inplace_scratch_len())
+        ];
+        self.row_fft.process_with_scratch(&mut field, &mut scratch);
         // Columns: only the frequencies the lookups reach. Shifted texel t holds frequency
         // t − b, i.e. FFT bin (t − b) mod N; the spectrum is periodic, so t wraps too.
         let bin = |t: i64, n: usize| (t - (n / 2) as i64).rem_euclid(n as i64) as usize;
         let norm = 1.0 / (nx * ny) as f64;
-        let mut column = vec![Complex64::new(0.0, 0.0); ny];
-        for c in 0..cols {
-            let fx = bin(cx0 + c as i64, nx);
-            for (r, z) in column.iter_mut().enumerate() {
-                *z = field[r * nx + fx];
-            }
-            self.col_fft.process(&mut column);
+        let which: Vec<usize> = (0..cols).map(|c| bin(cx0 + c as i64, nx)).collect();
+        let mut columns = vec![zero; cols * ny];
+        gather_columns(&field, nx, &which, &mut columns);
+        self.col_fft
+            .process_with_scratch(&mut columns, &mut scratch);
+        for (c, column) in columns.chunks_exact(ny).enumerate() {
             for r in 0..rows {
                 spectrum[r * cols + c] = column[bin(cy0 + r as i64, ny)] * norm;
             }
         }
     }
+}
 
-    /// The Gaussian window at the lookups of every node, `|P̂|²·weight` added to `acc`
-    /// (planar: X, Y, Z planes over the nodes). `spectrum` is the windowed-spectrum input
-    /// over `g`'s texels.
-    fn window(&self, g: &Lookups, spectrum: &[Complex64], weight: [f64; 3], acc: &mut [f64]) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked above).
-            return unsafe { self.window_avx2(g, spectrum, weight, acc) };
-        }
-        self.window_kernel(g, spectrum, weight, acc);
-    }
-
-    /// [`Self::window`] compiled for AVX2: the same operations in the same order (no fused
-    /// multiply-add), so the same numbers, with twice the lanes.
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn window_avx2(
-        &self,
-        g: &Lookups,
-        spectrum: &[Complex64],
-        weight: [f64; 3],
-        acc: &mut [f64],
-    ) {
-        self.window_kernel(g, spectrum, weight, acc);
-    }
-
-    #[inline(always)]
-    fn window_kernel(
-        &self,
-        g: &Lookups,
-        spectrum: &[Complex64],
-        weight: [f64; 3],
-        acc: &mut [f64],
-    ) {
-        let [cx0, cy0] = g.t0;
-        let [cols, _] = g.size;
-        let (rx, ry) = (self.reach(0), self.reach(1));
-        let rows = g.size[1];
-
-        // Separable Gaussian window: first along x for every needed row, then along y. The
-        // taps of one lookup add as complex numbers (re and im as a pair, each tap's weight
-        // stored twice so a pair multiplies at once); |P̂|² comes after.
-        let gauss = |d: f64, sigma: f64| (-d * d / (2.0 * sigma * sigma)).exp();
-        let nu = g.qx.len();
-        let taps = (2 * rx + 1) as usize;
-        // Per lookup: the first texel it reads (from cx0) and its taps' weights.
-        let mut starts = Vec::with_capacity(nu);
-        let mut gx: Vec<[f64; 2]> = Vec::with_capacity(nu * taps);
-        for &q in &g.qx {
-            let a = q.floor() as i64;
-            starts.push((a - rx - cx0) as usize);
-            gx.extend((a - rx..=a + rx).map(|t| [gauss(t as f64 - q, self.sigma[0]); 2]));
-        }
-        let mut xpass = vec![[0.0f64; 2]; rows * nu];
-        for (line, out) in spectrum.chunks_exact(cols).zip(xpass.chunks_exact_mut(nu)) {
-            for ((o, &start), gw) in out.iter_mut().zip(&starts).zip(gx.chunks_exact(taps)) {
-                let mut sum = [0.0f64; 2];
-                for (x, gk) in line[start..start + taps].iter().zip(gw) {
-                    sum[0] += x.re * gk[0];
-                    sum[1] += x.im * gk[1];
-                }
-                *o = sum;
-            }
-        }
-        // Along y, a block of lookups at a time, their sums held through all taps (re, im
-        // interleaved as flat numbers, so a block is whole vector registers).
-        let xpass: &[f64] = xpass.as_flattened();
-        const BLOCK: usize = 16;
-        let mut gy: Vec<f64> = Vec::with_capacity(taps);
-        let mut from: Vec<usize> = Vec::with_capacity(taps);
-        let mut p = vec![0.0f64; 2 * nu];
-        let mut power = vec![0.0f64; nu];
-        let plane = nu * g.qy.len();
-        for (j, &q) in g.qy.iter().enumerate() {
-            let a = q.floor() as i64;
-            gy.clear();
-            from.clear();
-            for t in a - ry..=a + ry {
-                gy.push(gauss(t as f64 - q, self.sigma[1]));
-                from.push((t - cy0) as usize * 2 * nu);
-            }
-            let whole = 2 * nu / BLOCK * BLOCK;
-            for i0 in (0..whole).step_by(BLOCK) {
-                let mut sum = [0.0f64; BLOCK];
-                for (&gk, &r) in gy.iter().zip(&from) {
-                    let x: &[f64; BLOCK] = xpass[r + i0..r + i0 + BLOCK].try_into().unwrap();
-                    for k in 0..BLOCK {
-                        sum[k] += x[k] * gk;
-                    }
-                }
-                p[i0..i0 + BLOCK].copy_from_slice(&sum);
-            }
-            p[whole..].fill(0.0);
-            for (&gk, &r) in gy.iter().zip(&from) {
-                for (pk, x) in p[whole..].iter_mut().zip(&xpass[r + whole..r + 2 * nu]) {
-                    *pk += x * gk;
-                }
-            }
-            for (pw, pi) in power.iter_mut().zip(p.chunks_exact(2)) {
-                *pw = pi[0] * pi[0] + pi[1] * pi[1];
-            }
-            for (c, &wc) in weight.iter().enumerate() {
-                let at = c * plane + j * nu;
-                for (o, &pw) in acc[at..at + nu].iter_mut().zip(&power) {
-                    *o += pw * wc;
-                }
+/// Copies the columns `which` of the row-major `field` (rows of `nx`) into `columns`, one
+/// after another, a band of rows at a time (so the reads stay in cache).
+fn gather_columns(field: &[Complex64], nx: usize, which: &[usize], columns: &mut [Complex64]) {
+    const BAND: usize = 16;
+    let ny = field.len() / nx;
+    for r0 in (0..ny).step_by(BAND) {
+        let r1 = (r0 + BAND).min(ny);
+        for (k, &fx) in which.iter().enumerate() {
+            for r in r0..r1 {
+                columns[k * ny + r] = field[r * nx + fx];
             }
         }
     }
+}
+
+/// `a + b`, element by element (planar accumulators).
+fn add_planes(mut a: Vec<f64>, b: Vec<f64>) -> Vec<f64> {
+    for (x, y) in a.iter_mut().zip(&b) {
+        *x += y;
+    }
+    a
 }
 
 /// The lookups of one wavelength over a node grid, and the texels their windows read.
@@ -566,17 +733,22 @@ impl TermBand {
     /// The windowed-spectrum inputs of `group` (phase scales `s`): for each wavelength,
     /// `Σ_n ε_n iⁿ J_n(s·A) DFT[T_n]` over its texels, row-major. Band rows are the unit of
     /// work, so a row of every term is read once for the whole group.
-    fn sum(&self, s: &[f64], group: &[Lookups]) -> Vec<Vec<Complex64>> {
-        let terms = self.spectra.len();
+    fn sum<T: Real>(
+        &self,
+        spectra: &[Vec<Complex<T>>],
+        s: &[f64],
+        group: &[Lookups],
+    ) -> Vec<Vec<Complex<T>>> {
+        let terms = spectra.len();
         // ε_n iⁿ J_n: real weights for the even terms, imaginary for the odd ones.
-        let weights: Vec<Vec<f64>> = s
+        let weights: Vec<Vec<T>> = s
             .iter()
             .map(|&s| {
                 let j = crate::brdf::bessel::jn_all(s * self.half_range, terms);
                 (0..terms)
                     .map(|n| {
                         let sign = if (n / 2) % 2 == 0 { 1.0 } else { -1.0 };
-                        sign * if n == 0 { 1.0 } else { 2.0 } * j[n]
+                        T::of(sign * if n == 0 { 1.0 } else { 2.0 } * j[n])
                     })
                     .collect()
             })
@@ -589,85 +761,38 @@ impl TermBand {
             .max()
             .unwrap_or(0)
             - self.t0[1];
-        let starts: Vec<i64> = (lo..hi).step_by(TERM_ROWS_PER_TASK).collect();
-        let blocks: Vec<Vec<Vec<Complex64>>> = starts
-            .into_par_iter()
-            .map(|r0| {
-                let r1 = (r0 + TERM_ROWS_PER_TASK as i64).min(hi);
-                let mut out: Vec<Vec<Complex64>> = vec![Vec::new(); group.len()];
-                let (mut even, mut odd) = (Vec::new(), Vec::new());
-                for t in r0..r1 {
-                    for ((g, weight), o) in group.iter().zip(&weights).zip(out.iter_mut()) {
-                        let r = t + self.t0[1] - g.t0[1];
-                        if r < 0 || r >= g.size[1] as i64 {
-                            continue;
-                        }
-                        let cols = g.size[0];
-                        even.clear();
-                        even.resize(cols, Complex64::new(0.0, 0.0));
-                        odd.clear();
-                        odd.resize(cols, Complex64::new(0.0, 0.0));
-                        let start = t as usize * self.cols + (g.t0[0] - self.t0[0]) as usize;
-                        self.sum_row(start, weight, &mut even, &mut odd);
-                        o.extend(
-                            even.iter()
-                                .zip(&odd)
-                                .map(|(e, d)| e + Complex64::new(-d.im, d.re)),
-                        );
-                    }
+        let zero = Complex::new(T::default(), T::default());
+        let mut inputs: Vec<Vec<Complex<T>>> = group.iter().map(|g| vec![zero; g.len()]).collect();
+        // Every wavelength's rows, handed to the task of the band rows they read.
+        let tasks = ((hi - lo).max(0) as usize).div_ceil(TERM_ROWS_PER_TASK);
+        // (wavelength, first band sample it reads, its row of the output)
+        type Row<'a, T> = (usize, usize, &'a mut [Complex<T>]);
+        let mut rows_of: Vec<Vec<Row<'_, T>>> = (0..tasks).map(|_| Vec::new()).collect();
+        for (l, (g, out)) in group.iter().zip(inputs.iter_mut()).enumerate() {
+            let first = g.t0[1] - self.t0[1];
+            let start = (g.t0[0] - self.t0[0]) as usize;
+            for (r, row) in out.chunks_exact_mut(g.size[0]).enumerate() {
+                let t = (first + r as i64) as usize;
+                rows_of[(t - lo as usize) / TERM_ROWS_PER_TASK].push((
+                    l,
+                    t * self.cols + start,
+                    row,
+                ));
+            }
+        }
+        rows_of.into_par_iter().for_each(|rows| {
+            let mut odd = Vec::new();
+            for (l, at, row) in rows {
+                odd.clear();
+                odd.resize(row.len(), zero);
+                Self::sum_row(spectra, at, &weights[l], row, &mut odd);
+                // even + i·odd
+                for (e, d) in row.iter_mut().zip(&odd) {
+                    *e = Complex::new(e.re - d.im, e.im + d.re);
                 }
-                out
-            })
-            .collect();
-        let mut inputs: Vec<Vec<Complex64>> =
-            group.iter().map(|g| Vec::with_capacity(g.len())).collect();
-        for block in blocks {
-            for (input, rows) in inputs.iter_mut().zip(block) {
-                input.extend(rows);
             }
-        }
+        });
         inputs
-    }
-
-    /// Adds the terms' samples `start..start + even.len()` (one band row), times their
-    /// weights, to `even` (even `n`) and `odd` (odd `n`).
-    fn sum_row(&self, start: usize, weight: &[f64], even: &mut [Complex64], odd: &mut [Complex64]) {
-        #[cfg(target_arch = "x86_64")]
-        if std::arch::is_x86_feature_detected!("avx2") {
-            // SAFETY: the CPU has AVX2 (checked above).
-            return unsafe { self.sum_row_avx2(start, weight, even, odd) };
-        }
-        self.sum_row_kernel(start, weight, even, odd);
-    }
-
-    /// [`Self::sum_row`] compiled for AVX2 (the same operations in the same order).
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2")]
-    unsafe fn sum_row_avx2(
-        &self,
-        start: usize,
-        weight: &[f64],
-        even: &mut [Complex64],
-        odd: &mut [Complex64],
-    ) {
-        self.sum_row_kernel(start, weight, even, odd);
-    }
-
-    #[inline(always)]
-    fn sum_row_kernel(
-        &self,
-        start: usize,
-        weight: &[f64],
-        even: &mut [Complex64],
-        odd: &mut [Complex64],
-    ) {
-        let cols = even.len();
-        for (n, (term, &wn)) in self.spectra.iter().zip(weight).enumerate() {
-            let sum = if n % 2 == 0 { &mut *even } else { &mut *odd };
-            for (acc, x) in sum.iter_mut().zip(&term[start..start + cols]) {
-                *acc += x * wn;
-            }
-        }
     }
 }
 
@@ -701,10 +826,17 @@ mod tests {
         let direct = PhaseSpectrum::new(&hf, 2.0);
         let mut shared = PhaseSpectrum::new(&hf, 2.0);
         let s_max = 2.0 * std::f64::consts::PI * w.abs() / 0.45;
-        shared.share_terms([u[0], u[8]], [v[0], v[6]], [0.45, 0.64], s_max, usize::MAX);
+        shared.share_terms(
+            [u[0], u[8]],
+            [v[0], v[6]],
+            [0.45, 0.64],
+            s_max,
+            usize::MAX,
+            Precision::F64,
+        );
         assert!(shared.terms.is_some(), "the band must fit");
-        let a = direct.slice(&u, &v, w, &samples, &|| {});
-        let b = shared.slice(&u, &v, w, &samples, &|| {});
+        let a = direct.slice(&u, &v, w, &samples, Precision::F64, &|| {});
+        let b = shared.slice(&u, &v, w, &samples, Precision::F64, &|| {});
         let peak = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         assert!(peak > 0.0);
         for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
