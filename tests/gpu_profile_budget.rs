@@ -241,3 +241,75 @@ fn redirected_stderr_gets_a_line_per_row() {
     assert!(table.contains("| taylor R=2 |") && table.contains("| chebyshev-w |"));
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// The default profile from an empty cache, as a user first runs it (on a small field, so
+/// the suite stays quick): every registered variant is measured within the default budget,
+/// the default variant first; a row is left out only when its variant refuses the field,
+/// with the refusal said, never for want of time.
+#[test]
+fn a_cold_default_profile_measures_every_variant_the_default_first() {
+    let dir = scratch("cold");
+    let hf = field(&dir);
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+        .args(["profile", "--heightfield", &hf, "--size", "17"])
+        .args(["--pixels", "4", "--brightest", "2", "--cache-dir"])
+        .arg(dir.join("cache"))
+        .arg("--csv")
+        .arg(dir.join("p.csv"))
+        .env("DIFFRACT_VALIDATION", "1")
+        .output()
+        .expect("run diffract");
+    let err = String::from_utf8_lossy(&o.stderr);
+    if err
+        .lines()
+        .any(|l| l.starts_with("error: Vulkan unavailable:"))
+    {
+        assert!(!gpu_util::vulkan_required(), "{err}");
+        return;
+    }
+    assert!(o.status.success(), "{err}");
+    let rows: Vec<&str> = err
+        .lines()
+        .filter(|l| {
+            l.starts_with("profile: ") && (l.contains(": warm-up") || l.contains(": skipped"))
+        })
+        .collect();
+    assert!(
+        rows.first()
+            .is_some_and(|l| l.starts_with("profile: chebyshev-w: warm-up")),
+        "the default variant is not measured first: {err}"
+    );
+    for line in &rows {
+        assert!(
+            !line.contains("skipped") || line.contains("refused"),
+            "a row skipped for time: {line}\n{err}"
+        );
+    }
+    // Every kind has a measured row in the CSV, or its rows were refused (said above).
+    let csv = std::fs::read_to_string(dir.join("p.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let kind_at = header.iter().position(|h| *h == "kind").unwrap();
+    let skipped_at = header.iter().position(|h| *h == "skipped").unwrap();
+    let measured: Vec<(String, String)> = lines
+        .map(|l| {
+            let f: Vec<&str> = l.split(',').collect();
+            (f[kind_at].to_string(), f[skipped_at].to_string())
+        })
+        .collect();
+    for kind in diffract::render::VariantKind::ALL {
+        if kind.family() == diffract::render::variant::Family::Debug {
+            continue;
+        }
+        let name = kind.name();
+        let refused = err.contains("skipped, refused: invalid ") && err.contains(name);
+        assert!(
+            measured
+                .iter()
+                .any(|(k, skip)| k == name && skip == "false")
+                || refused,
+            "{name} neither measured nor refused:\n{csv}\n{err}"
+        );
+    }
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -13,6 +13,7 @@ use super::stats::ErrorStats;
 use crate::brdf::direction;
 use crate::colour::ColourTable;
 use crate::material::{Material, PreparedMaterial};
+use crate::render::variant::VariantKind;
 use crate::render::Picture;
 use crate::render::{Renderer, TableOptions};
 use crate::{Error, Result};
@@ -180,7 +181,8 @@ impl Run<'_> {
         (budget.total_s - self.start.elapsed().as_secs_f64()).max(0.0)
     }
 
-    /// The order rows are measured in: as given, or, with a budget, by estimated cost
+    /// The order rows are measured in: as given, or, with a budget, the default variant's
+    /// row first (the one a user most needs measured), then the rest by estimated cost
     /// (cheapest first, so a tight budget measures as many rows as it can).
     fn order(&self) -> Vec<usize> {
         let mut order: Vec<usize> = (0..self.setup.variants.len()).collect();
@@ -195,7 +197,15 @@ impl Run<'_> {
                     ms + planes as f64 * Pace::PRIOR_TABLE_MS_PER_PLANE
                 })
                 .collect();
-            order.sort_by(|&a, &b| cost[a].total_cmp(&cost[b]));
+            let default = |i: usize| {
+                let v = &self.setup.variants[i];
+                v.kind == VariantKind::DEFAULT && v.name == VariantKind::DEFAULT.name()
+            };
+            order.sort_by(|&a, &b| {
+                default(b)
+                    .cmp(&default(a))
+                    .then(cost[a].total_cmp(&cost[b]))
+            });
         }
         order
     }

@@ -324,9 +324,16 @@ impl PhaseSpectrum {
         let [y0, y1] = self.texel_span(1, v, lambda_um);
         let (cols, rows) = ((x1 - x0 + 1) as usize, (y1 - y0 + 1) as usize);
         // One job transforms the whole field (rows, then the band's columns); the terms cost
-        // `count` full transforms once and a `count`-term sum over the band per job.
+        // `count` full transforms once and a `count`-term sum over the band per job, a
+        // vectorised multiply-add per sample: measured on the 2-core EPYC (704² field, 25
+        // terms, a 345×344 band), a sample of it costs an eighth of a direct sample in f64
+        // and a sixteenth in f32.
         let per_job_direct = self.nx * self.ny + cols * self.ny;
-        let per_job_shared = count * rows * cols / 4;
+        let per_job_shared = count * rows * cols
+            / match precision {
+                Precision::F64 => 8,
+                Precision::F32 => 16,
+            };
         let once = count * (self.nx * self.ny + self.nx * self.ny);
         if count * rows * cols > MAX_TERM_BAND
             || (jobs != usize::MAX
