@@ -214,8 +214,7 @@ fn float32_device_table_stays_within_its_bound() {
 }
 
 /// `render --table-build` builds where it is told and says so on its `table:` line; the
-/// builds give the same picture. (This small table is cheaper per job by direct transforms
-/// than through the term band, so the fast CPU build is float64 here and says so.)
+/// builds give the same picture.
 #[test]
 fn render_says_where_the_table_was_built() {
     if device().is_none() {
@@ -225,7 +224,7 @@ fn render_says_where_the_table_was_built() {
     std::fs::create_dir_all(&dir).unwrap();
     let mut pictures = Vec::new();
     for (build, want) in [
-        ("cpu", "built on CPU (f64) in "),
+        ("cpu", "built on CPU (f32 sums, within "),
         ("cpu-f64", "built on CPU (f64) in "),
         ("device", "built on device ("),
     ] {
