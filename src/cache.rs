@@ -24,8 +24,11 @@ pub const TERM_FILES: &str = "terms-";
 pub const TABLE_FILES: &str = "gtable-";
 /// File-name prefix of the cached validity cells (the scalar model against RCWA).
 pub const VALIDITY_FILES: &str = "validity-";
+/// File-name prefix of the GPU-ready tables: a sampled table pre-filtered, fitted and
+/// packed into the texels a draw uploads.
+pub const PACKED_FILES: &str = "gpack-";
 /// Prefixes of the cache's files: all count towards the cap and are listed and cleared.
-pub const FILE_PREFIXES: [&str; 3] = [TERM_FILES, TABLE_FILES, VALIDITY_FILES];
+pub const FILE_PREFIXES: [&str; 4] = [TERM_FILES, TABLE_FILES, VALIDITY_FILES, PACKED_FILES];
 
 /// 64-bit FNV-1a, fed incrementally. Not cryptographic: it guards against corruption and
 /// accidental reuse, not against an adversary who edits cache files.

@@ -78,8 +78,15 @@ pub fn run(args: &CacheCommandArgs) -> Result<()> {
                     .path
                     .file_name()
                     .is_some_and(|n| n.to_string_lossy().starts_with(cache::VALIDITY_FILES));
+                let packed = e
+                    .path
+                    .file_name()
+                    .is_some_and(|n| n.to_string_lossy().starts_with(cache::PACKED_FILES));
                 let what = match crate::spectrum::cache::read_header(&e.path) {
                     _ if gtable => "sampled G table of a table variant".to_string(),
+                    _ if packed => {
+                        "a table variant's GPU texels (pre-filtered, fitted, packed)".to_string()
+                    }
                     _ if validity => "scalar model against RCWA (validity cells)".to_string(),
                     Ok(h) => format!(
                         "{}×{} {} T={} band {}×{} {:?}",

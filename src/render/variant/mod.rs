@@ -17,6 +17,7 @@ mod coverage;
 mod dhillon;
 mod flss;
 mod nmm;
+mod packed;
 mod pq;
 mod spec;
 pub mod table;

@@ -22,6 +22,8 @@ use crate::gpu::Device;
 use crate::leave_out::{LeftOut, WavelengthsLeft};
 use crate::{Error, Result};
 
+use super::packed::{self, Packed};
+
 /// How a table's planes are stored on the GPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) enum Layout {
@@ -222,6 +224,20 @@ pub(crate) fn prepare<T: GTable + 'static>(
         "in the table build",
     );
     let keep = setup.leave_out.then_some(selection.keep.as_slice());
+    // The GPU-ready texels of this very table, when a draw that keeps no f64 model made
+    // them before.
+    let p = setup.prepared;
+    let packed_key = packed_key(kind, dev, setup, &spec, nodes, keep, layout, smoothed)?;
+    if let (Some(key), Some(dir)) = (packed_key, setup.cache_dir) {
+        let (nu, nv) = spec.uv_nodes()?;
+        let most = ((nu + 3) * (nv + 3) * spec.w_nodes.max(1) * 16) as u64;
+        if let Some(cached) = packed::load(dir, key, (nu, nv), most, setup.report) {
+            let mut gpu = TableGpu::from_packed(kind, dev, &spec, &cached, layout, start)?;
+            let built = crate::render::table_build::Built::Cached.to_string();
+            finish_stats(&mut gpu, built, setup, wavelengths);
+            return Ok(Box::new(gpu));
+        }
+    }
     let lambdas = selection.keep.len() as u64;
     let bar = ProgressBar::new(spec.w_nodes as u64 * lambdas).with_message(format!("{kind} table"));
     let bar = setup.report.progress(bar);
@@ -229,7 +245,6 @@ pub(crate) fn prepare<T: GTable + 'static>(
         ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} (w, λ) planes, {eta} left")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
-    let p = setup.prepared;
     let (mut samples, built) = crate::render::table_build::sample_g_built(
         dev,
         setup.table.build,
@@ -262,8 +277,27 @@ pub(crate) fn prepare<T: GTable + 'static>(
         smooth_slices(&mut samples);
     }
     let table = assemble(spec.region, samples)?;
-    let mut gpu = TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
-    gpu.stats.table_build = Some(built.to_string());
+    let (mut gpu, texels) =
+        TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
+    if let (Some(key), Some(dir)) = (packed_key, setup.cache_dir) {
+        packed::store(dir, key, &texels, setup.report);
+    }
+    drop(texels);
+    finish_stats(&mut gpu, built.to_string(), setup, wavelengths);
+    if setup.keep_model {
+        gpu.model = Some(TableModel(Box::new(table)));
+    }
+    Ok(Box::new(gpu))
+}
+
+/// The rest of a prepared table's report: how it was obtained, the disc, what was left out.
+fn finish_stats(
+    gpu: &mut TableGpu,
+    built: String,
+    setup: &DrawSetup<'_>,
+    wavelengths: WavelengthsLeft,
+) {
+    gpu.stats.table_build = Some(built);
     gpu.stats.disc_prefiltered = setup.disc.is_some();
     if gpu.stats.disc_prefiltered {
         gpu.stats.name.push_str(" sun's disc pre-filtered");
@@ -275,10 +309,48 @@ pub(crate) fn prepare<T: GTable + 'static>(
         gpu_bytes: gpu.stats.gpu_bytes,
         gpu_bytes_keep_all: gpu.stats.gpu_bytes,
     });
-    if setup.keep_model {
-        gpu.model = Some(TableModel(Box::new(table)));
+}
+
+/// The packed-texel cache's key of a table: everything its texels depend on (the sampled
+/// table's key and its wavelengths, where and in what arithmetic it is built, the disc
+/// pre-filter, the smoothing, the variant's layout and the texel format the device
+/// filters). `None` where the draw keeps the f64 model, which only the full path makes.
+#[allow(clippy::too_many_arguments)]
+fn packed_key(
+    kind: VariantKind,
+    dev: &Arc<Device>,
+    setup: &DrawSetup<'_>,
+    spec: &TableSpec,
+    nodes: fn(&TableSpec) -> Vec<f64>,
+    keep: Option<&[usize]>,
+    layout: Layout,
+    smoothed: bool,
+) -> Result<Option<u64>> {
+    if setup.keep_model || setup.cache_dir.is_none() {
+        return Ok(None);
     }
-    Ok(Box::new(gpu))
+    let p = setup.prepared;
+    let mut h = crate::cache::Fnv1a::new();
+    h.bytes(b"packed table");
+    h.u64(crate::brdf::table_cache::key(
+        &p.heightfield,
+        p.material.coherence_um,
+        spec,
+        &nodes(spec),
+    ));
+    if let Some(k) = keep {
+        h.bytes(b"kept wavelengths");
+        k.iter().for_each(|&i| h.u64(i as u64));
+    }
+    h.bytes(format!("{:?} on {:?}", setup.table.build, setup.table.build.on(dev)).as_bytes());
+    if let Some(d) = &setup.disc {
+        h.bytes(b"disc");
+        d.axes.iter().flatten().for_each(|a| h.u64(a.to_bits()));
+    }
+    h.bytes(format!("{kind} {layout:?} smoothed {smoothed}").as_bytes());
+    let (format, _) = filterable_format(dev, setup.table.format)?;
+    h.bytes(format!("{format:?}").as_bytes());
+    Ok(Some(h.finish()))
 }
 
 /// A table variant in f64: `C(ωi, ωr)·G` with the f64 table the shader's planes were
@@ -312,6 +384,8 @@ struct TableGpu {
 }
 
 impl TableGpu {
+    /// Packs `table`'s planes for `layout` in `format` (where the device filters it) and
+    /// uploads them ([`Self::from_packed`]); also the packed texels, for the cache.
     fn upload(
         kind: VariantKind,
         dev: &Arc<Device>,
@@ -320,13 +394,45 @@ impl TableGpu {
         layout: Layout,
         format: TableFormat,
         start: Instant,
-    ) -> Result<Self> {
+    ) -> Result<(Self, Packed)> {
         let (nu, nv) = table.nodes_uv();
         let (pu, pv) = table.plane_dims();
         let planes = table.planes();
-        let (format, vk_format) = filterable_format(dev, format)?;
-        let texel_bytes = format.texel_bytes();
+        let (format, _) = filterable_format(dev, format)?;
         let fp = footprint(layout, planes.len(), (nu, nv), (pu, pv), format);
+        let packed = Packed {
+            nu,
+            nv,
+            pu,
+            pv,
+            planes: planes.len(),
+            layers: fp.layers,
+            fetches: fp.fetches,
+            format,
+            region: *table.region(),
+            bytes: texel_bytes_of(planes, layout, fp.layers, format),
+        };
+        debug_assert_eq!(packed.bytes.len(), fp.bytes);
+        let gpu = Self::from_packed(kind, dev, spec, &packed, layout, start)?;
+        Ok((gpu, packed))
+    }
+
+    /// Uploads packed texels: the image, its sampler and the table's uniform block.
+    fn from_packed(
+        kind: VariantKind,
+        dev: &Arc<Device>,
+        spec: &TableSpec,
+        p: &Packed,
+        layout: Layout,
+        start: Instant,
+    ) -> Result<Self> {
+        let (format, vk_format) = filterable_format(dev, p.format)?;
+        if format != p.format {
+            return Err(Error::invalid(
+                "table format",
+                format!("{} cannot filter {:?} linearly", dev.info.name, p.format),
+            ));
+        }
         let info = &dev.info;
         let (limit, view_type) = match layout {
             Layout::Volume => (info.max_image_dimension_3d, vk::ImageViewType::TYPE_3D),
@@ -339,7 +445,7 @@ impl TableGpu {
             Layout::Volume => info.max_image_dimension_3d,
             Layout::Planes | Layout::PackedPlanes => info.max_image_array_layers,
         };
-        let layers = fp.layers;
+        let (pu, pv, layers) = (p.pu, p.pv, p.layers);
         if pu as u32 > limit || pv as u32 > limit || layers as u32 > depth_limit {
             return Err(Error::invalid(
                 "table size",
@@ -348,7 +454,6 @@ impl TableGpu {
                 ),
             ));
         }
-        let bytes = texel_bytes_of(planes, layout, layers, format);
         let image = Image::sampled_with_data(
             dev,
             &format!("{kind} table"),
@@ -361,10 +466,10 @@ impl TableGpu {
                 aspect: vk::ImageAspectFlags::COLOR,
                 view_type,
             },
-            texel_bytes,
-            &bytes,
+            format.texel_bytes(),
+            &p.bytes,
         )?;
-        let r = table.region();
+        let r = p.region;
         let e = r.extent();
         let ubo = TableInfoUbo {
             lo: [r.lo[0] as f32, r.lo[1] as f32, r.lo[2] as f32, 0.0],
@@ -374,7 +479,7 @@ impl TableGpu {
                 (1.0 / e[2]) as f32,
                 0.0,
             ],
-            nodes: [nu as f32, nv as f32, planes.len() as f32, 0.0],
+            nodes: [p.nu as f32, p.nv as f32, p.planes as f32, 0.0],
         };
         let info = Buffer::with_data(
             dev,
@@ -382,24 +487,21 @@ impl TableGpu {
             vk::BufferUsageFlags::UNIFORM_BUFFER,
             std::slice::from_ref(&ubo),
         )?;
-        debug_assert_eq!(bytes.len(), fp.bytes);
         Ok(Self {
             model: None,
             left_out: None,
             stats: VariantStats {
                 name: format!(
-                    "{kind} K={} {nu}×{nv} texel {:.4} dλ={} {format:?}",
-                    planes.len(),
-                    spec.texel_uv,
-                    spec.step_nm
+                    "{kind} K={} {}×{} texel {:.4} dλ={} {format:?}",
+                    p.planes, p.nu, p.nv, spec.texel_uv, spec.step_nm
                 ),
                 build_ms: start.elapsed().as_secs_f64() * 1e3,
-                gpu_bytes: bytes.len(),
-                fetches: fp.fetches,
+                gpu_bytes: p.bytes.len(),
+                fetches: p.fetches,
                 table_build: None,
                 disc_prefiltered: false,
             },
-            terms: planes.len() as u32,
+            terms: p.planes as u32,
             info,
             sampler: Sampler::new(
                 dev,
