@@ -11,6 +11,14 @@ use diffract::profile::{
 };
 use diffract::render::TableOptions;
 
+/// The tests here time whole profiles against their budgets: one at a time, so no test's
+/// rows share the 2 cores with another's.
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn one_at_a_time() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// A 65 µm patch at a coarse dH (260² samples: the 1 nm reference stays cheap), two waves.
 fn field(dir: &std::path::Path) -> String {
     let path = dir.join("field.png");
@@ -67,6 +75,7 @@ fn setup(heightfield: &str, variants: Vec<Variant>, frames: Frames, pixels: usiz
 
 #[test]
 fn a_small_budget_is_kept_and_every_row_is_run_or_reported_skipped() {
+    let _serial = one_at_a_time();
     let Some(mut r) = gpu_util::renderer() else {
         return;
     };
@@ -106,6 +115,7 @@ fn order(a: f64, b: f64) -> i32 {
 
 #[test]
 fn the_budgeted_ranking_agrees_with_the_fixed_one_where_intervals_do_not_overlap() {
+    let _serial = one_at_a_time();
     let Some(mut r) = gpu_util::renderer() else {
         return;
     };
@@ -171,6 +181,7 @@ fn the_budgeted_ranking_agrees_with_the_fixed_one_where_intervals_do_not_overlap
 
 #[test]
 fn redirected_stderr_gets_a_line_per_row() {
+    let _serial = one_at_a_time();
     let dir = scratch("lines");
     let hf = field(&dir);
     let log = dir.join("stderr.txt");
@@ -248,6 +259,7 @@ fn redirected_stderr_gets_a_line_per_row() {
 /// with the refusal said, never for want of time.
 #[test]
 fn a_cold_default_profile_measures_every_variant_the_default_first() {
+    let _serial = one_at_a_time();
     let dir = scratch("cold");
     let hf = field(&dir);
     let o = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))

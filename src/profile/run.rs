@@ -35,6 +35,21 @@ struct Run<'a> {
     /// Whether a row was measured (until then the pace is the prior's, and the first row
     /// is measured whatever its estimate).
     measured: bool,
+    /// The tables this profile has sampled ([`sample_identity`]): a row whose table differs
+    /// from one of them only in its texel format reads the samples from the cache.
+    sampled: Vec<String>,
+}
+
+/// What a table row's samples depend on among its options: all but the texel format.
+fn sample_identity(row: &Variant) -> String {
+    format!(
+        "{:?} {:?}",
+        row.kind,
+        TableOptions {
+            format: crate::render::TableFormat::Rgba32f,
+            ..row.table
+        }
+    )
 }
 
 /// Renders and scores every row. The reference (1 nm, direct sum) is computed once at the
@@ -112,6 +127,7 @@ fn variant_rows(
         start,
         heightfield,
         measured: false,
+        sampled: Vec::new(),
         pace: Pace::PRIOR,
         samples: None,
         table_1nm: ColourTable::new(1)?,
@@ -231,8 +247,10 @@ impl Run<'_> {
             .step_nm
             .unwrap_or(TableOptions::DEFAULT_STEP_NM)
             .max(1);
+        // A table already sampled (with the cache on) is read, not built.
+        let read = self.setup.cache_dir.is_some() && self.sampled.contains(&sample_identity(row));
         let planes = match row.kind.footprint(&inputs) {
-            Some(Ok(f)) => f.planes * (400 / step as usize + 1),
+            Some(Ok(f)) if !read => f.planes * (400 / step as usize + 1),
             _ => 0,
         };
         let build = planes as f64 * self.pace.table_ms_per_plane.unwrap_or(0.0);
@@ -338,6 +356,9 @@ impl Run<'_> {
             Err(Warm::Failed(e)) => return Err(e),
         };
         let warm_ms = row_start.elapsed().as_secs_f64() * 1e3;
+        if warm.variant.table_build.is_some() {
+            self.sampled.push(sample_identity(row));
+        }
         let timed = self.timed_frames(renderer, &prepared, frames_end)?;
         let built_ms = match &warm.variant.table_build {
             Some(b) if !b.contains("cache") => warm.variant.build_ms,
