@@ -112,21 +112,34 @@ impl EnvArgs {
 
 /// The table an environment-lit BRDF map needs: every `(u, v)` within 2 and `w ∈ [−2, 0]`
 /// (each view direction reaches the whole disc `|ωi_xy| < 1` around `−ωr_xy`).
+///
+/// Its default spacing is the width of the narrowest lobe the table holds, the shortest
+/// wavelength's ([`TableSpec::lobe_width`], 0.0037 at 380 nm for 65 µm). The interpolating
+/// spline follows a lobe sampled that finely; on a coarser grid it rings below zero beside
+/// the blue lobes, and the `G ≥ 0` the estimator needs would add that energy back: a
+/// white furnace at 0.0054 (the lobe at 550 nm) reflects Z 6 % high, at 0.0037 within 0.1 %.
+/// (The sun's table samples at half the lobe at 550 nm and holds the disc; the whole
+/// `(u, v)` disc at that spacing would be 1.5k² nodes a plane.)
 pub fn map_table_spec(
     texel: Option<f64>,
     w_nodes: Option<usize>,
     step_nm: Option<u32>,
     coherence_um: f64,
 ) -> Result<TableSpec> {
+    let step_nm = step_nm.unwrap_or(5);
+    let shortest_nm = crate::colour::ColourTable::new(step_nm)?
+        .lambdas_nm
+        .first()
+        .copied()
+        .unwrap_or(380.0);
     let spec = TableSpec {
         region: Region {
             lo: [-2.0, -2.0, -2.0],
             hi: [2.0, 2.0, 0.0],
         },
-        // Twice the sun's spacing: the whole disc at the sun's would be 1.5k² nodes a plane.
-        texel_uv: texel.unwrap_or(2.0 * TableSpec::default_texel(coherence_um)),
+        texel_uv: texel.unwrap_or(TableSpec::lobe_width(coherence_um, shortest_nm)),
         w_nodes: w_nodes.unwrap_or(DEFAULT_ENV_W_NODES),
-        step_nm: step_nm.unwrap_or(5),
+        step_nm,
     };
     spec.validate()?;
     Ok(spec)

@@ -148,6 +148,13 @@ impl TableSpec {
         (axis(0, nu), axis(1, nv))
     }
 
+    /// The width (standard deviation in `u`) of the coherence lobe of `|P̂|²` at
+    /// `lambda_nm`, `λ/(2πσs)`: 0.0037 at 380 nm for 65 µm, 0.0054 at 550 nm.
+    pub fn lobe_width(coherence_um: f64, lambda_nm: f64) -> f64 {
+        let sigma_s = coherence_um / 4.0;
+        lambda_nm * 1e-3 / (2.0 * std::f64::consts::PI * sigma_s)
+    }
+
     /// The default `(u, v)` spacing: half the width of the coherence lobe,
     /// `λ/(2πσs)` at 550 nm (MODEL §7: about 0.005 in `u` for 65 µm).
     pub fn default_texel(coherence_um: f64) -> f64 {
