@@ -40,9 +40,16 @@ pub const MAX_DENSITY_CELLS: usize = 4 << 20;
 pub const DENSITY_NODES: usize = 8;
 /// Largest samples per pixel.
 pub const MAX_SAMPLES: u32 = 65_536;
-/// Samples per pixel one dispatch adds: lavapipe adds nothing after about 1160 samples in
-/// one invocation (a 2048-sample map comes out at 1160/2048 of the 1024-sample one), so
-/// the samples are split over dispatches that each add their sum to the picture.
+/// Samples per pixel one dispatch adds. llvmpipe (lavapipe) ends every loop of a shader
+/// invocation once the invocation's loops together have run 65 535 iterations (gallivm's
+/// loop limiter, `LP_MAX_TGSI_LOOP_ITERATIONS`, one counter shared by all loops): the
+/// samples' loop and its inner loops (the density's binary searches, Clenshaw over the
+/// table's terms, the spline taps) reach it after about a thousand samples, and a map
+/// whose batch spans the whole dispatch then adds nothing (measured: one dispatch of 2048
+/// samples on `builtin:sinusoidal` under the sky gives exactly zero, also with the NaN
+/// drop replaced by a marker; 256 samples a dispatch give the picture). 256 keeps an
+/// invocation's iterations below the limit up to about 250 loop iterations a sample. A
+/// GPU has no such limit.
 pub const CHUNK: u32 = 256;
 /// Default samples per pixel.
 pub const DEFAULT_SAMPLES: u32 = 256;
