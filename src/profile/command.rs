@@ -36,9 +36,10 @@ pub struct ProfileArgs {
     /// Azimuth of the light (degrees).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub phi_i: f64,
-    /// Wall-time budget of the whole profile in seconds: rows are measured cheapest first,
-    /// each draws frames until its median is known to 5 % or its share is spent, and a row
-    /// that does not fit is reported as skipped with its estimated cost.
+    /// Wall-time budget of the whole profile in seconds: the default variant's row first,
+    /// then the rest cheapest first; each draws frames until its median is known to 5 % or
+    /// its share is spent, and a row that does not fit is reported as skipped with its
+    /// estimated cost.
     #[arg(long, default_value_t = Budget::DEFAULT_S, conflicts_with = "full")]
     pub budget_s: f64,
     /// The exhaustive set: no budget, a 128² map, 1024 + 64 scored pixels, 5 frames per

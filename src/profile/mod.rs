@@ -12,10 +12,10 @@
 //! 95 % bootstrap interval over the scored pixels.
 //!
 //! Frames per row are either fixed ([`Frames::Fixed`], `--full`) or budgeted
-//! ([`Frames::Budget`]): rows are measured cheapest first, each draws frames until its
-//! median is known to the budget's precision or its share of the time left is spent, and
-//! a row whose estimated cost exceeds the time left is reported as skipped with that
-//! estimate.
+//! ([`Frames::Budget`]): the default variant's row first, then the rest cheapest first;
+//! each draws frames until its median is known to the budget's precision or its share of
+//! the time left is spent, and a row whose estimated cost exceeds the time left is reported
+//! as skipped with that estimate.
 //!
 //! The files, in the order a reader meets them: `plan` (the rows and the set-up), `run`
 //! (the entry [`profile`] and each row's measurement), `budget` (frames, budget, pace),

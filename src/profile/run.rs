@@ -154,7 +154,8 @@ fn variant_rows(
 }
 
 impl Run<'_> {
-    /// The mesh reference, then every row, cheapest first when budgeted.
+    /// The mesh reference, then every row (budgeted: the default variant's first, then the
+    /// rest cheapest first).
     fn rows(&mut self, renderer: &mut Renderer) -> Result<()> {
         if self.progress.bar.is_none() {
             let how = match self.setup.frames {
@@ -294,7 +295,7 @@ impl Run<'_> {
         let (deadline, frames_end) = match self.budget() {
             None => (None, None),
             Some(b) => {
-                // Greedy: cheapest first, each row while its estimate fits what is left.
+                // Greedy: in that order, each row while its estimate fits what is left.
                 let allowance = self.left_s(&b);
                 let est = self.estimate_ms(row) / 1e3;
                 if est > allowance && self.measured {
