@@ -1,8 +1,10 @@
-//! The on-disk cache that the DFT terms ([`crate::spectrum::cache`]) and the sampled tables
-//! ([`crate::brdf::table_cache`]) share: the keys (64-bit FNV-1a over everything a file
-//! depends on) and file names, the directory's size cap and its least-recently-used
-//! eviction, the listing, and the removal of temporary files left by writers that died.
-//! Each cache owns its file format; this module never reads inside a file.
+//! The on-disk cache that the DFT terms ([`crate::spectrum::cache`]), the sampled tables
+//! ([`crate::brdf::table_cache`]) and their packed texels
+//! ([`crate::render::variant`]'s `packed`) share: the keys (64-bit FNV-1a over everything a
+//! file depends on) and file names, reading and writing a file's bytes, the directory's
+//! size cap and its least-recently-used eviction, the listing, and the removal of temporary
+//! files left by writers that died. Each cache owns its file format; this module never
+//! looks inside a file.
 //!
 //! The directory is capped at [`cache_max_bytes`] (`DIFFRACT_CACHE_MAX`, default
 //! [`DEFAULT_CACHE_MAX`]): after a write the least recently used files (mtime, refreshed
@@ -13,6 +15,7 @@
 use std::path::{Path, PathBuf};
 use std::time::SystemTime;
 
+use crate::report::Report;
 use crate::{Error, Result};
 
 /// Default cap of the cache directory (bytes).
@@ -100,6 +103,42 @@ impl<'a> CacheDir<'a> {
         std::fs::create_dir_all(self.dir).map_err(|e| Error::io(self.dir, e))?;
         save(path)?;
         evict(self.dir, self.max, Some(path)).map(|_| ())
+    }
+}
+
+impl CacheDir<'_> {
+    /// The bytes of the file at `path` (one of this cache's), at most `limit`: `None` when
+    /// there is none. A file that cannot be read is reported (`…; rebuilding`) and is `None`
+    /// too: the caller rebuilds what it held.
+    pub fn read(
+        &self,
+        path: &Path,
+        what: &str,
+        limit: u64,
+        report: &dyn Report,
+    ) -> Option<Vec<u8>> {
+        match crate::fsutil::read_bounded(path, what, limit) {
+            Ok(data) => Some(data),
+            Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => None,
+            Err(e) => {
+                report.warn(&format!("{e}; rebuilding"));
+                None
+            }
+        }
+    }
+
+    /// Stores `bytes` at `path` ([`Self::store`]). A cache file is diffract's own: replaced,
+    /// never written into (a FIFO or a link left at its path must not receive it). A
+    /// failure is a warning naming the cache (`what`), never an error of the caller's work.
+    pub fn write(&self, path: &Path, bytes: &[u8], what: &str, report: &dyn Report) {
+        let saved = self.store(path, |p| {
+            crate::fsutil::write_replacing(p, |w| {
+                std::io::Write::write_all(w, bytes).map_err(|e| Error::io(p, e))
+            })
+        });
+        if let Err(e) = saved {
+            report.warn(&format!("could not write the {what}: {e}"));
+        }
     }
 }
 

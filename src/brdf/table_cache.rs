@@ -13,10 +13,9 @@ use std::path::Path;
 
 use super::table::{sample_g_kept, Slices, TableSpec};
 use crate::cache::{mark_used, CacheDir, Fnv1a, TABLE_FILES};
-use crate::fsutil::write_replacing;
 use crate::heightfield::HeightField;
 use crate::report::Report;
-use crate::{Error, Result};
+use crate::Result;
 
 const MAGIC: &[u8; 8] = b"DIFFGTAB";
 /// Bump when the layout or the meaning of `G` changes.
@@ -218,8 +217,8 @@ pub fn sample_g_cached_by(
     let path = cache.file(TABLE_FILES, key);
     // A valid file has exactly this many bytes: read no more than that.
     let expected = (44 + w_nodes.len() * 8 + nu * nv * w_nodes.len() * 12 + 8) as u64;
-    match crate::fsutil::read_bounded(&path, "table cache", expected) {
-        Ok(data) => match decode(&data, key, w_nodes) {
+    if let Some(data) = cache.read(&path, "table cache", expected, report) {
+        match decode(&data, key, w_nodes) {
             Ok(s) if s.nu == nu && s.nv == nv => {
                 mark_used(&path);
                 return Ok((s, true));
@@ -232,9 +231,7 @@ pub fn sample_g_cached_by(
                 "table cache {}: {msg}; rebuilding",
                 path.display()
             )),
-        },
-        Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => {}
-        Err(e) => report.warn(&format!("{e}; rebuilding")),
+        }
     }
     let s = build()?;
     let bytes = encode(&s, key);
@@ -246,16 +243,7 @@ pub fn sample_g_cached_by(
         ));
         return Ok((s, false));
     }
-    // A cache file is diffract's own: replaced, never written into (a FIFO or a link left
-    // at its path must not receive it).
-    let saved = cache.store(&path, |p| {
-        write_replacing(p, |w| {
-            std::io::Write::write_all(w, &bytes).map_err(|e| Error::io(p, e))
-        })
-    });
-    if let Err(e) = saved {
-        report.warn(&format!("could not write the table cache: {e}"));
-    }
+    cache.write(&path, &bytes, "table cache", report);
     Ok((s, false))
 }
 

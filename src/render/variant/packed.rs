@@ -9,9 +9,7 @@ use std::path::Path;
 use super::TableFormat;
 use crate::brdf::table::Region;
 use crate::cache::{mark_used, CacheDir, Fnv1a, PACKED_FILES};
-use crate::fsutil::write_replacing;
 use crate::report::Report;
-use crate::Error;
 
 const MAGIC: &[u8; 8] = b"DIFFPACK";
 /// Bump when the layout of the texels or of the file changes.
@@ -132,46 +130,36 @@ pub fn load(
     let cache = CacheDir::open(dir).ok()?;
     let path = cache.file(PACKED_FILES, key);
     let limit = max_bytes.saturating_add((HEADER + 8) as u64);
-    match crate::fsutil::read_bounded(&path, "packed table cache", limit) {
-        Ok(data) => match Packed::decode(&data, key) {
-            Ok(p) if (p.nu, p.nv) == nodes => {
-                mark_used(&path);
-                Some(p)
-            }
-            Ok(_) => None,
-            Err(msg) => {
-                report.warn(&format!(
-                    "packed table cache {}: {msg}; rebuilding",
-                    path.display()
-                ));
-                None
-            }
-        },
-        Err(Error::Io { source, .. }) if source.kind() == std::io::ErrorKind::NotFound => None,
-        Err(e) => {
-            report.warn(&format!("{e}; rebuilding"));
+    let data = cache.read(&path, "packed table cache", limit, report)?;
+    match Packed::decode(&data, key) {
+        Ok(p) if (p.nu, p.nv) == nodes => {
+            mark_used(&path);
+            Some(p)
+        }
+        Ok(_) => None,
+        Err(msg) => {
+            report.warn(&format!(
+                "packed table cache {}: {msg}; rebuilding",
+                path.display()
+            ));
             None
         }
     }
 }
 
 /// Stores `packed` under `key` in `dir` (replacing, never writing into, what is there); a
-/// failure is a warning, never an error of the draw.
+/// failure is a warning, never an error of the draw. A table over the cache's cap is not
+/// stored.
 pub fn store(dir: &Path, key: u64, packed: &Packed, report: &dyn Report) {
-    let saved = CacheDir::open(dir).and_then(|cache| {
-        let bytes = packed.encode(key);
-        if bytes.len() as u64 > cache.max_bytes() {
-            return Ok(());
+    match CacheDir::open(dir) {
+        Ok(cache) => {
+            let bytes = packed.encode(key);
+            if bytes.len() as u64 <= cache.max_bytes() {
+                let path = cache.file(PACKED_FILES, key);
+                cache.write(&path, &bytes, "packed table cache", report);
+            }
         }
-        let path = cache.file(PACKED_FILES, key);
-        cache.store(&path, |p| {
-            write_replacing(p, |w| {
-                std::io::Write::write_all(w, &bytes).map_err(|e| Error::io(p, e))
-            })
-        })
-    });
-    if let Err(e) = saved {
-        report.warn(&format!("could not write the packed table cache: {e}"));
+        Err(e) => report.warn(&format!("could not write the packed table cache: {e}")),
     }
 }
 
