@@ -718,13 +718,9 @@ impl TableBuild {
 /// How a table's samples were obtained, for the render and profile reports.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Built {
-    /// Built on the CPU in `seconds`, its sums in `precision`; a float32 build's largest
-    /// difference from float64 over its probe, relative to the probe's peak.
-    Cpu {
-        seconds: f64,
-        precision: crate::brdf::truncation::Precision,
-        probe: Option<f64>,
-    },
+    /// Built on the CPU in `seconds`; `probe`: a float32 build's largest difference from
+    /// float64 over its probe, relative to the probe's peak (`None`: built in float64).
+    Cpu { seconds: f64, probe: Option<f64> },
     /// Built on the device `device` in `precision`, in `seconds`.
     Device {
         device: String,
@@ -741,12 +737,14 @@ impl std::fmt::Display for Built {
             Built::Cpu {
                 seconds,
                 probe: Some(e),
-                ..
             } => write!(
                 f,
                 "built on CPU (f32 sums, within {e:.1e} of f64 at its peak) in {seconds:.1} s"
             ),
-            Built::Cpu { seconds, .. } => write!(f, "built on CPU (f64) in {seconds:.1} s"),
+            Built::Cpu {
+                seconds,
+                probe: None,
+            } => write!(f, "built on CPU (f64) in {seconds:.1} s"),
             Built::Device {
                 device,
                 precision,
@@ -788,7 +786,8 @@ pub fn sample_g_built(
         TableBuild::CpuF64 => crate::brdf::truncation::Precision::F64,
         _ => crate::brdf::truncation::Precision::F32,
     };
-    let cpu = std::cell::Cell::new(None);
+    // The fast build's probe, out of the closure the cache calls on a miss.
+    let probe = std::cell::Cell::new(None);
     let make = || match precision {
         None => {
             let s = crate::brdf::table::sample_g_kept_in(
@@ -800,7 +799,7 @@ pub fn sample_g_built(
                 sums,
                 progress,
             )?;
-            cpu.set(Some((s.precision, s.probe)));
+            probe.set(s.probe);
             Ok(s.slices)
         }
         Some(p) => sample_g_device(dev, hf, coherence_um, spec, w_nodes, keep, p, progress),
@@ -824,14 +823,10 @@ pub fn sample_g_built(
     let seconds = start.elapsed().as_secs_f64();
     let built = match (cached, precision) {
         (true, _) => Built::Cached,
-        (false, None) => {
-            let (precision, probe) = cpu.get().unwrap_or((sums, None));
-            Built::Cpu {
-                seconds,
-                precision,
-                probe,
-            }
-        }
+        (false, None) => Built::Cpu {
+            seconds,
+            probe: probe.get(),
+        },
         (false, Some(precision)) => Built::Device {
             device: dev.info.name.clone(),
             precision,

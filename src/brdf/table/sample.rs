@@ -441,12 +441,7 @@ impl PhaseSpectrum {
                 };
                 let mut field = vec![zero; xs.len()];
                 let mut columns = vec![zero; needed.len() * ny];
-                let mut scratch = vec![
-                    zero;
-                    self.row_fft
-                        .get_inplace_scratch_len()
-                        .max(self.col_fft.get_inplace_scratch_len())
-                ];
+                let mut scratch = self.fft_scratch();
                 let mut n = first;
                 while n < last {
                     let pair = n + 1 < last;
@@ -492,6 +487,15 @@ impl PhaseSpectrum {
             })
             .collect();
         out.into_iter().flatten().collect()
+    }
+
+    /// A scratch buffer both transforms (rows and columns) can run in place with.
+    fn fft_scratch(&self) -> Vec<Complex64> {
+        let len = self
+            .row_fft
+            .get_inplace_scratch_len()
+            .max(self.col_fft.get_inplace_scratch_len());
+        vec![Complex64::new(0.0, 0.0); len]
     }
 
     /// The lookups of one wavelength over the node grid `u × v`.
@@ -548,7 +552,7 @@ impl PhaseSpectrum {
                 })
                 .collect()
         };
-        let s_of = |lambda_um: f64| 2.0 * std::f64::consts::PI * w / lambda_um;
+        let s_of = |lambda_um: f64| phase_scale(w, lambda_um);
         let looks: Vec<Lookups> = samples
             .iter()
             .map(|&(l, _)| self.lookups(u, v, l * 1e-3))
@@ -606,10 +610,7 @@ impl PhaseSpectrum {
                 last += 1;
             }
             let group = &looks[first..last];
-            let s: Vec<f64> = group
-                .iter()
-                .map(|g| 2.0 * std::f64::consts::PI * w / g.lambda_um)
-                .collect();
+            let s: Vec<f64> = group.iter().map(|g| phase_scale(w, g.lambda_um)).collect();
             let inputs = band.sum(terms, &s, group);
             // One accumulator per thread's share of the group (not one per split).
             let share = group.len().div_ceil(rayon::current_num_threads().max(1));
@@ -656,12 +657,7 @@ impl PhaseSpectrum {
             .map(|h| Complex64::from_polar(1.0, s * h))
             .collect();
         let zero = Complex64::new(0.0, 0.0);
-        let mut scratch = vec![
-            zero;
-            self.row_fft
-                .get_inplace_scratch_len()
-                .max(self.col_fft.get_inplace_scratch_len())
-        ];
+        let mut scratch = self.fft_scratch();
         self.row_fft.process_with_scratch(&mut field, &mut scratch);
         // Columns: only the frequencies the lookups reach. Shifted texel t holds frequency
         // t − b, i.e. FFT bin (t − b) mod N; the spectrum is periodic, so t wraps too.
@@ -693,6 +689,11 @@ fn gather_columns(field: &[Complex64], nx: usize, which: &[usize], columns: &mut
             }
         }
     }
+}
+
+/// The phase field's scale `s = 2πw/λ` (µm⁻¹) of one `(w, λ)` job.
+fn phase_scale(w: f64, lambda_um: f64) -> f64 {
+    2.0 * std::f64::consts::PI * w / lambda_um
 }
 
 /// `a + b`, element by element (planar accumulators).
