@@ -40,15 +40,21 @@ fn main() {
             Some("comp") => shaderc::ShaderKind::Compute,
             _ => continue, // *.glsl are includes, compiled as part of the stages.
         };
-        match compile(&compiler, &glsl_dir, path, kind, &out_dir) {
-            Ok(name) => compiled.push(name),
-            Err(msg) => {
-                eprintln!("{msg}");
-                println!(
-                    "cargo:warning={}",
-                    msg.lines().next().unwrap_or("shader error")
-                );
-                failed = true;
+        let mut results = vec![compile(&compiler, &glsl_dir, path, kind, &out_dir)];
+        if kind == shaderc::ShaderKind::Fragment {
+            results.extend(env_stages(&compiler, &glsl_dir, path, &out_dir));
+        }
+        for result in results {
+            match result {
+                Ok(name) => compiled.push(name),
+                Err(msg) => {
+                    eprintln!("{msg}");
+                    println!(
+                        "cargo:warning={}",
+                        msg.lines().next().unwrap_or("shader error")
+                    );
+                    failed = true;
+                }
             }
         }
     }
@@ -230,6 +236,55 @@ fn spec_constants(glsl_dir: &Path, entries: &[PathBuf]) -> Result<String, String
     Ok(s)
 }
 
+/// The main() of a variant's fragment stage, and the compute stages that build.rs puts in
+/// its place: the environment-lit BRDF map and scene pixels evaluate the variant's own
+/// `diffractionXyz` (glsl/env_common.glsl).
+const SHADE_MAIN: &str = "#include \"shade.glsl\"";
+const ENV_STAGES: [&str; 2] = ["env_map", "env_scene"];
+
+/// A variant's fragment file (one that ends its evaluator with [`SHADE_MAIN`]) compiled as
+/// each of [`ENV_STAGES`], to `OUT_DIR/<stem>.<stage>.spv`; nothing for other fragment
+/// stages (debug views, the per-vertex colour stage).
+fn env_stages(
+    compiler: &shaderc::Compiler,
+    glsl_dir: &Path,
+    path: &Path,
+    out_dir: &Path,
+) -> Vec<Result<String, String>> {
+    let source = match std::fs::read_to_string(path) {
+        Ok(s) => s,
+        Err(e) => return vec![Err(format!("{}: {e}", path.display()))],
+    };
+    if !source.lines().any(|l| l.trim() == SHADE_MAIN) {
+        return Vec::new();
+    }
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("stage");
+    ENV_STAGES
+        .iter()
+        .map(|stage| {
+            let replaced: String = source
+                .lines()
+                .map(|l| {
+                    if l.trim() == SHADE_MAIN {
+                        format!("#include \"{stage}.glsl\"\n")
+                    } else {
+                        format!("{l}\n")
+                    }
+                })
+                .collect();
+            compile_source(
+                compiler,
+                glsl_dir,
+                &replaced,
+                &format!("{} as {stage}", path.display()),
+                shaderc::ShaderKind::Compute,
+                &out_dir.join(format!("{stem}.{stage}.spv")),
+            )
+            .map(|()| format!("{stem}.{stage}"))
+        })
+        .collect()
+}
+
 /// Compiles one stage to `OUT_DIR/<file name>.spv`; returns the file name.
 fn compile(
     compiler: &shaderc::Compiler,
@@ -239,6 +294,30 @@ fn compile(
     out_dir: &Path,
 ) -> Result<String, String> {
     let source = std::fs::read_to_string(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    let name = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .ok_or_else(|| format!("{}: non-UTF-8 file name", path.display()))?;
+    compile_source(
+        compiler,
+        glsl_dir,
+        &source,
+        &path.display().to_string(),
+        kind,
+        &out_dir.join(format!("{name}.spv")),
+    )?;
+    Ok(name.to_string())
+}
+
+/// Compiles `source` (named `file_name` in messages) to SPIR-V at `out`.
+fn compile_source(
+    compiler: &shaderc::Compiler,
+    glsl_dir: &Path,
+    source: &str,
+    file_name: &str,
+    kind: shaderc::ShaderKind,
+    out: &Path,
+) -> Result<(), String> {
     let mut options =
         shaderc::CompileOptions::new().map_err(|e| format!("shaderc options: {e}"))?;
     // Vulkan 1.0 / SPIR-V 1.0: the oldest target, so any Vulkan driver can load the module.
@@ -258,20 +337,13 @@ fn compile(
             content,
         })
     });
-    let file_name = path.display().to_string();
     let artifact = compiler
-        .compile_into_spirv(&source, kind, &file_name, "main", Some(&options))
+        .compile_into_spirv(source, kind, file_name, "main", Some(&options))
         .map_err(|e| match e {
             shaderc::Error::CompilationError(_, msg) => msg,
             other => format!("{file_name}: {other}"),
         })?;
-    let name = path
-        .file_name()
-        .and_then(|n| n.to_str())
-        .ok_or_else(|| format!("{file_name}: non-UTF-8 file name"))?;
-    let out = out_dir.join(format!("{name}.spv"));
-    std::fs::write(&out, artifact.as_binary_u8()).map_err(|e| format!("{}: {e}", out.display()))?;
-    Ok(name.to_string())
+    std::fs::write(out, artifact.as_binary_u8()).map_err(|e| format!("{}: {e}", out.display()))
 }
 
 fn env_or_exit(key: &str) -> String {

@@ -1,9 +1,12 @@
-// Shared by the environment-lit compute stages (env_map.comp: a BRDF map; env_scene.comp:
-// the pixels of a scene's G-buffer): the parameters and buffers, the BRDF C·G of the
-// radiance-weighted chebyshev-w table, the samplers (the BRDF's density over (u, v), the
-// environment by luminance, disc lights uniform in their cone) and the estimator of one
-// surface point, L_o = ∫ L(ωi)·f·cos θi dωi, that both stages call (MODEL §10). Mirrors
-// brdf::env_reference and src/render/env.rs.
+// The estimator of one surface point under every light, L_o = ∫ L(ωi)·f·cos θi dωi
+// (MODEL §10), shared by the environment-lit compute stages (env_map.glsl: a BRDF map;
+// env_scene.glsl: the pixels of a scene's G-buffer): its parameters and buffers (set 1),
+// the samplers (the BRDF's density over (u, v), the environment by luminance, disc lights
+// uniform in their cone) and the sums. The BRDF itself is the variant's: build.rs compiles
+// each variant's fragment file with its shade.glsl main() replaced by one of these stages,
+// so `diffractionXyz(ωi, ωr)` = C·G in XYZ is the very function the raster pass calls,
+// reading the variant's set 0 (its table or DFT terms, built in radiance units: the
+// colour weights carry f_r/ρ, src/render/env.rs). Mirrors brdf::env_reference.
 //
 // Per direction the integrand is that of thesis Algorithm 4 with absolute units:
 //   L(ωi)·cos θi·[(1 − w_d)·f_r + ((1 − α) + w_d)·t],   f_r = C·G (per du dv: cos θi dωi
@@ -15,102 +18,39 @@
 
 layout(local_size_x = 64) in;
 
-layout(std430, set = 0, binding = 0) readonly buffer Params {
-    vec4 regionLo;   // xyz: lower corner (u0, v0, w0) of the table
-    vec4 regionHi;   // xyz: upper corner
-    vec4 blend;      // x: w_diffuse (0 without a texture), y: probability of the environment among the light samples, z: m, a light sample every m-th sample
-    vec4 white;      // xyz: D65's white XYZ, w: Schlick R0
+layout(std430, set = 1, binding = 0) readonly buffer EnvParams {
+    vec4 blend;      // x: w_diffuse (0 without a texture), y: probability of the environment among the light samples, z: m, a light sample every m-th sample, w: the BRDF's scale to radiance
     vec4 cdfLo;      // xy: (u, v) of the G density's first bin corner, z: first CDF node w, w: node step
     vec4 cdfStep;    // xy: bin size in u and v
-    ivec4 tableDims; // x: nu, y: nv, z: K (Chebyshev terms), w: pixels that share a sequence
+    vec4 envRot;     // x: cos, y: sin of the map's rotation about +Y
     ivec4 cdfDims;   // x: bins along u, y: along v, z: CDF nodes in w, w: samples per noise batch
     ivec4 envDims;   // x: W, y: H, z: samples per pixel, w: invocations (map side², or the G-buffer pixels of this pass)
-    ivec4 flags;     // x: Fresnel, y: shadowing, z: the environment can be sampled, w: seed
-    vec4 envRot;     // x: cos, y: sin of the map's rotation about +Y
     ivec4 lightDims; // x: point lights, y: disc lights, z: texture blending, w: a BRDF map's side
+    ivec4 sequence;  // x: pixels that share a sequence, y: the environment can be sampled, z: seed
 } P;
-layout(std430, set = 0, binding = 1) readonly buffer Coeff { float coeff[]; };
-layout(std430, set = 0, binding = 2) readonly buffer EnvXyz { float envXyz[]; };
+layout(std430, set = 1, binding = 1) readonly buffer EnvXyz { float envXyz[]; };
 // Marginal CDF over rows (H + 1), conditional CDFs over columns (H·(W + 1)), then the
 // density in solid angle of each pixel (W·H).
-layout(std430, set = 0, binding = 3) readonly buffer EnvCdf { float envCdf[]; };
+layout(std430, set = 1, binding = 2) readonly buffer EnvCdf { float envCdf[]; };
 // Per CDF node: marginal over v bins (nbv + 1), conditionals over u bins (nbv·(nbu + 1)),
 // then the density in (u, v) of each bin (nbu·nbv).
-layout(std430, set = 0, binding = 4) readonly buffer GCdf { float gCdf[]; };
+layout(std430, set = 1, binding = 3) readonly buffer GCdf { float gCdf[]; };
 // The sums over the samples so far (the CPU divides by their number): each dispatch adds
 // samples [base, base + count); the first also adds the point lights. The stage decides
 // what a pixel holds (env_map.comp, env_scene.comp).
-layout(std430, set = 0, binding = 5) buffer Out { vec4 outSum[]; };
+layout(std430, set = 1, binding = 4) buffer Out { vec4 outSum[]; };
 // Point lights (2 vec4 each: towards the light in world space; irradiance XYZ), then disc
 // lights (3 vec4 each: towards the centre, w: cos of the angular radius; radiance XYZ,
 // w: solid angle; x: probability among the light samples), then the environment's
 // irradiance E(n) = ∫ L cos dω (linear sRGB) at IRR_W×IRR_H normals placed like the map's
 // pixel centres (world frame).
-layout(std430, set = 0, binding = 6) readonly buffer Lights { vec4 lights[]; };
+layout(std430, set = 1, binding = 5) readonly buffer Lights { vec4 lights[]; };
 layout(push_constant) uniform Chunk { int base; int count; } chunk;
 
-const float PI = 3.14159265358979;
 const int IRR_W = 128;
 const int IRR_H = 64;
 
 #include "srgb.glsl"
-
-// --- the BRDF: C(ωi, ωr)·G(u, v, w) -------------------------------------------------------
-
-float gain(vec3 wi, vec3 wr) {
-    float ci = wi.z, cr = wr.z;
-    if (ci <= 0.0 || cr <= 0.0) return 0.0;
-    float w = ci + cr;
-    vec3 h = wi + wr;
-    float onePlus = 0.5 * dot(h, h);
-    float c = onePlus * onePlus / (w * w * ci * cr);
-    h /= length(h);
-    float cosRH = clamp(dot(wr, h), 0.0, 1.0);
-    if (P.flags.x != 0) {
-        float r0 = P.white.w;
-        float m = 1.0 - cosRH;
-        c *= (r0 + (1.0 - r0) * m * m * m * m * m) / r0;
-    }
-    if (P.flags.y != 0) {
-        float k = cosRH > 0.0 ? 2.0 * h.z / cosRH : 0.0;
-        c *= min(1.0, min(k * cr, k * ci));
-    }
-    return (isnan(c) || isinf(c)) ? 0.0 : c;
-}
-
-vec4 splineWeights(float f) {
-    float f2 = f * f, f3 = f2 * f;
-    return vec4((1.0 - f) * (1.0 - f) * (1.0 - f), 3.0 * f3 - 6.0 * f2 + 4.0,
-                -3.0 * f3 + 3.0 * f2 + 3.0 * f + 1.0, f3) / 6.0;
-}
-
-// G(u, v, w) ≥ 0 of the chebyshev-w model (cubic B-spline planes, Clenshaw in w); 0 outside.
-vec3 tableG(vec3 uvw) {
-    vec3 f = (uvw - P.regionLo.xyz) / (P.regionHi.xyz - P.regionLo.xyz);
-    if (any(lessThan(f, vec3(0.0))) || any(greaterThan(f, vec3(1.0)))) return vec3(0.0);
-    int nu = P.tableDims.x, nv = P.tableDims.y, k = P.tableDims.z;
-    vec2 t = f.xy * vec2(nu - 1, nv - 1);
-    ivec2 i = clamp(ivec2(floor(t)), ivec2(0), ivec2(nu - 2, nv - 2));
-    vec2 x = t - vec2(i);
-    vec4 wx = splineWeights(x.x), wy = splineWeights(x.y);
-    int su = nu + 2, plane = su * (nv + 2);
-    float xw = 2.0 * f.z - 1.0;
-    vec3 b1 = vec3(0.0), b2 = vec3(0.0), c0 = vec3(0.0);
-    for (int j = k - 1; j >= 0; --j) {
-        vec3 c = vec3(0.0);
-        for (int b = 0; b < 4; ++b) {
-            for (int a = 0; a < 4; ++a) {
-                int o = 3 * (j * plane + (i.y + b) * su + i.x + a);
-                c += wx[a] * wy[b] * vec3(coeff[o], coeff[o + 1], coeff[o + 2]);
-            }
-        }
-        if (j == 0) { c0 = c; break; }
-        vec3 b0 = c + 2.0 * xw * b1 - b2;
-        b2 = b1;
-        b1 = b0;
-    }
-    return max(c0 + xw * b1 - b2, vec3(0.0));
-}
 
 // --- CDF inversion --------------------------------------------------------------------------
 
@@ -220,7 +160,7 @@ float unitFloat(uint x) { return float(x >> 8) * (1.0 / 16777216.0); }
 vec3 radianceAt(vec3 d, int penv, out float pLight, out vec3 lDisc) {
     int p = penv >= 0 ? penv : envPixel(d);
     lDisc = vec3(0.0);
-    pLight = P.flags.z != 0 ? P.blend.y * envPdf(p) : 0.0;
+    pLight = P.sequence.y != 0 ? P.blend.y * envPdf(p) : 0.0;
     int base = 2 * P.lightDims.x;
     for (int j = 0; j < P.lightDims.y; ++j) {
         vec4 axis = lights[base + 3 * j];
@@ -301,16 +241,13 @@ vec3 toTangent(Surface s, vec3 d) { return vec3(dot(d, s.t), dot(d, s.b), dot(d,
 // the Monte Carlo part is the small Fresnel term alone).
 void addDirection(Surface s, vec3 wi, vec3 l, vec3 lOwn, float scale, inout vec3 xyz,
                   inout vec3 rgb) {
-    float c = gain(wi, s.wr);
-    if (c > 0.0) {
-        vec3 g = tableG(vec3(-wi.xy - s.wr.xy, -wi.z - s.wr.z));
-        xyz += scale * (1.0 - P.blend.x) * c * l * g;
-    }
+    // The variant's C·G holds radiance over blend.w (src/render/env_brdf.rs).
+    xyz += scale * (1.0 - P.blend.x) * P.blend.w * l * diffractionXyz(wi, s.wr);
     if (P.lightDims.z != 0 && wi.z > 0.0) {
         vec3 h = wi + s.wr;
         float lh = length(h);
         float cosRH = lh > 1e-20 ? clamp(dot(s.wr, h / lh), 0.0, 1.0) : 0.0;
-        float r0 = P.white.w;
+        float r0 = params.shading.x;
         float m = 1.0 - cosRH;
         float alpha = min(1.0, abs(r0 + (1.0 - r0) * m * m * m * m * m));
         vec3 k = ((1.0 - alpha) + P.blend.x) * lOwn - alpha * (l - lOwn);
@@ -340,17 +277,20 @@ void pointLights(Surface s, out vec3 xyz, out vec3 rgb) {
 // consecutive samples (batches start at multiples of `batch`; the host estimates the
 // pixel's noise from them). key scrambles the sequence; the pixel takes its point
 // k·stride + place of it (pixels that share a key interleave one low-discrepancy sequence,
-// so that the first n samples of each make the first stride·n points of it).
+// so that the first n samples of each make the first stride·n points of it). closed: the
+// samples of the batches added; dropped: the batches left out for a NaN or an infinity.
 void integrate(Surface s, uint key, uint place, uint stride, int batch, out vec3 xyz,
-               out vec3 rgb, out vec3 sq) {
+               out vec3 rgb, out vec3 sq, out int closed, out int dropped) {
     xyz = vec3(0.0);
     rgb = vec3(0.0);
     sq = vec3(0.0);
+    closed = 0;
+    dropped = 0;
     // R5: α_k = φ^−k, φ the real root of x⁶ = x + 1, as 32-bit fixed-point fractions so
     // that the n-th point is exact for every n (x_n = rot + n·α mod 1, wrapping).
     const uint alpha[5] = uint[5](3785032106u, 3335640776u, 2939605022u, 2590590015u,
                                   2283013049u);
-    uint h = hash(key * 9781u + uint(P.flags.w) * 6271u + 1u);
+    uint h = hash(key * 9781u + uint(P.sequence.z) * 6271u + 1u);
     uint rot[5];
     for (int d = 0; d < 5; ++d) { h = hash(h + uint(d)); rot[d] = h; }
     int m0, m1;
@@ -360,10 +300,11 @@ void integrate(Surface s, uint key, uint place, uint stride, int batch, out vec3
     // n_l = n/m: the host makes n a multiple of m). Each strategy takes the next point of
     // its own dimensions of the sequence. Power heuristic with the counts:
     // w_b = p_b²/(p_b² + (p_ω/m)²), w_l = 1 − w_b at the same direction.
-    bool lightSampling = P.flags.z != 0 || P.lightDims.y > 0;
+    bool lightSampling = P.sequence.y != 0 || P.lightDims.y > 0;
     int m = max(1, int(P.blend.z));
     float mf = float(m);
     vec3 bx = vec3(0.0), br = vec3(0.0);
+    int opened = chunk.base;
     for (int k = chunk.base; k < chunk.base + chunk.count; ++k) {
         uint ib = uint(k) * stride + place + 1u;
         vec3 x3 = vec3(unitFloat(rot[0] + ib * alpha[0]), unitFloat(rot[1] + ib * alpha[1]),
@@ -378,8 +319,9 @@ void integrate(Surface s, uint key, uint place, uint stride, int batch, out vec3
             float pl;
             vec3 own;
             vec3 l = radianceAt(toWorld(s, wi), -1, pl, own);
-            float pb = pUv * wi.z, ql = pl / mf;
-            addDirection(s, wi, l, own, pb * pb / (pb * pb + ql * ql) / pUv, bx, br);
+            // pb > 0 here; the ratio form cannot make 0/0 or ∞/∞ (an infinite ratio gives 0).
+            float r = (pl / mf) / (pUv * wi.z);
+            addDirection(s, wi, l, own, 1.0 / (1.0 + r * r) / pUv, bx, br);
         }
         // The lights' sample: the integrand per dωi (times cos θi) over p_ω, times m.
         if (lightSampling && k % m == 0) {
@@ -392,18 +334,27 @@ void integrate(Surface s, uint key, uint place, uint stride, int batch, out vec3
             vec3 own;
             vec3 l = radianceAt(d, p, pl, own);
             if (wi.z > 0.0 && pl > 0.0) {
-                float pb = brdfDensity(-wi.xy - s.wr.xy, m0, m1, tw) * wi.z, ql = pl / mf;
-                float mis = ql * ql / (pb * pb + ql * ql);
-                addDirection(s, wi, l, own, wi.z * mis / ql, bx, br);
+                float ql = pl / mf;
+                float r = brdfDensity(-wi.xy - s.wr.xy, m0, m1, tw) * wi.z / ql;
+                addDirection(s, wi, l, own, wi.z / (1.0 + r * r) / ql, bx, br);
             }
         }
         if ((k + 1) % batch == 0 || k + 1 == chunk.base + chunk.count) {
-            if (any(isnan(bx)) || any(isinf(bx))) bx = vec3(0.0);
-            if (any(isnan(br)) || any(isinf(br))) br = vec3(0.0);
+            // A batch is added whole, its samples counted in `closed`, or, when it holds
+            // a NaN or an infinity, left out and counted in `dropped` (the host reports
+            // it). The host divides by `closed`: what a batch the loop never finished (a
+            // driver that ends long loops) or a dropped one would have added is not in
+            // the sum, and not in the count either.
             vec3 c = XYZ_TO_SRGB * bx + br;
-            sq += c * c;
-            xyz += bx;
-            rgb += br;
+            if (any(isnan(c)) || any(isinf(c))) {
+                dropped += 1;
+            } else {
+                sq += c * c;
+                xyz += bx;
+                rgb += br;
+                closed += k + 1 - opened;
+            }
+            opened = k + 1;
             bx = vec3(0.0);
             br = vec3(0.0);
         }

@@ -193,6 +193,7 @@ pub fn draw_map(
         seed: 0,
     };
     let pic = render_env_brdf_map(dev, &lighting, &req)?;
+    warn_dropped(pic.dropped);
     let table_line = table_line(&lighting, spec, built);
     let rgb = pic
         .xyz
@@ -206,6 +207,19 @@ pub fn draw_map(
         table_line,
         samples,
     })
+}
+
+/// Says how many batches of samples the estimator left out for a NaN or an infinity (the
+/// picture is the mean of the others), where any were.
+fn warn_dropped(dropped: u64) {
+    if dropped > 0 {
+        crate::report::Report::warn(
+            &crate::report::Stderr,
+            &format!(
+                "{dropped} batch(es) of samples held a NaN or an infinity and were left out: each pixel is the mean of its other batches"
+            ),
+        );
+    }
 }
 
 /// `render` of a scene lit by an environment, disc lights or `--no-sun`: the scene in
@@ -268,6 +282,7 @@ pub fn run_env_scene(
             noise: (noise > 0.0).then_some(noise),
         },
     )?;
+    warn_dropped(frame.dropped);
     let out = &scene.output;
     let rgb = match crate::image_io::output_format(&args.out)? {
         crate::image_io::OutputFormat::Exr => {

@@ -1,5 +1,5 @@
-//! Compute plumbing: a compute pipeline layout over storage buffers (set 0, bindings
-//! `0..n`) with one push-constant range, compute pipelines specialised by constants, the
+//! Compute plumbing: a compute pipeline layout over storage buffers (bindings `0..n` of
+//! set 0, or of the set after the caller's own) with one push-constant range, compute pipelines specialised by constants, the
 //! descriptor set that points the bindings at buffers, device-local buffers filled through
 //! a staging copy, and the recording helpers (dispatch over a 1D range of invocations,
 //! barriers). Knows Vulkan, not what the shaders compute.
@@ -20,17 +20,32 @@ use crate::{Error, Result};
 pub const LOCAL_SIZE: u32 = 64;
 
 /// A descriptor-set layout of `bindings` storage buffers (compute stage) and the pipeline
-/// layout with one push-constant range of `push_bytes`.
+/// layout with one push-constant range of `push_bytes`; the storage set is set 0, or comes
+/// after sets the caller owns ([`ComputeLayout::after`]).
 pub struct ComputeLayout {
     dev: Arc<Device>,
     set_layout: vk::DescriptorSetLayout,
     raw: vk::PipelineLayout,
     bindings: u32,
     push_bytes: u32,
+    /// The storage set's index: the number of sets before it.
+    first_set: u32,
 }
 
 impl ComputeLayout {
     pub fn new(dev: &Arc<Device>, name: &str, bindings: u32, push_bytes: u32) -> Result<Self> {
+        Self::after(dev, name, &[], bindings, push_bytes)
+    }
+
+    /// A layout whose sets `0..leading.len()` are the caller's (bound with
+    /// [`ComputeLayout::dispatch_after`]) and whose storage set follows them.
+    pub fn after(
+        dev: &Arc<Device>,
+        name: &str,
+        leading: &[vk::DescriptorSetLayout],
+        bindings: u32,
+        push_bytes: u32,
+    ) -> Result<Self> {
         let vk_bindings: Vec<_> = (0..bindings)
             .map(|b| {
                 vk::DescriptorSetLayoutBinding::default()
@@ -50,9 +65,10 @@ impl ComputeLayout {
             raw: vk::PipelineLayout::null(),
             bindings,
             push_bytes,
+            first_set: leading.len() as u32,
         };
         dev.set_name(set_layout, name);
-        let set_layouts = [set_layout];
+        let set_layouts: Vec<_> = leading.iter().copied().chain([set_layout]).collect();
         let ranges = [vk::PushConstantRange {
             stage_flags: vk::ShaderStageFlags::COMPUTE,
             offset: 0,
@@ -81,6 +97,30 @@ impl ComputeLayout {
         push: &[u8],
         invocations: u64,
     ) -> Result<()> {
+        self.dispatch_after(cb, pipeline, &[], set, push, invocations)
+    }
+
+    /// [`ComputeLayout::dispatch`] with the caller's sets `leading` bound before the
+    /// storage set (one per leading layout of [`ComputeLayout::after`]).
+    pub fn dispatch_after(
+        &self,
+        cb: vk::CommandBuffer,
+        pipeline: &ComputePipeline,
+        leading: &[vk::DescriptorSet],
+        set: &StorageSet,
+        push: &[u8],
+        invocations: u64,
+    ) -> Result<()> {
+        if leading.len() as u32 != self.first_set {
+            return Err(Error::invalid(
+                "compute dispatch",
+                format!(
+                    "{} sets before the storage set, layout has {}",
+                    leading.len(),
+                    self.first_set
+                ),
+            ));
+        }
         if push.len() as u32 != self.push_bytes {
             return Err(Error::invalid(
                 "compute dispatch",
@@ -110,7 +150,11 @@ impl ComputeLayout {
                 vk::PipelineBindPoint::COMPUTE,
                 self.raw,
                 0,
-                &[set.set.raw],
+                &leading
+                    .iter()
+                    .copied()
+                    .chain([set.set.raw])
+                    .collect::<Vec<_>>(),
                 &[],
             );
             if !push.is_empty() {

@@ -18,6 +18,7 @@ use ash::vk;
 use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
+use super::env_brdf::{EnvBrdf, EnvStage};
 use crate::brdf::env_reference::{absolute_factor, radiance_planes, radiance_slices_in};
 use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, TableSpec};
 use crate::brdf::Shading;
@@ -29,8 +30,6 @@ use crate::heightfield::HeightField;
 use crate::light::env::{map_to_direction, EnvMap, EnvSampler};
 use crate::{Error, Result};
 use std::f64::consts::PI;
-
-pub(crate) const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_map.comp.spv"));
 
 /// Cells of the BRDF's density a side of one table cell.
 pub const SUB: usize = 2;
@@ -197,6 +196,8 @@ fn cdf_block(weights: &[f64], w: usize, h: usize, cell_area: f64) -> Vec<f32> {
 /// What an environment-lit BRDF map is drawn from, prepared on the CPU once.
 pub struct EnvLighting {
     pub table: ChebyshevW,
+    /// What the table was sampled over.
+    pub spec: TableSpec,
     pub density: GDensity,
     /// D65's white XYZ (`Y = 1`): the colour of the sun.
     pub white: [f64; 3],
@@ -309,6 +310,7 @@ impl EnvLighting {
             / white[1];
         let lighting = EnvLighting {
             table,
+            spec: *spec,
             density,
             white,
             mirror_scale,
@@ -317,6 +319,21 @@ impl EnvLighting {
             probe: probe.get(),
         };
         Ok((lighting, cached))
+    }
+}
+
+impl EnvLighting {
+    /// `chebyshev-w` drawn from the lighting's own table for the environment-lit stages,
+    /// stored in float32 (its values near a mirror's peak pass float16's range).
+    pub(crate) fn brdf(&self, dev: &Arc<Device>, shading: &Shading) -> Result<EnvBrdf> {
+        EnvBrdf::chebyshev_w(
+            dev,
+            &self.table,
+            &self.spec,
+            shading,
+            self.mirror_scale,
+            crate::render::variant::TableFormat::Rgba32f,
+        )
     }
 }
 
@@ -339,6 +356,8 @@ pub struct EnvPicture {
     pub size: u32,
     pub xyz: Vec<[f32; 3]>,
     pub gpu_ms: f64,
+    /// Batches of samples left out for a NaN or an infinity (0 on every case measured).
+    pub dropped: u64,
 }
 
 /// A light evaluated once per pixel, in full: a direction of the sun's disc, or a disc
@@ -566,21 +585,18 @@ fn rotate_y(d: [f64; 3], a: f64) -> [f64; 3] {
     [c * d[0] + s * d[2], d[1], -s * d[0] + c * d[2]]
 }
 
+/// Mirror of `EnvParams` in glsl/env_common.glsl.
 #[repr(C)]
 #[derive(Clone, Copy)]
 struct ParamsSsbo {
-    region_lo: [f32; 4],
-    region_hi: [f32; 4],
     blend: [f32; 4],
-    white: [f32; 4],
     cdf_lo: [f32; 4],
     cdf_step: [f32; 4],
-    table_dims: [i32; 4],
+    env_rot: [f32; 4],
     cdf_dims: [i32; 4],
     env_dims: [i32; 4],
-    flags: [i32; 4],
-    env_rot: [f32; 4],
     light_dims: [i32; 4],
+    sequence: [i32; 4],
 }
 
 // SAFETY: repr(C) of 4-byte scalars in 16-byte groups: no padding.
@@ -615,7 +631,10 @@ pub(crate) struct Dispatch<'a> {
     pub stride: u32,
     /// Samples per noise batch (a G-buffer's; a map ignores it).
     pub batch: u32,
-    pub spirv: &'a [u8],
+    pub stage: EnvStage,
+    /// The variant the stage evaluates; `None`: `chebyshev-w` drawn from the lighting's own
+    /// table.
+    pub brdf: Option<&'a Arc<EnvBrdf>>,
     pub name: &'a str,
 }
 
@@ -644,7 +663,8 @@ impl<'a> Dispatch<'a> {
             extra: None,
             stride: 1,
             batch: 1,
-            spirv: SPIRV,
+            stage: EnvStage::Map,
+            brdf: None,
             name,
         }
     }
@@ -672,7 +692,6 @@ pub(crate) struct EnvKernel {
     dev: Arc<Device>,
     pipeline: ComputePipeline,
     layout: ComputeLayout,
-    coeff: Buffer,
     radiance: Buffer,
     env_cdf: Buffer,
     density: Buffer,
@@ -681,10 +700,13 @@ pub(crate) struct EnvKernel {
     env_square: f64,
     /// The irradiance table of the rotation it was made for (texture blending reads it).
     irradiance: Option<(f64, Vec<[f64; 3]>)>,
-    /// Whether the stage reads its own buffer at binding 7 (the G-buffer) and the pass's
-    /// pixels at binding 8.
+    /// Whether the stage reads its own buffer at binding 6 (the G-buffer) and the pass's
+    /// pixels at binding 7.
     extra: bool,
     name: String,
+    /// Set 0 of the stage: the variant it evaluates. Last: the pipeline was made with its
+    /// layout.
+    brdf: Arc<EnvBrdf>,
 }
 
 /// What one picture integrates into: the parameters, the lights, the stage's own buffer,
@@ -717,17 +739,17 @@ fn env_moments(env: &EnvMap) -> (f64, f64) {
 }
 
 impl EnvKernel {
-    /// The objects of `lighting` and `env` for the stage `spirv` (`extra`: it reads a
-    /// G-buffer at binding 7 and the pass's pixels at binding 8).
+    /// The objects of `lighting` and `env` for `stage` evaluating `brdf` (a scene's stage
+    /// reads a G-buffer at binding 6 and the pass's pixels at binding 7).
     pub fn new(
         dev: &Arc<Device>,
         lighting: &EnvLighting,
         env: &EnvMap,
-        spirv: &[u8],
-        extra: bool,
+        brdf: &Arc<EnvBrdf>,
+        stage: EnvStage,
         name: &str,
     ) -> Result<Self> {
-        let t = &lighting.table;
+        let extra = stage == EnvStage::Scene;
         let sampler = EnvSampler::new(env);
         let env_pdf = sampler
             .prob
@@ -742,16 +764,15 @@ impl EnvKernel {
                 .iter()
                 .flat_map(|p| linear_srgb_to_xyz(p.map(f64::from)).map(|x| x as f32)),
         );
-        let coeff = f32_bytes(t.splines.iter().flatten().flatten().map(|&x| x as f32));
         let b = |what: &str, bytes: &[u8]| {
             compute::storage_with_data(dev, &format!("{name} {what}"), bytes)
         };
-        let layout = ComputeLayout::new(dev, name, 7 + 2 * u32::from(extra), 8)?;
-        let pipeline = ComputePipeline::new(dev, name, &layout, spirv, &[])?;
+        let layout =
+            ComputeLayout::after(dev, name, &[brdf.set_layout()], 6 + 2 * u32::from(extra), 8)?;
+        let pipeline = ComputePipeline::new(dev, name, &layout, brdf.spirv(stage)?, brdf.spec())?;
         let (env_power, env_square) = env_moments(env);
         Ok(EnvKernel {
             dev: Arc::clone(dev),
-            coeff: b("table", &coeff)?,
             radiance: b("radiance", &env_xyz)?,
             env_cdf: b("environment CDFs", &env_cdf)?,
             density: b(
@@ -765,6 +786,7 @@ impl EnvKernel {
             irradiance: None,
             extra,
             name: name.to_string(),
+            brdf: Arc::clone(brdf),
         })
     }
 
@@ -803,7 +825,7 @@ impl EnvKernel {
         let (q_env, q_discs) = d.lights.probabilities(self.env_power);
         let share = d.lights.light_share_with(self.env_power, self.env_square);
         let every = light_every(share, &[d.samples, d.first.max(1)]);
-        let params = params(lighting, d, q_env, every);
+        let params = params(lighting, d, q_env, every, self.brdf.scale);
         let rotation = d.env.rotate_rad;
         if d.w_diffuse.is_some() && self.irradiance.as_ref().is_none_or(|(r, _)| *r != rotation) {
             self.irradiance = Some((rotation, irradiance_table(d.env)));
@@ -866,7 +888,6 @@ impl EnvKernel {
         }
         let mut buffers = vec![
             &t.params_buf,
-            &self.coeff,
             &self.radiance,
             &self.env_cdf,
             &self.density,
@@ -905,8 +926,14 @@ impl EnvKernel {
         loop {
             let n = CHUNK.min(base + count - at);
             let push: Vec<u8> = [at, n].iter().flat_map(|v| v.to_le_bytes()).collect();
-            self.layout
-                .dispatch(cb, &self.pipeline, set, &push, t.pixels.max(1))?;
+            self.layout.dispatch_after(
+                cb,
+                &self.pipeline,
+                &[self.brdf.set()],
+                set,
+                &push,
+                t.pixels.max(1),
+            )?;
             compute::compute_barrier(&self.dev, cb);
             at += n;
             if at >= base + count {
@@ -916,35 +943,31 @@ impl EnvKernel {
     }
 }
 
-/// The parameter block of `d` (env_common.glsl's `Params`), a light sample every
-/// `light_every`-th sample.
-fn params(lighting: &EnvLighting, d: &Dispatch<'_>, q_env: f64, light_every: u32) -> ParamsSsbo {
+/// The parameter block of `d` (env_common.glsl's `EnvParams`), a light sample every
+/// `light_every`-th sample, the BRDF's values times `scale` in radiance.
+fn params(
+    lighting: &EnvLighting,
+    d: &Dispatch<'_>,
+    q_env: f64,
+    light_every: u32,
+    scale: f64,
+) -> ParamsSsbo {
     let env = d.env;
-    let t = &lighting.table;
-    let r = t.region;
     let g = &lighting.density;
     ParamsSsbo {
-        region_lo: [r.lo[0] as f32, r.lo[1] as f32, r.lo[2] as f32, 0.0],
-        region_hi: [r.hi[0] as f32, r.hi[1] as f32, r.hi[2] as f32, 0.0],
         blend: [
             d.w_diffuse.unwrap_or(0.0) as f32,
             q_env as f32,
             light_every as f32,
-            0.0,
-        ],
-        white: [
-            lighting.white[0] as f32,
-            lighting.white[1] as f32,
-            lighting.white[2] as f32,
-            crate::brdf::schlick_r0(d.shading.ior) as f32,
+            scale as f32,
         ],
         cdf_lo: [g.lo[0] as f32, g.lo[1] as f32, g.w0 as f32, g.dw as f32],
         cdf_step: [g.step[0] as f32, g.step[1] as f32, 0.0, 0.0],
-        table_dims: [
-            t.nu as i32,
-            t.nv as i32,
-            t.coeffs.len() as i32,
-            d.stride.max(1) as i32,
+        env_rot: [
+            env.rotate_rad.cos() as f32,
+            env.rotate_rad.sin() as f32,
+            0.0,
+            0.0,
         ],
         cdf_dims: [
             g.bins[0] as i32,
@@ -958,38 +981,46 @@ fn params(lighting: &EnvLighting, d: &Dispatch<'_>, q_env: f64, light_every: u32
             d.samples as i32,
             d.pixels as i32,
         ],
-        flags: [
-            i32::from(d.shading.fresnel),
-            i32::from(d.shading.shadowing),
-            i32::from(q_env > 0.0),
-            d.seed as i32,
-        ],
-        env_rot: [
-            env.rotate_rad.cos() as f32,
-            env.rotate_rad.sin() as f32,
-            0.0,
-            0.0,
-        ],
         light_dims: [
             d.lights.points.len() as i32,
             d.lights.discs.len() as i32,
             i32::from(d.w_diffuse.is_some()),
             d.map_side as i32,
         ],
+        sequence: [
+            d.stride.max(1) as i32,
+            i32::from(q_env > 0.0),
+            d.seed as i32,
+            0,
+        ],
     }
 }
 
+/// What [`dispatch_passes`] integrated.
+pub(crate) struct Integrated {
+    /// `outputs` vec4s a pixel: the stage's raw sums.
+    pub sums: Vec<[f32; 4]>,
+    /// The GPU time of all passes.
+    pub gpu_ms: f64,
+    /// Batches of samples left out for a NaN or an infinity, over every pixel (the `w` of
+    /// each pixel's second vec4).
+    pub dropped: u64,
+}
+
 /// Runs `d` with `lighting` in passes: `first`, then whatever `next` asks for after reading
-/// the sums so far (it gets them and the samples of the last pass; `None` ends). Returns
-/// the raw sums and the GPU time of all passes.
+/// the sums so far (it gets them and the samples of the last pass; `None` ends).
 pub(crate) fn dispatch_passes(
     dev: &Arc<Device>,
     lighting: &EnvLighting,
     d: &Dispatch<'_>,
     first: Pass,
     next: &mut NextPass<'_>,
-) -> Result<(Vec<[f32; 4]>, f64)> {
-    let mut kernel = EnvKernel::new(dev, lighting, d.env, d.spirv, d.extra.is_some(), d.name)?;
+) -> Result<Integrated> {
+    let brdf = match d.brdf {
+        Some(b) => Arc::clone(b),
+        None => Arc::new(lighting.brdf(dev, &d.shading)?),
+    };
+    let mut kernel = EnvKernel::new(dev, lighting, d.env, &brdf, d.stage, d.name)?;
     let mut target = kernel.bind(lighting, d, false)?;
     let out_bytes = (d.pixels * d.outputs * 16).max(16);
     let readback = Buffer::new(
@@ -1019,11 +1050,19 @@ pub(crate) fn dispatch_passes(
             pass = next(&sums, done).filter(|q| !q.pixels.is_empty() && q.samples > done);
         }
     }
-    Ok((sums, start.elapsed().as_secs_f64() * 1e3))
+    let dropped = sums
+        .chunks_exact(d.outputs as usize)
+        .map(|p| p[1][3] as u64)
+        .sum();
+    Ok(Integrated {
+        sums,
+        gpu_ms: start.elapsed().as_secs_f64() * 1e3,
+        dropped,
+    })
 }
 
-/// vec4s a pixel of the map's stage writes: (the samples' XYZ sum, their number), (the
-/// point lights' XYZ, 0) (glsl/env_map.comp).
+/// vec4s a pixel of the map's stage writes: (the added samples' XYZ sum, their number),
+/// (the point lights' XYZ, the batches dropped) (glsl/env_map.glsl).
 pub const MAP_OUTPUTS: u64 = 2;
 
 /// A pixel's value from its sums: the point lights plus the samples' mean.
@@ -1075,7 +1114,7 @@ pub fn render_env_brdf_map(
         pixels: Vec::new(),
         samples: req.samples,
     };
-    let (sums, gpu_ms) = dispatch_passes(
+    let run = dispatch_passes(
         dev,
         lighting,
         &Dispatch {
@@ -1094,8 +1133,13 @@ pub fn render_env_brdf_map(
     )?;
     Ok(EnvPicture {
         size: req.size,
-        xyz: sums.chunks_exact(2).map(|p| mean_of(p[0], p[1])).collect(),
-        gpu_ms,
+        xyz: run
+            .sums
+            .chunks_exact(2)
+            .map(|p| mean_of(p[0], p[1]))
+            .collect(),
+        gpu_ms: run.gpu_ms,
+        dropped: run.dropped,
     })
 }
 

@@ -29,8 +29,6 @@ use crate::mesh::Mesh;
 use crate::scene::{Camera, Scene};
 use crate::Result;
 
-pub(crate) const SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_scene.comp.spv"));
-
 /// A texture as the G-buffer reads it: linear-sRGB albedo, top row first, repeated.
 pub struct Albedo {
     pub width: u32,
@@ -388,6 +386,8 @@ pub struct Shaded {
     /// output pixel with a covered G-buffer pixel.
     pub samples: Vec<u32>,
     pub gpu_ms: f64,
+    /// Batches of samples left out for a NaN or an infinity.
+    pub dropped: u64,
 }
 
 /// The covered pixels of `g` grouped by their output pixel (indices into `g.covered`).
@@ -454,7 +454,11 @@ pub fn shade_gbuffer(
         let target = req.noise?;
         let pixels: Vec<u32> = groups
             .par_iter()
-            .filter(|m| sums[3 * m[0] as usize][3] as u32 >= done)
+            .filter(|m| {
+                // Every sample of the last pass, added or in a dropped batch.
+                let at = 3 * m[0] as usize;
+                sums[at][3] as u32 + sums[at + 1][3] as u32 * NOISE_BATCH >= done
+            })
             .filter(|m| {
                 let (se, mean) = pixel_noise(sums, m);
                 target.delta_e_of(mean, se) >= target.delta_e
@@ -467,7 +471,7 @@ pub fn shade_gbuffer(
             samples: (2 * done).min(req.samples),
         })
     };
-    let (sums, gpu_ms) = dispatch_passes(
+    let run = dispatch_passes(
         dev,
         lighting,
         &Dispatch {
@@ -484,7 +488,8 @@ pub fn shade_gbuffer(
             extra: Some(if bytes.is_empty() { &[0; 64] } else { &bytes }),
             stride,
             batch: NOISE_BATCH,
-            spirv: SPIRV,
+            stage: super::env_brdf::EnvStage::Scene,
+            brdf: None,
             name: "env scene",
         },
         super::env::Pass {
@@ -493,18 +498,20 @@ pub fn shade_gbuffer(
         },
         &mut next,
     )?;
-    let rgb = sums
+    let rgb = run
+        .sums
         .chunks_exact(3)
         .map(|p| super::env::mean_of(p[0], p[2]))
         .collect();
     let samples = groups
         .iter()
-        .map(|m| m.iter().map(|&i| sums[3 * i as usize][3] as u32).sum())
+        .map(|m| m.iter().map(|&i| run.sums[3 * i as usize][3] as u32).sum())
         .collect();
     Ok(Shaded {
         rgb,
         samples,
-        gpu_ms,
+        gpu_ms: run.gpu_ms,
+        dropped: run.dropped,
     })
 }
 
@@ -541,6 +548,8 @@ pub struct EnvSceneFrame {
     pub samples_most: u32,
     pub gpu_ms: f64,
     pub raster_ms: f64,
+    /// Batches of samples left out for a NaN or an infinity.
+    pub dropped: u64,
 }
 
 /// Most G-buffer pixels (`width × height × supersample²`) of an environment-lit scene: the
@@ -635,6 +644,7 @@ pub fn render_env_scene(
         samples_most,
         gpu_ms: shaded.gpu_ms,
         raster_ms,
+        dropped: shaded.dropped,
     })
 }
 

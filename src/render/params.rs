@@ -59,7 +59,19 @@ impl Renderer {
     /// The shared part of the uniform block plus the variant's; callers fill in the scene
     /// or map part.
     pub(super) fn params(&self, prepared: &PreparedMaterial) -> ParamsUbo {
-        let mut params = ParamsUbo {
+        let mut params = ParamsUbo::shared(&prepared.shading);
+        if let Some((_, v)) = &self.prepared {
+            v.fill_params(&mut params);
+        }
+        params
+    }
+}
+
+impl ParamsUbo {
+    /// The shared part of the uniform block for `shading` (Schlick's `R0`, texture gain 1,
+    /// a point light along −Z), before the variant and the scene or map fill in theirs.
+    pub(crate) fn shared(shading: &crate::brdf::Shading) -> ParamsUbo {
+        ParamsUbo {
             eye_world: [0.0; 4],
             light_dir_world: [0.0, 0.0, -1.0, 0.0],
             lighting: [1.0, 1.0, 0.0, 0.0],
@@ -68,20 +80,11 @@ impl Renderer {
             spectrum_size: [0; 4],
             band: [0; 4],
             lookup: [0.0; 4],
-            shading: [
-                crate::brdf::schlick_r0(prepared.shading.ior) as f32,
-                1.0,
-                0.0,
-                0.0,
-            ],
+            shading: [crate::brdf::schlick_r0(shading.ior) as f32, 1.0, 0.0, 0.0],
             light_info: [1, 0, 0, 0],
             decode: [[0.0; 4]; MAX_TERMS],
             light_disk: [[0.0, 0.0, 1.0, 1.0]; crate::light::MAX_DISK_SAMPLES as usize],
-        };
-        if let Some((_, v)) = &self.prepared {
-            v.fill_params(&mut params);
         }
-        params
     }
 }
 

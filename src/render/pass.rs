@@ -420,7 +420,7 @@ pub(super) fn built_in(file: &str) -> Result<&'static [u8]> {
 /// The descriptor bindings of a pass: the uniform block (0), the colour table (2), the
 /// texture (3) and the variant's own; with `per_vertex` the vertex stage reads the colour
 /// table and the variant's resources too.
-fn pass_bindings(variant: &dyn PreparedVariant, per_vertex: bool) -> Vec<Binding> {
+pub(super) fn pass_bindings(variant: &dyn PreparedVariant, per_vertex: bool) -> Vec<Binding> {
     let stages = vk::ShaderStageFlags::VERTEX | vk::ShaderStageFlags::FRAGMENT;
     let mut bindings = vec![
         Binding {
@@ -476,7 +476,7 @@ fn pass_buffers(
 
 /// The 1×1 white texture bound where a scene has none (the binding is statically used, so
 /// it always needs an image; the variant never samples it then).
-fn white_texture(dev: &Arc<Device>) -> Result<Image> {
+pub(super) fn white_texture(dev: &Arc<Device>) -> Result<Image> {
     Image::sampled_with_data(
         dev,
         "no texture (1×1 white)",

@@ -29,6 +29,7 @@ use crate::light::env::{EnvMap, EnvSource};
 use crate::material::PreparedMaterial;
 use crate::mesh::Mesh;
 use crate::render::env::{map_lights, Dispatch, EnvKernel, EnvLighting, EnvTarget};
+use crate::render::env_brdf::EnvStage;
 use crate::render::env_scene::{rasterise, scene_lights, Albedo, NOISE_BATCH, SCENE_OUTPUTS};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -83,7 +84,8 @@ type LightingKey = (usize, bool);
 
 /// The objects of one environment, material and set of switches.
 struct Kernels {
-    key: (LightingKey, usize),
+    /// The lighting, the map, and shadowing (a specialisation constant of the stages).
+    key: (LightingKey, usize, bool),
     scene: EnvKernel,
     map: EnvKernel,
     albedo: Option<Albedo>,
@@ -277,10 +279,13 @@ impl EnvView {
             return Ok(());
         };
         self.load_map(state)?;
-        let kernel_key = (key, self.current);
+        let kernel_key = (key, self.current, state.shadowing);
         if self.kernels.as_ref().is_none_or(|k| k.key != kernel_key) {
             self.reset_kernels(frames);
-            self.kernels = Some(self.make_kernels(dev, &lighting, kernel_key)?);
+            let mut shading = material.material.shading();
+            shading.fresnel = state.fresnel;
+            shading.shadowing = state.shadowing;
+            self.kernels = Some(self.make_kernels(dev, &lighting, kernel_key, &shading)?);
         }
         self.make_resolve(dev)?;
         if self.view.is_none() {
@@ -387,31 +392,28 @@ impl EnvView {
         Ok(())
     }
 
+    /// The stages of the scene and the map for the lighting and map of `key`, evaluating
+    /// the BRDF with `shading` (the lighting's Fresnel, the key's shadowing).
     fn make_kernels(
         &self,
         dev: &Arc<Device>,
         lighting: &EnvLighting,
-        key: (LightingKey, usize),
+        key: (LightingKey, usize, bool),
+        shading: &crate::brdf::Shading,
     ) -> Result<Kernels> {
         let env = self.maps[self.current]
             .as_ref()
             .ok_or_else(|| Error::invalid("environment", "not loaded"))?;
+        let brdf = Arc::new(lighting.brdf(dev, shading)?);
         let scene = EnvKernel::new(
             dev,
             lighting,
             env,
-            crate::render::env_scene::SPIRV,
-            true,
+            &brdf,
+            EnvStage::Scene,
             "viewer env scene",
         )?;
-        let map = EnvKernel::new(
-            dev,
-            lighting,
-            env,
-            crate::render::env::SPIRV,
-            false,
-            "viewer env map",
-        )?;
+        let map = EnvKernel::new(dev, lighting, env, &brdf, EnvStage::Map, "viewer env map")?;
         Ok(Kernels {
             key,
             scene,
@@ -527,7 +529,8 @@ impl EnvView {
                     extra: Some(if gbytes.is_empty() { &[0; 64] } else { &gbytes }),
                     stride: 1,
                     batch: NOISE_BATCH,
-                    spirv: &[],
+                    stage: EnvStage::Scene,
+                    brdf: None,
                     name: "viewer env scene",
                 },
                 pixels,
@@ -780,7 +783,15 @@ mod tests {
         let state = ViewState::from_scene(scene);
         let mesh = scene.mesh.load().unwrap();
         view.load_map(&state).unwrap();
-        view.kernels = Some(view.make_kernels(dev, lighting, ((0, true), 0)).unwrap());
+        view.kernels = Some(
+            view.make_kernels(
+                dev,
+                lighting,
+                ((0, true), 0, true),
+                &scene.material.shading(),
+            )
+            .unwrap(),
+        );
         view.make_resolve(dev).unwrap();
         let rect = |x: i32| vk::Rect2D {
             offset: vk::Offset2D { x, y: 0 },

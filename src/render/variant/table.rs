@@ -290,6 +290,31 @@ pub(crate) fn prepare<T: GTable + 'static>(
     Ok(Box::new(gpu))
 }
 
+/// `table`, built elsewhere (the environment's sampling table), uploaded as the table
+/// variant `kind` stores it, in `format`.
+pub(crate) fn upload_built(
+    kind: VariantKind,
+    dev: &Arc<Device>,
+    spec: &TableSpec,
+    table: &dyn GTable,
+    format: super::TableFormat,
+) -> Result<Box<dyn PreparedVariant>> {
+    let layout = kind
+        .implementation()
+        .table_layout()
+        .ok_or_else(|| Error::invalid("variant", format!("'{kind}' is not a table variant")))?;
+    let (gpu, _) = TableGpu::upload(
+        kind,
+        dev,
+        spec,
+        table,
+        layout.layout,
+        format,
+        Instant::now(),
+    )?;
+    Ok(Box::new(gpu))
+}
+
 /// The rest of a prepared table's report: how it was obtained, the disc, what was left out.
 fn finish_stats(
     gpu: &mut TableGpu,

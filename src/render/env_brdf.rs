@@ -1,0 +1,210 @@
+//! The BRDF that the environment-lit compute stages evaluate: a prepared variant's own
+//! descriptor set (set 0: the shared uniform block, the colour weights, its table or DFT
+//! terms) bound beside the stages' storage set, and the SPIR-V that build.rs made of the
+//! variant's fragment file with glsl/env_map.glsl or glsl/env_scene.glsl as its main().
+//! So the light's estimator calls the very `diffractionXyz` the raster pass calls: one
+//! BRDF in GLSL, whatever lights it.
+//!
+//! **Units.** The stages integrate radiance (MODEL §10): `f_r = A_λ·R0·ρ` per wavelength.
+//! The variant's `G` holds it over [`EnvBrdf::scale`] (the mirror's luminance-weighted
+//! `A_λ·R0`, about 440 for 65 µm with Fresnel), so its values stay those of a relative
+//! table (within float16's range), and the stages multiply by the scale.
+
+use std::sync::Arc;
+
+use ash::vk;
+
+use super::params::ParamsUbo;
+use super::variant::{PreparedVariant, SpecConstant, Specialisation, VariantKind};
+use crate::brdf::table::{ChebyshevW, TableSpec};
+use crate::brdf::Shading;
+use crate::gpu::memory::{Buffer, Image, Sampler};
+use crate::gpu::pipeline::{DescriptorSet, PipelineLayout, Resource};
+use crate::gpu::Device;
+use crate::{Error, Result};
+
+/// The compute stages build.rs makes of every variant's fragment file.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum EnvStage {
+    /// A BRDF map's pixels (glsl/env_map.glsl).
+    Map,
+    /// A G-buffer's pixels (glsl/env_scene.glsl).
+    Scene,
+}
+
+impl EnvStage {
+    fn suffix(self) -> &'static str {
+        match self {
+            EnvStage::Map => "env_map",
+            EnvStage::Scene => "env_scene",
+        }
+    }
+}
+
+/// A variant bound for the environment-lit stages ([module notes](self)).
+pub(crate) struct EnvBrdf {
+    kind: VariantKind,
+    /// What `diffractionXyz` returns is radiance over this.
+    pub scale: f64,
+    spec: Specialisation,
+    set: DescriptorSet,
+    layout: PipelineLayout,
+    _ubo: Buffer,
+    _colour: Buffer,
+    _white: Image,
+    _sampler: Sampler,
+    /// Last among the resources: the set points at its images and buffers.
+    _variant: Arc<dyn PreparedVariant>,
+}
+
+impl EnvBrdf {
+    /// `chebyshev-w` drawn from `table` (radiance units; the environment's sampling table,
+    /// so the draw builds no second one), stored in `format` over `spec`.
+    pub fn chebyshev_w(
+        dev: &Arc<Device>,
+        table: &ChebyshevW,
+        spec: &TableSpec,
+        shading: &Shading,
+        scale: f64,
+        format: super::variant::TableFormat,
+    ) -> Result<Self> {
+        let scaled = scaled(table, 1.0 / scale);
+        let variant = super::variant::table::upload_built(
+            VariantKind::ChebyshevW,
+            dev,
+            spec,
+            &scaled,
+            format,
+        )?;
+        Self::new(
+            dev,
+            VariantKind::ChebyshevW,
+            Arc::from(variant),
+            shading,
+            &[[0.0; 4]],
+            scale,
+        )
+    }
+
+    /// `variant` (of `kind`) with the colour weights `colour` (binding 2: per line the XYZ
+    /// weight in radiance over `scale`, and `λ`), Fresnel and shadowing as `shading` says.
+    pub fn new(
+        dev: &Arc<Device>,
+        kind: VariantKind,
+        variant: Arc<dyn PreparedVariant>,
+        shading: &Shading,
+        colour: &[[f32; 4]],
+        scale: f64,
+    ) -> Result<Self> {
+        if !(scale.is_finite() && scale > 0.0) {
+            return Err(Error::invalid("environment BRDF", format!("scale {scale}")));
+        }
+        let mut bindings = super::pass::pass_bindings(variant.as_ref(), false);
+        for b in &mut bindings {
+            b.stages = vk::ShaderStageFlags::COMPUTE;
+        }
+        let name = format!("{kind} under the environment");
+        let layout =
+            PipelineLayout::new(dev, &name, &bindings, (vk::ShaderStageFlags::COMPUTE, 0))?;
+        let mut params = ParamsUbo::shared(shading);
+        variant.fill_params(&mut params);
+        let ubo = Buffer::with_data(
+            dev,
+            &format!("{name} params"),
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            std::slice::from_ref(&params),
+        )?;
+        let colour = Buffer::with_data(
+            dev,
+            &format!("{name} colour weights"),
+            vk::BufferUsageFlags::STORAGE_BUFFER,
+            if colour.is_empty() {
+                &[[0.0f32; 4]]
+            } else {
+                colour
+            },
+        )?;
+        let white = super::pass::white_texture(dev)?;
+        let sampler = Sampler::new(
+            dev,
+            "no texture (nearest)",
+            vk::Filter::NEAREST,
+            vk::SamplerAddressMode::REPEAT,
+        )?;
+        let mut resources = vec![
+            (0, Resource::Uniform(&ubo)),
+            (2, Resource::Storage(&colour)),
+            (3, Resource::Sampled(&white, &sampler)),
+        ];
+        resources.extend(variant.resources());
+        let set = DescriptorSet::new(dev, &name, &layout, &resources)?;
+        drop(resources);
+        let mut spec = Specialisation::default();
+        spec[SpecConstant::Shadowing] = u32::from(shading.shadowing);
+        spec[SpecConstant::Fresnel] = u32::from(shading.fresnel);
+        variant.specialise(&mut spec);
+        Ok(EnvBrdf {
+            kind,
+            scale,
+            spec,
+            set,
+            layout,
+            _ubo: ubo,
+            _colour: colour,
+            _white: white,
+            _sampler: sampler,
+            _variant: variant,
+        })
+    }
+
+    /// The layout of set 0, which the stages' pipeline layout starts with.
+    pub fn set_layout(&self) -> vk::DescriptorSetLayout {
+        self.layout.set_layout
+    }
+
+    /// Set 0, bound before the stages' storage set.
+    pub fn set(&self) -> vk::DescriptorSet {
+        self.set.raw
+    }
+
+    /// The specialisation constants of the variant's stages, in `constant_id` order.
+    pub fn spec(&self) -> &[u32] {
+        self.spec.values()
+    }
+
+    /// The SPIR-V of `stage` made of the variant's fragment file.
+    pub fn spirv(&self, stage: EnvStage) -> Result<&'static [u8]> {
+        let stem = self
+            .kind
+            .fragment_file()
+            .strip_suffix(".frag")
+            .unwrap_or_default();
+        let file = format!("{stem}.{}", stage.suffix());
+        crate::gpu::shaders::spirv(&file).ok_or_else(|| {
+            Error::invalid(
+                "variant",
+                format!(
+                    "'{}' cannot be lit by an environment: its fragment stage has no evaluator that build.rs compiled as {file}",
+                    self.kind
+                ),
+            )
+        })
+    }
+}
+
+/// `table` times `factor` (the series and its splines are linear in `G`).
+fn scaled(table: &ChebyshevW, factor: f64) -> ChebyshevW {
+    let mul = |planes: &[Vec<[f64; 3]>]| -> Vec<Vec<[f64; 3]>> {
+        planes
+            .iter()
+            .map(|p| p.iter().map(|t| t.map(|x| x * factor)).collect())
+            .collect()
+    };
+    ChebyshevW {
+        region: table.region,
+        nu: table.nu,
+        nv: table.nv,
+        coeffs: mul(&table.coeffs),
+        splines: mul(&table.splines),
+    }
+}
