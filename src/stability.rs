@@ -1443,6 +1443,7 @@ impl ExactCase {
             texel_uv: 0.005,
             w_nodes: probes.len(),
             step_nm: 10,
+            response: crate::brdf::table::Response::Relative,
         };
         let exact = crate::brdf::table::sample_g(hf, coherence_um, &spec, &probes, &|| ())?;
         let peak = exact

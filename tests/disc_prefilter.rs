@@ -55,6 +55,7 @@ fn one_prefiltered_evaluation_matches_the_disc_sums() {
         texel_uv,
         w_nodes: 6,
         step_nm: 10,
+        response: diffract::brdf::table::Response::Relative,
     };
     // Directions across the lobe: a line through its peak along u and one along v.
     let wrs: Vec<[f64; 3]> = (-12..=12)

@@ -56,6 +56,8 @@ fn white_furnace_on_the_gpu() {
             size,
             sun: None,
             seed: 0,
+            brdf: None,
+            per_dispatch: None,
         };
         let pic = render_env_brdf_map(&dev, &lighting, &req).unwrap();
         let (mut worst, mut n, mut mean) = ([0.0f64; 3], 0, [0.0f64; 3]);
@@ -118,6 +120,7 @@ fn grating_spec(texel: f64, w_nodes: usize) -> TableSpec {
         texel_uv: texel,
         w_nodes,
         step_nm: 10,
+        response: diffract::brdf::table::Response::Relative,
     }
 }
 
@@ -156,6 +159,8 @@ fn environment_lit_pixels_match_the_f64_reference() {
             size,
             sun: None,
             seed: 0,
+            brdf: None,
+            per_dispatch: None,
         };
         let pic = render_env_brdf_map(&dev, &lighting, &req).unwrap();
         let refs: Vec<([f64; 3], f64)> = PIXELS
@@ -211,6 +216,8 @@ fn the_error_falls_with_the_samples() {
             size,
             sun: None,
             seed,
+            brdf: None,
+            per_dispatch: None,
         };
         render_env_brdf_map(&dev, &lighting, &req).unwrap()
     };

@@ -47,6 +47,7 @@ fn lighting() -> &'static EnvLighting {
             texel_uv: 2.0 * TableSpec::default_texel(m.coherence_um),
             w_nodes: 8,
             step_nm: 20,
+            response: diffract::brdf::table::Response::Relative,
         };
         EnvLighting::build(&hf, m.coherence_um, &m.shading(), &spec).expect("table")
     })
@@ -125,6 +126,7 @@ fn the_sun_as_a_map_renders_the_sun_lit_picture() {
                 samples,
                 seed: 0,
                 noise: None,
+                brdf: None,
             },
         )
         .expect("env scene");
@@ -213,6 +215,7 @@ fn a_disc_light_matches_the_f64_reference() {
         w_diffuse: None,
         noise: None,
         stride: 1,
+        brdf: None,
     };
     let picked = chosen(&g);
     let few = GBuffer {
@@ -278,6 +281,7 @@ fn scene_pixels_under_the_sky_and_the_studio_match_the_f64_reference() {
                 white: scene.output.white,
             }),
             stride: 1,
+            brdf: None,
         };
         let got = shade_gbuffer(&dev, l, &g, &req).unwrap().rgb;
         let table = |d: [f64; 3]| l.table.g(d).unwrap_or([0.0; 3]);
@@ -405,6 +409,7 @@ fn the_default_samples_keep_the_sky_within_p99_one_of_converged() {
                 samples,
                 seed,
                 noise,
+                brdf: None,
             },
         )
         .expect("env scene");

@@ -21,6 +21,7 @@ fn check(name: &str, hf: &HeightField, region: Region) {
         texel_uv: TableSpec::default_texel(65.0),
         w_nodes: 4,
         step_nm: 10,
+        response: diffract::brdf::table::Response::Relative,
     };
     let w: Vec<f64> = (0..spec.w_nodes)
         .map(|k| region.lo[2] + (region.hi[2] - region.lo[2]) * k as f64 / 3.0)

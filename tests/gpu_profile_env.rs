@@ -75,6 +75,7 @@ fn env(samples: &[u32]) -> EnvProfile {
             texel_uv: 0.035,
             w_nodes: 4,
             step_nm: 10,
+            response: diffract::brdf::table::Response::Relative,
         },
         pixels: 6,
     }

@@ -61,6 +61,7 @@ fn spec(region: Region, texel: f64, step_nm: u32) -> TableSpec {
         texel_uv: texel,
         w_nodes: 2,
         step_nm,
+        response: diffract::brdf::table::Response::Relative,
     }
 }
 

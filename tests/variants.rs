@@ -57,6 +57,7 @@ fn table_nodes_equal_the_direct_sum_reference() {
             texel_uv: 0.002,
             w_nodes: 2,
             step_nm: 10,
+            response: diffract::brdf::table::Response::Relative,
         };
         let s = sample_g(&hf, 65.0, &spec, &[d[2], d[2] + 0.004], &|| ()).unwrap();
         let c = gain(wi, wr, &shading);
@@ -103,6 +104,7 @@ fn representations_interpolate_g_within_their_stated_accuracy() {
         texel_uv: 0.0015,
         w_nodes,
         step_nm: 10,
+        response: diffract::brdf::table::Response::Relative,
     };
     let cheb = ChebyshevW::build(&hf, 65.0, &spec(10), &|| ()).unwrap();
     let dh = Dhillon::from_chebyshev(&cheb, 0.0);
@@ -157,6 +159,7 @@ fn chebyshev_coefficients_decay_to_the_tolerance_with_the_default_count() {
         texel_uv: 0.004,
         w_nodes: 16,
         step_nm: 20,
+        response: diffract::brdf::table::Response::Relative,
     };
     let cheb = ChebyshevW::build(&hf, 65.0, &spec, &|| ()).unwrap();
     let decay = cheb.decay();
@@ -184,6 +187,7 @@ fn table_specs_refuse_nonsense_and_oversized_builds() {
         texel_uv,
         w_nodes,
         step_nm: 5,
+        response: diffract::brdf::table::Response::Relative,
     };
     assert!(bad(0.0, 16).validate().is_err());
     assert!(bad(f64::NAN, 16).validate().is_err());

@@ -1300,6 +1300,8 @@ fn the_map_beside_the_mesh_is_lit_by_the_environment() {
         size: side,
         sun: Some((diffract::brdf::direction(theta, phi), 1.0)),
         seed: 0,
+        brdf: None,
+        per_dispatch: None,
     };
     let pic = render_env_brdf_map(&dev, &lighting, &req).expect("env map");
     let gain = f64::from(diffract::view::input::DEFAULT_MAP_EXPOSURE) / lighting.mirror_scale;

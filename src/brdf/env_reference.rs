@@ -473,6 +473,7 @@ mod tests {
             texel_uv: 0.001,
             w_nodes: 4,
             step_nm: 10,
+            response: crate::brdf::table::Response::Relative,
         };
         let t = radiance_table(&hf, 65.0, &s, &spec).unwrap();
         let lobe = FlatLobe::new(&ColourTable::new(10).unwrap(), 65.0, &s);

@@ -11,7 +11,7 @@
 
 use std::path::Path;
 
-use super::table::{sample_g_kept, Slices, TableSpec};
+use super::table::{sample_g_kept, Response, Slices, TableSpec};
 use crate::cache::{mark_used, CacheDir, Fnv1a, TABLE_FILES};
 use crate::heightfield::HeightField;
 use crate::report::Report;
@@ -38,6 +38,19 @@ pub fn key(hf: &HeightField, coherence_um: f64, spec: &TableSpec, w_nodes: &[f64
     }
     h.u64(spec.texel_uv.to_bits());
     h.u64(u64::from(spec.step_nm));
+    match spec.response {
+        Response::Relative => {}
+        Response::Radiance {
+            coherence_um,
+            r0,
+            scale,
+        } => {
+            h.bytes(b"radiance");
+            for v in [coherence_um, r0, scale] {
+                h.u64(v.to_bits());
+            }
+        }
+    }
     for w in w_nodes {
         h.u64(w.to_bits());
     }
@@ -266,6 +279,7 @@ mod tests {
             texel_uv: 0.05,
             w_nodes: 3,
             step_nm: 100,
+            response: crate::brdf::table::Response::Relative,
         };
         (hf, spec, vec![-1.6, -1.4, -1.2])
     }

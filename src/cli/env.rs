@@ -140,6 +140,7 @@ pub fn map_table_spec(
         texel_uv: texel.unwrap_or(TableSpec::lobe_width(coherence_um, shortest_nm)),
         w_nodes: w_nodes.unwrap_or(DEFAULT_ENV_W_NODES),
         step_nm,
+        response: crate::brdf::table::Response::Relative,
     };
     spec.validate()?;
     Ok(spec)
@@ -191,6 +192,8 @@ pub fn draw_map(
         size,
         sun,
         seed: 0,
+        brdf: None,
+        per_dispatch: None,
     };
     let pic = render_env_brdf_map(dev, &lighting, &req)?;
     warn_dropped(pic.dropped);
@@ -280,6 +283,7 @@ pub fn run_env_scene(
             samples,
             seed: 0,
             noise: (noise > 0.0).then_some(noise),
+            brdf: None,
         },
     )?;
     warn_dropped(frame.dropped);

@@ -52,6 +52,7 @@ impl TableArgs {
             budget_bytes: self.table_budget_mb.saturating_mul(1 << 20),
             format: self.table_format,
             build: self.table_build,
+            response: crate::brdf::table::Response::Relative,
         }
     }
 

@@ -367,6 +367,16 @@ pub struct DeviceInfo {
     pub shader_float64: bool,
 }
 
+impl DeviceInfo {
+    /// The most loop iterations one shader invocation may run, over all its loops together,
+    /// before the driver ends them early and silently: llvmpipe (lavapipe) counts them
+    /// against gallivm's `LP_MAX_TGSI_LOOP_ITERATIONS` (65 535). `None` where the driver
+    /// has no such limit (GPUs).
+    pub fn loop_iteration_limit(&self) -> Option<u64> {
+        self.name.starts_with("llvmpipe").then_some(65_535)
+    }
+}
+
 /// A logical device with one graphics queue, a command pool and the memory allocator.
 pub struct Device {
     pub(crate) raw: ash::Device,

@@ -69,6 +69,8 @@ pub(super) fn env_rows(
             size,
             sun: None,
             seed: 0,
+            brdf: None,
+            per_dispatch: None,
         };
         let t = Instant::now();
         render_env_brdf_map(dev, &lighting, &req).map(|p| (p, t.elapsed().as_secs_f64() * 1e3))

@@ -39,17 +39,25 @@ pub const MAX_DENSITY_CELLS: usize = 4 << 20;
 pub const DENSITY_NODES: usize = 8;
 /// Largest samples per pixel.
 pub const MAX_SAMPLES: u32 = 65_536;
-/// Samples per pixel one dispatch adds. llvmpipe (lavapipe) ends every loop of a shader
-/// invocation once the invocation's loops together have run 65 535 iterations (gallivm's
-/// loop limiter, `LP_MAX_TGSI_LOOP_ITERATIONS`, one counter shared by all loops): the
-/// samples' loop and its inner loops (the density's binary searches, Clenshaw over the
-/// table's terms, the spline taps) reach it after about a thousand samples, and a map
-/// whose batch spans the whole dispatch then adds nothing (measured: one dispatch of 2048
-/// samples on `builtin:sinusoidal` under the sky gives exactly zero, also with the NaN
-/// drop replaced by a marker; 256 samples a dispatch give the picture). 256 keeps an
-/// invocation's iterations below the limit up to about 250 loop iterations a sample. A
-/// GPU has no such limit.
+/// Most samples per pixel one dispatch adds. Fewer where the driver limits an
+/// invocation's loop iterations ([`samples_per_dispatch`]).
 pub const CHUNK: u32 = 256;
+
+/// Samples per pixel one dispatch adds for a variant whose samples take at most
+/// `iterations` loop iterations each: [`CHUNK`], or on a driver that ends an invocation's
+/// loops after a fixed count of iterations (llvmpipe:
+/// [`crate::gpu::DeviceInfo::loop_iteration_limit`], one counter over all loops of the
+/// invocation, so the samples' loop and everything it calls share it) half of what fits
+/// under it, at least one. Past the limit the loops end early without a word: a sample
+/// loop that ran 2048 samples of `chebyshev-w` in one dispatch, or 256 of `flss`, added
+/// nothing. The stages count the samples they add ([`mean_of`] divides by that count),
+/// so a dispatch cut short is a noisier pixel, never a darker one.
+pub fn samples_per_dispatch(info: &crate::gpu::DeviceInfo, iterations: u64) -> u32 {
+    match info.loop_iteration_limit() {
+        Some(limit) => (limit / 2 / iterations.max(1)).clamp(1, u64::from(CHUNK)) as u32,
+        None => CHUNK,
+    }
+}
 /// Default samples per pixel.
 pub const DEFAULT_SAMPLES: u32 = 256;
 
@@ -349,6 +357,12 @@ pub struct EnvMapRequest<'a> {
     pub sun: Option<([f64; 3], f64)>,
     /// Scrambles the sequence (0 for the default picture).
     pub seed: u32,
+    /// The variant the stages evaluate (`None`: `chebyshev-w` from the lighting's own table;
+    /// [`crate::render::Renderer::env_brdf`] binds another).
+    pub brdf: Option<&'a std::sync::Arc<crate::render::env_brdf::EnvBrdf>>,
+    /// Samples per dispatch; `None`: what the device and the variant allow
+    /// ([`samples_per_dispatch`]).
+    pub per_dispatch: Option<u32>,
 }
 
 /// XYZ radiance per pixel, row-major from the top, and the dispatch's wall time.
@@ -635,6 +649,8 @@ pub(crate) struct Dispatch<'a> {
     /// The variant the stage evaluates; `None`: `chebyshev-w` drawn from the lighting's own
     /// table.
     pub brdf: Option<&'a Arc<EnvBrdf>>,
+    /// Samples per dispatch; `None`: [`samples_per_dispatch`].
+    pub per_dispatch: Option<u32>,
     pub name: &'a str,
 }
 
@@ -665,6 +681,7 @@ impl<'a> Dispatch<'a> {
             batch: 1,
             stage: EnvStage::Map,
             brdf: None,
+            per_dispatch: None,
             name,
         }
     }
@@ -724,6 +741,8 @@ pub(crate) struct EnvTarget {
     pub out: Buffer,
     /// Invocations of a dispatch: the pixels of the pass.
     pub pixels: u64,
+    /// Samples per pixel of one dispatch.
+    pub per_dispatch: u32,
 }
 
 /// The environment's luminance moments `(∫ Y dω, ∫ Y² dω)`.
@@ -857,6 +876,12 @@ impl EnvKernel {
             mapped,
             out,
             pixels: d.pixels,
+            per_dispatch: d.per_dispatch.unwrap_or_else(|| {
+                samples_per_dispatch(
+                    &self.dev.info,
+                    self.brdf.iterations_per_sample(d.lights.discs.len()),
+                )
+            }),
         };
         let all: Vec<u32> = if self.extra {
             (0..d.pixels as u32).collect()
@@ -924,7 +949,7 @@ impl EnvKernel {
         compute::compute_barrier(&self.dev, cb);
         let mut at = base;
         loop {
-            let n = CHUNK.min(base + count - at);
+            let n = t.per_dispatch.max(1).min(base + count - at);
             let push: Vec<u8> = [at, n].iter().flat_map(|v| v.to_le_bytes()).collect();
             self.layout.dispatch_after(
                 cb,
@@ -1119,6 +1144,8 @@ pub fn render_env_brdf_map(
         lighting,
         &Dispatch {
             seed: req.seed,
+            brdf: req.brdf,
+            per_dispatch: req.per_dispatch,
             ..Dispatch::map(
                 req.env,
                 &lights,

@@ -25,7 +25,7 @@ use crate::{Error, Result};
 
 /// The compute stages build.rs makes of every variant's fragment file.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub(crate) enum EnvStage {
+pub enum EnvStage {
     /// A BRDF map's pixels (glsl/env_map.glsl).
     Map,
     /// A G-buffer's pixels (glsl/env_scene.glsl).
@@ -42,10 +42,12 @@ impl EnvStage {
 }
 
 /// A variant bound for the environment-lit stages ([module notes](self)).
-pub(crate) struct EnvBrdf {
+pub struct EnvBrdf {
     kind: VariantKind,
     /// What `diffractionXyz` returns is radiance over this.
     pub scale: f64,
+    /// Texel fetches of one evaluation.
+    fetches: usize,
     spec: Specialisation,
     set: DescriptorSet,
     layout: PipelineLayout,
@@ -60,7 +62,7 @@ pub(crate) struct EnvBrdf {
 impl EnvBrdf {
     /// `chebyshev-w` drawn from `table` (radiance units; the environment's sampling table,
     /// so the draw builds no second one), stored in `format` over `spec`.
-    pub fn chebyshev_w(
+    pub(crate) fn chebyshev_w(
         dev: &Arc<Device>,
         table: &ChebyshevW,
         spec: &TableSpec,
@@ -88,7 +90,7 @@ impl EnvBrdf {
 
     /// `variant` (of `kind`) with the colour weights `colour` (binding 2: per line the XYZ
     /// weight in radiance over `scale`, and `λ`), Fresnel and shadowing as `shading` says.
-    pub fn new(
+    pub(crate) fn new(
         dev: &Arc<Device>,
         kind: VariantKind,
         variant: Arc<dyn PreparedVariant>,
@@ -146,6 +148,7 @@ impl EnvBrdf {
         Ok(EnvBrdf {
             kind,
             scale,
+            fetches: variant.stats().fetches,
             spec,
             set,
             layout,
@@ -172,24 +175,36 @@ impl EnvBrdf {
         self.spec.values()
     }
 
+    /// A bound on the loop iterations one sample takes in the stages: two evaluations of
+    /// the BRDF (the BRDF's sample and the lights'), each at most two iterations a texel
+    /// fetch, plus the samplers' binary searches and `discs` disc lights tested twice.
+    pub fn iterations_per_sample(&self, discs: usize) -> u64 {
+        4 * self.fetches as u64 + 128 + 4 * discs as u64
+    }
+
     /// The SPIR-V of `stage` made of the variant's fragment file.
     pub fn spirv(&self, stage: EnvStage) -> Result<&'static [u8]> {
-        let stem = self
-            .kind
-            .fragment_file()
-            .strip_suffix(".frag")
-            .unwrap_or_default();
-        let file = format!("{stem}.{}", stage.suffix());
-        crate::gpu::shaders::spirv(&file).ok_or_else(|| {
-            Error::invalid(
-                "variant",
-                format!(
-                    "'{}' cannot be lit by an environment: its fragment stage has no evaluator that build.rs compiled as {file}",
-                    self.kind
-                ),
-            )
-        })
+        env_spirv(self.kind, stage)
     }
+}
+
+/// The SPIR-V of `stage` that build.rs made of `kind`'s fragment file, or why there is
+/// none (a debug view draws no BRDF).
+pub fn env_spirv(kind: VariantKind, stage: EnvStage) -> Result<&'static [u8]> {
+    let stem = kind
+        .fragment_file()
+        .strip_suffix(".frag")
+        .unwrap_or_default();
+    let file = format!("{stem}.{}", stage.suffix());
+    crate::gpu::shaders::spirv(&file).ok_or_else(|| {
+        Error::invalid(
+            "variant",
+            format!(
+                "'{kind}' cannot be lit by an environment: it draws no BRDF that the environment's stages can evaluate ({} has no shade.glsl main() for build.rs to replace)",
+                kind.fragment_file()
+            ),
+        )
+    })
 }
 
 /// `table` times `factor` (the series and its splines are linear in `G`).
@@ -206,5 +221,86 @@ fn scaled(table: &ChebyshevW, factor: f64) -> ChebyshevW {
         nv: table.nv,
         coeffs: mul(&table.coeffs),
         splines: mul(&table.splines),
+    }
+}
+
+impl super::Renderer {
+    /// The current variant bound for the environment-lit stages of `lighting` (its region,
+    /// its scale to radiance), evaluated with `shading`. `chebyshev-w` draws from the
+    /// lighting's own table (one table samples and draws); any other variant is built here
+    /// with its table in radiance units ([`crate::brdf::table::Response::Radiance`]) or
+    /// its colour weights carrying them, over the lighting's region and at its `(u, v)`
+    /// spacing unless the table options name another. Nothing is left out: the wavelengths'
+    /// weights differ from the sun-lit ones the leaving out is measured against.
+    pub fn env_brdf(
+        &mut self,
+        prepared: &crate::material::PreparedMaterial,
+        lighting: &super::env::EnvLighting,
+        shading: &Shading,
+    ) -> Result<Arc<EnvBrdf>> {
+        let kind = self.variant().resolve();
+        env_spirv(kind, EnvStage::Map)?;
+        if kind == VariantKind::ChebyshevW {
+            return lighting.brdf(self.device(), shading).map(Arc::new);
+        }
+        let r0 = if shading.fresnel {
+            crate::brdf::schlick_r0(shading.ior)
+        } else {
+            1.0
+        };
+        let response = crate::brdf::table::Response::Radiance {
+            coherence_um: prepared.material.coherence_um,
+            r0,
+            scale: lighting.mirror_scale,
+        };
+        let table = self.table;
+        let leave_out = self.leave_out;
+        let region = self.table_region;
+        self.table = super::variant::TableOptions {
+            texel_uv: table.texel_uv.or(Some(lighting.spec.texel_uv)),
+            response,
+            ..table
+        };
+        self.leave_out = false;
+        self.table_region = Some(lighting.spec.region);
+        let built = self.prepare_variant(
+            prepared,
+            lighting.spec.region,
+            super::params::OutputMode::Mesh,
+            None,
+        );
+        self.table = table;
+        self.leave_out = leave_out;
+        self.table_region = region;
+        built?;
+        let variant = self
+            .prepared
+            .as_ref()
+            .map(|(_, v)| Arc::clone(v))
+            .ok_or(Error::Internal("no variant prepared"))?;
+        let colour = &prepared.colour;
+        let factors = response.line_factors(colour);
+        let line = |i: usize| {
+            let (w, f) = (colour.weights[i], factors[i]);
+            [
+                (w[0] * f[0]) as f32,
+                (w[1] * f[1]) as f32,
+                (w[2] * f[2]) as f32,
+                colour.lambdas_nm[i] as f32,
+            ]
+        };
+        let weights: Vec<[f32; 4]> = match variant.kept_wavelengths() {
+            Some(kept) => kept.iter().map(|&i| line(i)).collect(),
+            None => (0..colour.len()).map(line).collect(),
+        };
+        EnvBrdf::new(
+            self.device(),
+            kind,
+            variant,
+            shading,
+            &weights,
+            lighting.mirror_scale,
+        )
+        .map(Arc::new)
     }
 }

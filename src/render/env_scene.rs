@@ -326,6 +326,9 @@ pub struct GBufferRequest<'a> {
     pub noise: Option<NoiseTarget>,
     /// G-buffer pixels per output pixel (supersample²), which interleave one sequence.
     pub stride: u32,
+    /// The variant the stages evaluate (`None`: `chebyshev-w` from the lighting's own table;
+    /// [`crate::render::Renderer::env_brdf`] binds another).
+    pub brdf: Option<&'a std::sync::Arc<crate::render::env_brdf::EnvBrdf>>,
 }
 
 /// The most samples an output pixel of a scene takes, unless `--env-samples` says otherwise.
@@ -489,8 +492,9 @@ pub fn shade_gbuffer(
             stride,
             batch: NOISE_BATCH,
             stage: super::env_brdf::EnvStage::Scene,
-            brdf: None,
+            brdf: req.brdf,
             name: "env scene",
+            per_dispatch: None,
         },
         super::env::Pass {
             pixels: (0..g.covered.len() as u32).collect(),
@@ -532,6 +536,9 @@ pub struct EnvScene<'a> {
     /// An output pixel stops once its estimated CIEDE2000 noise (as written) is below
     /// this ([`NoiseTarget`]); `None`: every pixel takes `samples`.
     pub noise: Option<f64>,
+    /// The variant the stages evaluate (`None`: `chebyshev-w` from the lighting's own table;
+    /// [`crate::render::Renderer::env_brdf`] binds another).
+    pub brdf: Option<&'a std::sync::Arc<crate::render::env_brdf::EnvBrdf>>,
 }
 
 /// A frame at the scene's render size ([`crate::scene::Output::render_size`]), ready for
@@ -625,6 +632,7 @@ pub fn render_env_scene(
             w_diffuse: blend.map(|(spec, _)| f64::from(spec.w_diffuse)),
             noise,
             stride: ss * ss,
+            brdf: req.brdf,
         },
     )?;
     let samples_mean = shaded.samples.iter().map(|&n| f64::from(n)).sum::<f64>()

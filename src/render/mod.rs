@@ -15,7 +15,7 @@
 
 mod background;
 pub mod env;
-pub(crate) mod env_brdf;
+pub mod env_brdf;
 pub mod env_scene;
 mod offscreen;
 mod params;

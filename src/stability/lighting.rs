@@ -122,6 +122,7 @@ pub fn run(dev: &Arc<Device>) -> Result<Vec<LightingCell>> {
         texel_uv: 0.001,
         w_nodes: 4,
         step_nm: 10,
+        response: crate::brdf::table::Response::Relative,
     };
     let lighting = EnvLighting::build(&hf, coherence, &shading, &spec)?;
     let lobe = FlatLobe::new(&ColourTable::new(spec.step_nm)?, coherence, &shading);
@@ -135,6 +136,8 @@ pub fn run(dev: &Arc<Device>) -> Result<Vec<LightingCell>> {
             size: MAP_SIZE,
             sun: None,
             seed: 0,
+            brdf: None,
+            per_dispatch: None,
         };
         let pic = render_env_brdf_map(dev, &lighting, &req)?;
         let mut rows = Vec::new();

@@ -532,6 +532,7 @@ impl EnvView {
                     stage: EnvStage::Scene,
                     brdf: None,
                     name: "viewer env scene",
+                    per_dispatch: None,
                 },
                 pixels,
                 rect: mesh_rect,
@@ -850,6 +851,7 @@ mod tests {
             texel_uv: 0.002,
             w_nodes: 4,
             step_nm: 20,
+            response: crate::brdf::table::Response::Relative,
         };
         let shading = scene.material.shading();
         let lighting = EnvLighting::build(&hf, 65.0, &shading, &spec).unwrap();
@@ -880,6 +882,8 @@ mod tests {
                 size: 16,
                 sun: Some((wi, 1.0)),
                 seed: 0,
+                brdf: None,
+                per_dispatch: None,
             },
         )
         .unwrap();
@@ -898,6 +902,7 @@ mod tests {
                 samples: 8,
                 seed: 0,
                 noise: None,
+                brdf: None,
             },
         )
         .unwrap();

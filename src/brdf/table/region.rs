@@ -105,8 +105,57 @@ impl Region {
     }
 }
 
-/// How to sample `G`: the region, the `(u, v)` node spacing, the number of `w` nodes and the
-/// wavelength step of the offline spectral integral.
+/// What a table's `G` answers (MODEL §10): the relative reflectance of MODEL §2, or
+/// radiance under radiance.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub enum Response {
+    /// `G = Σ_λ w_λ·|P̂_λ|²`: `ρ` of MODEL §2 (a mirror's specular value is 1), what the
+    /// thesis plots and the sun-lit passes draw.
+    #[default]
+    Relative,
+    /// Each line's weight times `f_r/ρ = A_λ·r0` over D65's white in its channel and over
+    /// `scale`: `L_o,c = scale·∫∫ L_c·C·G_c du dv` (brdf::env_reference). `scale` keeps the
+    /// values those of a relative table (float16's range); `r0` is Schlick's `R0` with
+    /// Fresnel on, 1 without.
+    Radiance {
+        coherence_um: f64,
+        r0: f64,
+        scale: f64,
+    },
+}
+
+impl Response {
+    /// The factor of each line of `colour` (per channel) that turns a relative `G` into
+    /// this response.
+    pub fn line_factors(&self, colour: &ColourTable) -> Vec<[f64; 3]> {
+        match *self {
+            Response::Relative => vec![[1.0; 3]; colour.len()],
+            Response::Radiance {
+                coherence_um,
+                r0,
+                scale,
+            } => {
+                let white = colour
+                    .weights
+                    .iter()
+                    .fold([0.0; 3], |a, w| [a[0] + w[0], a[1] + w[1], a[2] + w[2]]);
+                let sigma = coherence_um / 4.0;
+                colour
+                    .lambdas_nm
+                    .iter()
+                    .map(|&l| {
+                        let k = 2.0 * std::f64::consts::PI / (l * 1e-3);
+                        let a = k * k * sigma * sigma / std::f64::consts::PI * r0 / scale;
+                        [a / white[0], a / white[1], a / white[2]]
+                    })
+                    .collect()
+            }
+        }
+    }
+}
+
+/// How to sample `G`: the region, the `(u, v)` node spacing, the number of `w` nodes, the
+/// wavelength step of the offline spectral integral and what `G` answers.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct TableSpec {
     pub region: Region,
@@ -116,24 +165,30 @@ pub struct TableSpec {
     pub w_nodes: usize,
     /// Wavelength step of the offline integral (nm; divides 400).
     pub step_nm: u32,
+    pub response: Response,
 }
 
 impl TableSpec {
     /// The wavelengths (nm) of the offline spectral integral with their XYZ weights: every
     /// line of the colour table at `step_nm`, or only those whose indices `keep` lists.
+    /// The weights are those of [`TableSpec::response`].
     pub fn spectral_samples(&self, keep: Option<&[usize]>) -> Result<Vec<(f64, [f64; 3])>> {
         let colour = ColourTable::new(self.step_nm)?;
+        let factors = self.response.line_factors(&colour);
+        let line = |i: usize| {
+            let (w, f) = (colour.weights[i], factors[i]);
+            (
+                colour.lambdas_nm[i],
+                [w[0] * f[0], w[1] * f[1], w[2] * f[2]],
+            )
+        };
         Ok(match keep {
             Some(k) => k
                 .iter()
-                .filter_map(|&i| Some((*colour.lambdas_nm.get(i)?, colour.weights[i])))
+                .filter(|&&i| i < colour.len())
+                .map(|&i| line(i))
                 .collect(),
-            None => colour
-                .lambdas_nm
-                .iter()
-                .copied()
-                .zip(colour.weights.iter().copied())
-                .collect(),
+            None => (0..colour.len()).map(line).collect(),
         })
     }
 

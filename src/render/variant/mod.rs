@@ -393,6 +393,9 @@ pub struct TableOptions {
     pub format: TableFormat,
     /// Where `G` is sampled: CPU or device (`--table-build`).
     pub build: crate::render::table_build::TableBuild,
+    /// What `G` answers: relative reflectance (the sun-lit passes) or radiance (the
+    /// environment-lit stages, [`crate::render::env_brdf`]).
+    pub response: crate::brdf::table::Response,
 }
 
 impl Default for TableOptions {
@@ -404,6 +407,7 @@ impl Default for TableOptions {
             budget_bytes: 512 << 20,
             format: TableFormat::Rgba32f,
             build: Default::default(),
+            response: Default::default(),
         }
     }
 }
@@ -419,6 +423,7 @@ impl TableOptions {
         budget_bytes: 512 << 20,
         format: TableFormat::Rgba16f,
         build: crate::render::table_build::TableBuild::Auto,
+        response: crate::brdf::table::Response::Relative,
     };
 
     /// The step of a table that holds no disc, unless another is asked for: a line of the
@@ -501,6 +506,7 @@ impl TableOptions {
             texel_uv: texel,
             w_nodes,
             step_nm: self.step_nm.unwrap_or(Self::DEFAULT_STEP_NM),
+            response: self.response,
         };
         spec.validate()?;
         Ok((spec, (texel > asked).then_some(asked)))
@@ -898,6 +904,7 @@ pub(super) mod testing {
             texel_uv: 0.2,
             w_nodes,
             step_nm: 10,
+            response: crate::brdf::table::Response::Relative,
         }
     }
 
