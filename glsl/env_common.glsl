@@ -305,7 +305,12 @@ void integrate(Surface s, uint key, uint place, uint stride, int batch, out vec3
     float mf = float(m);
     vec3 bx = vec3(0.0), br = vec3(0.0);
     int opened = chunk.base;
-    for (int k = chunk.base; k < chunk.base + chunk.count; ++k) {
+    int end = chunk.base + chunk.count;
+    // The last batch added, to take back if the loop was cut short (below).
+    vec3 lastX = vec3(0.0), lastR = vec3(0.0), lastSq = vec3(0.0);
+    int lastN = 0;
+    int k = chunk.base;
+    for (; k < end; ++k) {
         uint ib = uint(k) * stride + place + 1u;
         vec3 x3 = vec3(unitFloat(rot[0] + ib * alpha[0]), unitFloat(rot[1] + ib * alpha[1]),
                        unitFloat(rot[2] + ib * alpha[2]));
@@ -339,25 +344,38 @@ void integrate(Surface s, uint key, uint place, uint stride, int batch, out vec3
                 addDirection(s, wi, l, own, wi.z / (1.0 + r * r) / ql, bx, br);
             }
         }
-        if ((k + 1) % batch == 0 || k + 1 == chunk.base + chunk.count) {
+        if ((k + 1) % batch == 0 || k + 1 == end) {
             // A batch is added whole, its samples counted in `closed`, or, when it holds
             // a NaN or an infinity, left out and counted in `dropped` (the host reports
-            // it). The host divides by `closed`: what a batch the loop never finished (a
-            // driver that ends long loops) or a dropped one would have added is not in
-            // the sum, and not in the count either.
+            // it). The host divides by `closed`: what a batch the loop never finished
+            // or a dropped one would have added is in neither the sum nor the count.
             vec3 c = XYZ_TO_SRGB * bx + br;
             if (any(isnan(c)) || any(isinf(c))) {
                 dropped += 1;
+                lastN = 0;
             } else {
                 sq += c * c;
                 xyz += bx;
                 rgb += br;
-                closed += k + 1 - opened;
+                lastX = bx;
+                lastR = br;
+                lastSq = c * c;
+                lastN = k + 1 - opened;
+                closed += lastN;
             }
             opened = k + 1;
             bx = vec3(0.0);
             br = vec3(0.0);
         }
+    }
+    // A driver that ends an invocation's loops after a fixed count of iterations
+    // (llvmpipe: src/render/env.rs, samples_per_dispatch) leaves k short of the end, and
+    // the inner loops of the last sample may have been cut too: its batch goes.
+    if (k < end && lastN > 0) {
+        xyz -= lastX;
+        rgb -= lastR;
+        sq -= lastSq;
+        closed -= lastN;
     }
 }
 

@@ -36,7 +36,8 @@ void main() {
                         vec3(x, y, sqrt(1.0 - r2)), vec3(0.0));
     vec3 xyz, rgb, sq;
     int closed, dropped;
-    integrate(s, idx, 0u, 1u, chunk.count, xyz, rgb, sq, closed, dropped);
+    // Batches of one sample: a dispatch the driver cuts short keeps every sample it took.
+    integrate(s, idx, 0u, 1u, 1, xyz, rgb, sq, closed, dropped);
     if (chunk.base == 0) {
         vec3 pxyz, prgb;
         pointLights(s, pxyz, prgb);

@@ -179,3 +179,84 @@ fn every_variant_draws_under_an_environment_as_it_draws_under_the_sun() {
     assert_no_validation(&r);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// What the samples per dispatch guard against, shown: llvmpipe ends every loop of a
+/// shader invocation once its loops together have run 65 535 iterations
+/// (`DeviceInfo::loop_iteration_limit`). One dispatch of 256 `flss` samples (about 7 000
+/// iterations a sample here) passes it: every pixel takes fewer samples than asked, says
+/// so in its count, and is exactly the mean of the samples it took (the sample the cut
+/// fell in is left out). The default split takes every sample. A driver without the
+/// limit takes every sample either way.
+#[test]
+fn a_dispatch_past_the_drivers_loop_limit_takes_fewer_samples_and_counts_them() {
+    let Some(mut r) = renderer() else { return };
+    let dir = std::env::temp_dir().join(format!("diffract-env-limit-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let prepared = prepare(&material(&dir));
+    let shading = prepared.shading;
+    let lighting = EnvLighting::build(&prepared.heightfield, 65.0, &shading, &spec()).unwrap();
+    let sky = EnvMap::load(&EnvSource::Sky, 1.0, 0.0).unwrap();
+    r.set_variant(VariantKind::Flss);
+    let brdf = r.env_brdf(&prepared, &lighting, &shading).unwrap();
+    let size = 6;
+    let draw = |per_dispatch, samples| {
+        render_env_brdf_map(
+            r.device(),
+            &lighting,
+            &EnvMapRequest {
+                env: &sky,
+                shading,
+                samples,
+                size,
+                sun: None,
+                seed: 0,
+                brdf: Some(&brdf),
+                per_dispatch,
+            },
+        )
+        .unwrap()
+    };
+    let (split, whole) = (draw(None, SAMPLES), draw(Some(SAMPLES), SAMPLES));
+    let inside: Vec<usize> = (0..size * size)
+        .filter(|p| map_direction(p % size, p / size, size).is_some())
+        .map(|p| p as usize)
+        .collect();
+    for &p in &inside {
+        assert_eq!(
+            split.taken[p], SAMPLES,
+            "the default split takes every sample"
+        );
+    }
+    let limited = r.device().info.loop_iteration_limit().is_some();
+    let most = inside.iter().map(|&p| whole.taken[p]).max().unwrap();
+    let least = inside.iter().map(|&p| whole.taken[p]).min().unwrap();
+    eprintln!(
+        "{}: one dispatch of {SAMPLES} flss samples took {least} to {most} a pixel",
+        r.device_name()
+    );
+    if !limited {
+        assert_eq!(least, SAMPLES);
+        assert_no_validation(&r);
+        return;
+    }
+    assert!(most < SAMPLES / 4, "llvmpipe's limit cut the loop: {most}");
+    assert!(least > 0, "every pixel took a sample before the cut");
+    // A cut pixel is the mean of the samples it took: the first `least` to `most` of the
+    // sequence. Against the picture of the first `n` samples (n: `least` down to a
+    // multiple of 8, so that the light samples fall where they fell in the cut run) it
+    // differs by the last few samples only; against the whole picture by the noise of
+    // the other ~220.
+    let n = least / 8 * 8;
+    let first = draw(None, n);
+    let pick = |pic: &diffract::render::env::EnvPicture| -> Vec<[f64; 3]> {
+        inside.iter().map(|&p| pic.xyz[p].map(f64::from)).collect()
+    };
+    let (to_first, to_all) = (
+        rel_l2(&pick(&whole), &pick(&first)),
+        rel_l2(&pick(&whole), &pick(&split)),
+    );
+    eprintln!("rel-L2 of the cut picture: {to_first:.3} to its first {n} samples' picture, {to_all:.3} to the whole one");
+    assert!(to_first < to_all / 2.0);
+    assert_no_validation(&r);
+    let _ = std::fs::remove_dir_all(dir);
+}

@@ -197,6 +197,21 @@ pub fn draw_map(
     };
     let pic = render_env_brdf_map(dev, &lighting, &req)?;
     warn_dropped(pic.dropped);
+    let inside = (0..size * size)
+        .filter(|p| crate::render::env::map_direction(p % size, p / size, size).is_some());
+    let short = inside
+        .clone()
+        .filter(|&p| pic.taken[p as usize] < samples)
+        .count();
+    if short > 0 && pic.dropped == 0 {
+        let taken: u64 = inside.map(|p| u64::from(pic.taken[p as usize])).sum();
+        crate::report::Report::warn(
+            &crate::report::Stderr,
+            &format!(
+                "{short} pixel(s) took fewer than {samples} samples ({taken} in all): the driver ended the samples' loop early; each pixel is the mean of the samples it took"
+            ),
+        );
+    }
     let table_line = table_line(&lighting, spec, built);
     let rgb = pic
         .xyz

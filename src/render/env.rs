@@ -372,6 +372,9 @@ pub struct EnvPicture {
     pub gpu_ms: f64,
     /// Batches of samples left out for a NaN or an infinity (0 on every case measured).
     pub dropped: u64,
+    /// The samples each pixel added (row-major; 0 outside the disc): fewer than asked
+    /// where the driver ended a dispatch's loops early or a batch was dropped.
+    pub taken: Vec<u32>,
 }
 
 /// A light evaluated once per pixel, in full: a direction of the sun's disc, or a disc
@@ -1167,6 +1170,16 @@ pub fn render_env_brdf_map(
             .collect(),
         gpu_ms: run.gpu_ms,
         dropped: run.dropped,
+        taken: (0..req.size * req.size)
+            .map(|p| {
+                let inside = map_direction(p % req.size, p / req.size, req.size).is_some();
+                if inside {
+                    run.sums[2 * p as usize][3] as u32
+                } else {
+                    0
+                }
+            })
+            .collect(),
     })
 }
 
