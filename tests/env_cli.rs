@@ -72,7 +72,20 @@ fn bad_maps_and_flags_get_one_error_line() {
         ),
         (&["--no-sun"], "[[disc_light]]"),
         (&["--env-rotate-deg", "30"], "need an environment"),
-        (&["--env", "builtin:sky", "--variant", "flss"], "--variant"),
+        (
+            &["--env", "builtin:sky", "--variant", "coverage"],
+            "cannot be lit by an environment",
+        ),
+        (
+            &[
+                "--brdf-map",
+                "--env",
+                "builtin:sky",
+                "--variant",
+                "coverage",
+            ],
+            "cannot be lit by an environment",
+        ),
         (&["--env", "builtin:sky", "--per-vertex"], "--per-vertex"),
         (&["--env", "builtin:sky", "--repeat", "2"], "--repeat"),
         (&["--env", "builtin:sky", "--size", "8"], "--size"),
@@ -109,6 +122,56 @@ fn bad_maps_and_flags_get_one_error_line() {
             "{args:?}: {err}"
         );
         assert!(lines[0].contains(want), "{args:?}: {err}");
+    }
+}
+
+/// `--variant` under an environment: the map is drawn by that variant's shader and the
+/// report names it.
+#[test]
+fn a_variant_draws_the_environment_lit_map() {
+    if gpu_util::device().is_none() {
+        return;
+    }
+    let d = dir("variant");
+    for variant in ["flss", "volume"] {
+        let out = d.join(format!("{variant}.exr"));
+        let _ = std::fs::remove_file(&out);
+        let o = render(
+            &[
+                "--brdf-map",
+                "--env",
+                "builtin:studio",
+                "--heightfield",
+                "builtin:blazed",
+                "--variant",
+                variant,
+                "--size",
+                "8",
+                "--env-samples",
+                "4",
+                "--table-texel",
+                "0.02",
+                "--table-w-nodes",
+                "4",
+                "--table-step-nm",
+                "20",
+                "--no-cache",
+                "-o",
+                out.to_str().unwrap(),
+            ],
+            &d,
+        );
+        let text = String::from_utf8_lossy(&o.stdout);
+        assert!(
+            o.status.success(),
+            "{}{}",
+            text,
+            String::from_utf8_lossy(&o.stderr)
+        );
+        assert!(text.contains(&format!("variant {variant} ")), "{text}");
+        let (_, _, px) = diffract::image_io::read_exr(&out).unwrap();
+        assert!(px.iter().flatten().all(|c| c.is_finite()));
+        assert!(px.iter().any(|p| p[1] > 0.0), "{variant}: a black map");
     }
 }
 

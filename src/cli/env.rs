@@ -166,6 +166,8 @@ pub struct EnvMapOutput {
     pub gpu_ms: f64,
     pub table_line: String,
     pub samples: u32,
+    /// The variant that drew it, as its report names it.
+    pub variant: String,
 }
 
 /// Builds the radiance table of `hf` and draws the environment-lit map.
@@ -179,10 +181,13 @@ pub fn draw_map(
     args: &EnvArgs,
     size: u32,
     sun_deg: (f64, f64),
+    gpu: &crate::cli::gpu::GpuArgs,
     cache: &crate::cli::cache::CacheArgs,
 ) -> Result<EnvMapOutput> {
     let shading = material.shading();
+    refuse_variant(gpu.variant)?;
     let (lighting, built) = lighting_for(hf, material, spec, cache)?;
+    let variant = env_variant(dev, gpu.variant, material, &lighting, &gpu.table, cache)?;
     let samples = args.env_samples.unwrap_or(DEFAULT_SAMPLES);
     let sun = (!args.no_sun).then(|| (crate::brdf::direction(sun_deg.0, sun_deg.1), 1.0));
     let req = EnvMapRequest {
@@ -192,7 +197,7 @@ pub fn draw_map(
         size,
         sun,
         seed: 0,
-        brdf: None,
+        brdf: variant.as_ref().map(|v| &v.brdf),
         per_dispatch: None,
     };
     let pic = render_env_brdf_map(dev, &lighting, &req)?;
@@ -224,7 +229,17 @@ pub fn draw_map(
         gpu_ms: pic.gpu_ms,
         table_line,
         samples,
+        variant: variant_name(variant.as_ref()),
     })
+}
+
+/// What the stages evaluated: the variant's report name, or `chebyshev-w` from the
+/// environment table.
+fn variant_name(variant: Option<&EnvVariant>) -> String {
+    variant.map_or_else(
+        || "chebyshev-w (the environment table)".to_string(),
+        |v| v.name.clone(),
+    )
 }
 
 /// Says how many batches of samples the estimator left out for a NaN or an infinity (the
@@ -248,16 +263,15 @@ pub fn run_env_scene(
     scene: &Scene,
     env: Option<&EnvMap>,
 ) -> Result<()> {
-    use crate::render::variant::VariantKind;
     crate::guard::refuse_flags(
         &[
-            ("--variant", args.gpu.variant != VariantKind::Default),
             ("--per-vertex", args.gpu.per_vertex),
             ("--repeat", args.repeat > 0),
         ],
-        "a scene lit by an environment, disc lights or --no-sun (it draws the chebyshev-w radiance table)",
+        "a scene lit by an environment, disc lights or --no-sun (its pixels are integrated by compute stages, once)",
     )?;
     crate::render::env_scene::check_size(None, scene)?;
+    refuse_variant(args.gpu.variant)?;
     let start = std::time::Instant::now();
     let material = args.material.apply(scene.material.clone());
     let (hf, _) = material.load_planned(
@@ -275,6 +289,14 @@ pub fn run_env_scene(
     crate::render::env_scene::check_size(Some(&dev), scene)?;
     let shading = material.shading();
     let (lighting, built) = lighting_for(&hf, &material, &spec, &args.cache)?;
+    let variant = env_variant(
+        &dev,
+        args.gpu.variant,
+        &material,
+        &lighting,
+        &args.gpu.table,
+        &args.cache,
+    )?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);
     let samples = args
         .env
@@ -298,7 +320,7 @@ pub fn run_env_scene(
             samples,
             seed: 0,
             noise: (noise > 0.0).then_some(noise),
-            brdf: None,
+            brdf: variant.as_ref().map(|v| &v.brdf),
         },
     )?;
     warn_dropped(frame.dropped);
@@ -329,7 +351,7 @@ pub fn run_env_scene(
     crate::image_io::write_image(&args.out, out.width, out.height, &rgb, 1.0)?;
     println!("{}", table_line(&lighting, &spec, built));
     println!(
-        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",
+        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: variant {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",
         dev.info.name,
         out.width,
         out.height,
@@ -339,6 +361,7 @@ pub fn run_env_scene(
         env.map_or("no environment".to_string(), |e| e.name.clone()),
         scene.disc_lights.len(),
         if args.env.no_sun { "off" } else { "on" },
+        variant_name(variant.as_ref()),
         frame.samples_mean,
         frame.samples_most,
         if noise > 0.0 {
@@ -357,6 +380,61 @@ pub fn run_env_scene(
         return Err(Error::Validation(n));
     }
     Ok(())
+}
+
+/// The variant the environment-lit stages evaluate for `--variant`: `None` for the default
+/// (`chebyshev-w` drawn from the environment table itself), else `variant` built on `dev`
+/// in radiance units with the table options of `table` ([`crate::render::Renderer::env_brdf`];
+/// a variant that cannot be lit by an environment is refused there, before any build). The
+/// renderer comes back too: it owns what the variant's set points at.
+pub fn env_variant(
+    dev: &std::sync::Arc<crate::gpu::Device>,
+    variant: crate::render::variant::VariantKind,
+    material: &crate::material::Material,
+    lighting: &EnvLighting,
+    table: &crate::cli::gpu::TableArgs,
+    cache: &crate::cli::cache::CacheArgs,
+) -> Result<Option<EnvVariant>> {
+    use crate::render::variant::VariantKind;
+    if matches!(variant, VariantKind::Default | VariantKind::ChebyshevW) {
+        return Ok(None);
+    }
+    refuse_variant(variant)?;
+    let mut renderer = crate::render::Renderer::on(std::sync::Arc::clone(dev))?;
+    renderer.set_variant(variant);
+    renderer.set_table_options(table.options());
+    let dir = cache.dir();
+    renderer.set_cache_dir(dir.clone());
+    let (hf, plan) = material.load_planned(
+        &crate::brdf::truncation::Reach::ALL,
+        crate::brdf::truncation::Precision::F32,
+        &crate::report::Stderr,
+    )?;
+    let prepared = material.prepare_planned_deferred(hf, plan, dir.as_deref())?;
+    let brdf = renderer.env_brdf(&prepared, lighting, &material.shading())?;
+    let name = renderer
+        .prepared_stats()
+        .map_or_else(|| variant.name().to_string(), |s| s.name);
+    Ok(Some(EnvVariant {
+        brdf,
+        name,
+        _renderer: renderer,
+    }))
+}
+
+/// The error of a variant that cannot be lit by an environment (a debug view), before any
+/// table is built.
+fn refuse_variant(variant: crate::render::variant::VariantKind) -> Result<()> {
+    crate::render::env_brdf::env_spirv(variant.resolve(), crate::render::env_brdf::EnvStage::Map)
+        .map(|_| ())
+}
+
+/// A variant bound for the environment-lit stages ([`env_variant`]).
+pub struct EnvVariant {
+    pub brdf: std::sync::Arc<crate::render::env_brdf::EnvBrdf>,
+    /// What the variant's report calls it (`flss T=12 R=1 dλ=10`, a table's nodes).
+    pub name: String,
+    _renderer: crate::render::Renderer,
 }
 
 /// The radiance table of `spec` and its density, through the cache unless `--no-cache`;

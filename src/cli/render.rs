@@ -255,6 +255,7 @@ fn run_env_map(args: &RenderArgs, scene: &Scene, env: &crate::light::env::EnvMap
         &args.env,
         size,
         sun,
+        &args.gpu,
         &args.cache,
     )?;
     if out.rgb.iter().flatten().any(|c| !c.is_finite()) {
@@ -279,9 +280,10 @@ fn run_env_map(args: &RenderArgs, scene: &Scene, env: &crate::light::env::EnvMap
     }
     println!("{}", out.table_line);
     println!(
-        "device: {}; environment-lit BRDF map (linear-sRGB radiance) {size}×{size} under {}, {} samples per pixel, sun {} → {}; GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",
+        "device: {}; environment-lit BRDF map (linear-sRGB radiance) {size}×{size} under {}, variant {}, {} samples per pixel, sun {} → {}; GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",
         dev.info.name,
         env.name,
+        out.variant,
         out.samples,
         if args.env.no_sun { "off" } else { "on" },
         args.out.display(),

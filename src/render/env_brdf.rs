@@ -230,7 +230,7 @@ impl super::Renderer {
     /// lighting's own table (one table samples and draws); any other variant is built here
     /// with its table in radiance units ([`crate::brdf::table::Response::Radiance`]) or
     /// its colour weights carrying them, over the lighting's region and at its `(u, v)`
-    /// spacing unless the table options name another. Nothing is left out: the wavelengths'
+    /// spacing and wavelength step unless the table options name others. Nothing is left out: the wavelengths'
     /// weights differ from the sun-lit ones the leaving out is measured against.
     pub fn env_brdf(
         &mut self,
@@ -258,6 +258,7 @@ impl super::Renderer {
         let region = self.table_region;
         self.table = super::variant::TableOptions {
             texel_uv: table.texel_uv.or(Some(lighting.spec.texel_uv)),
+            step_nm: table.step_nm.or(Some(lighting.spec.step_nm)),
             response,
             ..table
         };

@@ -397,6 +397,11 @@ impl Renderer {
         self.prepared.as_ref().and_then(|(_, v)| v.model())
     }
 
+    /// What the prepared variant reports about itself (`None` before a draw).
+    pub fn prepared_stats(&self) -> Option<variant::VariantStats> {
+        self.prepared.as_ref().map(|(_, v)| v.stats())
+    }
+
     /// The f64 table of the last frame's table variant (see [`Renderer::model`]).
     pub fn table_model(&self) -> Option<&dyn crate::brdf::table::GTable> {
         self.model().and_then(|m| m.table())
