@@ -14,6 +14,7 @@ use diffract::profile::{
     flss_variants, format_csv, format_table, profile_with_env, Budget, EnvProfile, Frames,
     ProfileSetup,
 };
+use diffract::render::variant::VariantKind;
 
 fn scratch(name: &str) -> std::path::PathBuf {
     let d = std::env::temp_dir().join(format!(
@@ -78,6 +79,7 @@ fn env(samples: &[u32]) -> EnvProfile {
             response: diffract::brdf::table::Response::Relative,
         },
         pixels: 6,
+        variants: vec![VariantKind::ChebyshevW],
     }
 }
 
@@ -128,7 +130,12 @@ fn env_rows_fall_with_samples_and_appear_in_the_outputs() {
     assert!(l2[1] < l2[0] && l2[2] < l2[1], "{l2:?}");
     assert!(l2[0] / l2[2] > 4.0, "{l2:?}");
     let table = format_table("lavapipe", &setup, &run);
-    for name in ["env 1 spp", "env 16 spp", "env 256 spp", "builtin:sky"] {
+    for name in [
+        "env chebyshev-w 1 spp",
+        "env chebyshev-w 16 spp",
+        "env chebyshev-w 256 spp",
+        "builtin:sky",
+    ] {
         assert!(table.contains(name), "{table}");
     }
     let csv = format_csv(&run);
@@ -169,11 +176,14 @@ fn env_rows_over_the_budget_are_skipped_with_their_estimates() {
     // More samples, a larger estimate.
     assert!(e.skipped[1].estimated_s > e.skipped[0].estimated_s);
     let table = format_table("lavapipe", &setup, &run);
-    assert!(table.contains("skipped: env 64 spp: estimated"), "{table}");
+    assert!(
+        table.contains("skipped: env chebyshev-w 64 spp: estimated"),
+        "{table}"
+    );
     let csv = format_csv(&run);
     assert!(csv
         .lines()
-        .any(|l| l.starts_with("env 1024 spp,") && l.contains(",true,")));
+        .any(|l| l.starts_with("env chebyshev-w 1024 spp,") && l.contains(",true,")));
     assert_eq!(renderer.validation_messages(), 0);
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -196,7 +206,9 @@ fn env_rows_beside_variant_rows() {
     assert_eq!(run.env.as_ref().unwrap().rows.len(), 2, "the env rows");
     let table = format_table("lavapipe", &setup, &run);
     let variant = table.find("| taylor R=2 |").expect("the variant's table");
-    let env = table.find("| env 16 spp |").expect("the env table");
+    let env = table
+        .find("| env chebyshev-w 16 spp |")
+        .expect("the env table");
     assert!(variant < env, "the variants' table first: {table}");
     let csv = format_csv(&run);
     assert_eq!(
@@ -204,6 +216,54 @@ fn env_rows_beside_variant_rows() {
         4,
         "header, the variant, two env rows: {csv}"
     );
+    assert_eq!(renderer.validation_messages(), 0);
+    let _ = std::fs::remove_dir_all(dir);
+}
+
+/// Rows per variant and sample count: each variant draws through its own shader with the
+/// same samples, its rows named after it in the table and the CSV.
+#[test]
+fn env_rows_per_variant() {
+    let Some(mut renderer) = gpu_util::renderer() else {
+        return;
+    };
+    let dir = scratch("variants");
+    let hf = grating(&dir);
+    let mut setup = setup(&hf, Frames::Fixed(1));
+    // This small patch's float32 lookup is good to 2e-3 (the planner's figure): flss is
+    // drawn at that tolerance.
+    setup.base.tolerance = 1e-2;
+    let kinds = [
+        VariantKind::ChebyshevW,
+        VariantKind::Volume,
+        VariantKind::Flss,
+    ];
+    let profile = EnvProfile {
+        variants: kinds.to_vec(),
+        ..env(&[4, 16])
+    };
+    let run = profile_with_env(&mut renderer, &setup, Some(&profile)).unwrap();
+    let e = run.env.as_ref().unwrap();
+    assert!(e.skipped.is_empty(), "{:?}", e.skipped);
+    let names: Vec<String> = e.rows.iter().map(|r| r.name()).collect();
+    let want: Vec<String> = kinds
+        .iter()
+        .flat_map(|k| [4, 16].map(|n| format!("env {} {n} spp", k.name())))
+        .collect();
+    assert_eq!(names, want);
+    for r in &e.rows {
+        eprintln!("{}: rel L2 {:.3e}", r.name(), r.vs_reference.rel_l2);
+        assert!(r.vs_reference.rel_l2.is_finite() && r.vs_reference.rel_l2 < 1.0);
+    }
+    let table = format_table("lavapipe", &setup, &run);
+    let csv = format_csv(&run);
+    for name in &want {
+        assert!(table.contains(&format!("| {name} |")), "{table}");
+        assert!(
+            csv.lines().any(|l| l.starts_with(&format!("{name},"))),
+            "{csv}"
+        );
+    }
     assert_eq!(renderer.validation_messages(), 0);
     let _ = std::fs::remove_dir_all(dir);
 }
@@ -288,7 +348,8 @@ fn the_command_writes_env_rows_and_refuses_bad_maps_in_one_line() {
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     assert!(
-        out.contains("| env 1 spp | 1 |") && out.contains("| env 16 spp | 16 |"),
+        out.contains("| env chebyshev-w 1 spp | 1 |")
+            && out.contains("| env chebyshev-w 16 spp | 16 |"),
         "{out}"
     );
     let csv = std::fs::read_to_string(dir.join("p.csv")).unwrap();

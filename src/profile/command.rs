@@ -14,6 +14,7 @@ use crate::cli::cache::CacheArgs;
 use crate::cli::gpu::TableArgs;
 use crate::cli::material::MaterialArgs;
 use crate::material::Material;
+use crate::render::variant::VariantKind;
 use crate::render::{map_direction, Renderer};
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -219,7 +220,35 @@ fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>
         samples,
         spec,
         pixels: args.env_pixels.unwrap_or(DEFAULT_ENV_PIXELS),
+        variants: env_variants(args)?,
     }))
+}
+
+/// The variants the environment rows draw: every one that can be lit by an environment
+/// without `--only`; with it, those it names that can (the default variant alone when it
+/// names only `env`); the default variant first.
+fn env_variants(args: &ProfileArgs) -> Result<Vec<VariantKind>> {
+    use crate::render::env_brdf::{env_spirv, EnvStage};
+    let named = !args.only.is_empty();
+    let candidates: Vec<VariantKind> = if named {
+        selected_rows(args)?
+            .iter()
+            .map(|v| v.kind.resolve())
+            .collect()
+    } else {
+        VariantKind::ALL.to_vec()
+    };
+    let mut kinds: Vec<VariantKind> = Vec::new();
+    let first = std::iter::once(VariantKind::DEFAULT).filter(|k| !named || candidates.contains(k));
+    for k in first.chain(candidates.iter().copied()) {
+        if env_spirv(k, EnvStage::Map).is_ok() && !kinds.contains(&k) {
+            kinds.push(k);
+        }
+    }
+    if kinds.is_empty() {
+        kinds.push(VariantKind::DEFAULT);
+    }
+    Ok(kinds)
 }
 
 /// The rows of every registered variant, or those `--only` names (`env` names the

@@ -15,11 +15,12 @@ use super::score::pick_pixels;
 use super::stats::{bootstrap, error_stats};
 use crate::brdf::env_reference::{env_radiance, Frame, Quadrature};
 use crate::brdf::table::{GTable, TableSpec};
-use crate::gpu::Device;
 use crate::heightfield::HeightField;
 use crate::material::Material;
 use crate::render::env::{render_env_brdf_map, EnvLighting, EnvMapRequest, EnvPicture};
+use crate::render::env_brdf::EnvBrdf;
 use crate::render::map_direction;
+use crate::render::variant::VariantKind;
 use crate::{Error, Result};
 
 /// The fewest pixels the reference scores, whatever the budget.
@@ -39,11 +40,14 @@ impl EnvPace {
     }
 }
 
-/// Draws and scores the environment rows on `dev`: the table, the first map, the
-/// reference, then the rows by ascending samples; with a budget (`end`), a row whose
-/// estimate exceeds the time left is skipped with it (the first row is always measured).
+/// Draws and scores the environment rows with `renderer`'s device: the table, the first
+/// map, the reference, then per variant of `env` (its first map at 1 sample for its pace)
+/// the rows by ascending samples; with a budget (`end`), a row whose estimate exceeds the
+/// time left is skipped with it (the default variant's first row is always measured).
+/// Every variant draws the same samples (the same sequence and densities), so their
+/// rows differ by their BRDFs and the noise they share.
 pub(super) fn env_rows(
-    dev: &Arc<Device>,
+    renderer: &mut crate::render::Renderer,
     hf: &HeightField,
     base: &Material,
     size: u32,
@@ -51,17 +55,18 @@ pub(super) fn env_rows(
     env: &EnvProfile,
     end: Option<Instant>,
 ) -> Result<EnvRun> {
-    if env.samples.is_empty() || env.pixels == 0 {
+    if env.samples.is_empty() || env.pixels == 0 || env.variants.is_empty() {
         return Err(Error::invalid(
             "env",
-            "at least one sample count and one scored pixel are needed",
+            "at least one sample count, one variant and one scored pixel are needed",
         ));
     }
+    let dev = Arc::clone(renderer.device());
     let shading = base.shading();
     let lighting = EnvLighting::build(hf, base.coherence_um, &shading, &env.spec)?;
     let table = table_line(&lighting, &env.spec);
     eprintln!("profile: {table}");
-    let draw = |samples: u32| {
+    let draw = |brdf: Option<&Arc<EnvBrdf>>, samples: u32| {
         let req = EnvMapRequest {
             env: &env.map,
             shading,
@@ -69,13 +74,13 @@ pub(super) fn env_rows(
             size,
             sun: None,
             seed: 0,
-            brdf: None,
+            brdf,
             per_dispatch: None,
         };
         let t = Instant::now();
-        render_env_brdf_map(dev, &lighting, &req).map(|p| (p, t.elapsed().as_secs_f64() * 1e3))
+        render_env_brdf_map(&dev, &lighting, &req).map(|p| (p, t.elapsed().as_secs_f64() * 1e3))
     };
-    let (first, first_wall_ms) = draw(1)?;
+    let (first, first_wall_ms) = draw(None, 1)?;
     let pixels = pick_pixels(&first.xyz, size, 0, env.pixels);
     let ref_end = end.map(|e| {
         let left = e.saturating_duration_since(Instant::now());
@@ -97,44 +102,105 @@ pub(super) fn env_rows(
         skipped: Vec::new(),
     };
     let pixels = &pixels[..reference.xyz.len()];
-    let mut pace = EnvPace {
-        overhead_ms: (first_wall_ms - first.gpu_ms).max(0.0),
-        per_sample_ms: first.gpu_ms,
-    };
-    for (k, &samples) in env.samples.iter().enumerate() {
-        let left_s = end.map(|e| e.saturating_duration_since(Instant::now()).as_secs_f64());
-        let est = pace.estimate_s(samples);
-        if let Some(left) = left_s.filter(|&l| est > l && k > 0) {
-            let reason = format!("estimated {est:.1} s, over the {left:.1} s left of the budget");
-            eprintln!("profile: {}: skipped, {reason}", row_name(samples));
-            run.skipped.push(EnvSkipped {
-                samples,
-                estimated_s: est,
-                reason,
-            });
-            continue;
-        }
-        let rows_left = (env.samples.len() - k) as f64;
-        let row_end = left_s.map(|l| Instant::now() + Duration::from_secs_f64(l / rows_left));
-        let (times, walls, last) = timed(&draw, samples, frames, row_end)?;
-        let row = score(&last, samples, pixels, &reference.xyz, &times, &walls);
-        pace = EnvPace {
-            overhead_ms: (row.wall_ms - row.gpu_ms).max(0.0),
-            per_sample_ms: row.gpu_ms / f64::from(samples),
+    let rows_in_all = env.variants.len() * env.samples.len();
+    // A material the planner refuses refuses every variant but chebyshev-w, whose table
+    // is the environment table itself.
+    let prepared = prepared_for(base, hf, &env.variants).map_err(|e| e.to_string());
+    for (v, &kind) in env.variants.iter().enumerate() {
+        let name = kind.name().to_string();
+        let skipped = |k: usize, reason: String, estimated_s: f64| EnvSkipped {
+            variant: name.clone(),
+            samples: env.samples[k],
+            estimated_s,
+            reason,
         };
-        eprintln!(
-            "profile: {}: {} frames, median {:.2} ms (wall {:.2} ms), rel L2 {:.2e} [{:.2e}, {:.2e}]",
-            row.name(),
-            row.frames,
-            row.gpu_ms,
-            row.wall_ms,
-            row.vs_reference.rel_l2,
-            row.intervals.rel_l2.lo,
-            row.intervals.rel_l2.hi
-        );
-        run.rows.push(row);
+        let built = match &prepared {
+            Ok(Some(p)) if kind != VariantKind::ChebyshevW => {
+                renderer.set_variant(kind);
+                renderer
+                    .env_brdf(p, &lighting, &shading)
+                    .map(Some)
+                    .map_err(|e| e.to_string())
+            }
+            Err(e) if kind != VariantKind::ChebyshevW => Err(e.clone()),
+            _ => Ok(None),
+        };
+        let brdf = match built {
+            Ok(b) => b,
+            Err(e) => {
+                let reason = format!("refused: {e}");
+                eprintln!("profile: env {name}: {reason}");
+                for k in 0..env.samples.len() {
+                    run.skipped.push(skipped(k, reason.clone(), 0.0));
+                }
+                continue;
+            }
+        };
+        let (pic, wall) = draw(brdf.as_ref(), 1)?;
+        let mut pace = EnvPace {
+            overhead_ms: (wall - pic.gpu_ms).max(0.0),
+            per_sample_ms: pic.gpu_ms,
+        };
+        for (k, &samples) in env.samples.iter().enumerate() {
+            let left_s = end.map(|e| e.saturating_duration_since(Instant::now()).as_secs_f64());
+            let est = pace.estimate_s(samples);
+            if let Some(l) = left_s.filter(|&l| est > l && (k > 0 || v > 0)) {
+                let reason = format!("estimated {est:.1} s, over the {l:.1} s left of the budget");
+                eprintln!("profile: {}: skipped, {reason}", row_name(&name, samples));
+                run.skipped.push(skipped(k, reason, est));
+                continue;
+            }
+            let rows_left = (rows_in_all - v * env.samples.len() - k) as f64;
+            let row_end = left_s.map(|l| Instant::now() + Duration::from_secs_f64(l / rows_left));
+            let (times, walls, last) =
+                timed(&|n| draw(brdf.as_ref(), n), samples, frames, row_end)?;
+            let row = score(
+                &last,
+                &name,
+                samples,
+                pixels,
+                &reference.xyz,
+                &times,
+                &walls,
+            );
+            pace = EnvPace {
+                overhead_ms: (row.wall_ms - row.gpu_ms).max(0.0),
+                per_sample_ms: row.gpu_ms / f64::from(samples),
+            };
+            eprintln!(
+                "profile: {}: {} frames, median {:.2} ms (wall {:.2} ms), rel L2 {:.2e} [{:.2e}, {:.2e}]",
+                row.name(),
+                row.frames,
+                row.gpu_ms,
+                row.wall_ms,
+                row.vs_reference.rel_l2,
+                row.intervals.rel_l2.lo,
+                row.intervals.rel_l2.hi
+            );
+            run.rows.push(row);
+        }
     }
     Ok(run)
+}
+
+/// The material the variants other than `chebyshev-w` are built from (`None` when no
+/// other is drawn: `chebyshev-w` draws from the environment table itself).
+fn prepared_for(
+    base: &Material,
+    hf: &HeightField,
+    variants: &[VariantKind],
+) -> Result<Option<crate::material::PreparedMaterial>> {
+    if variants.iter().all(|&k| k == VariantKind::ChebyshevW) {
+        return Ok(None);
+    }
+    let plan = base.plan_loaded(
+        hf,
+        &crate::brdf::truncation::Reach::ALL,
+        crate::brdf::truncation::Precision::F32,
+        &crate::report::Stderr,
+    )?;
+    base.prepare_planned_deferred(hf.clone(), plan, None)
+        .map(Some)
 }
 
 /// A row's frames: a fixed count, or until the median is known to the budget's precision,
@@ -162,6 +228,7 @@ fn timed(
 /// The row of `samples` from its last map and its frame times.
 fn score(
     last: &EnvPicture,
+    variant: &str,
     samples: u32,
     pixels: &[(u32, u32)],
     reference: &[[f64; 3]],
@@ -173,6 +240,7 @@ fn score(
         .map(|&(i, j)| last.xyz[(j * last.size + i) as usize].map(f64::from))
         .collect();
     EnvRow {
+        variant: variant.to_string(),
         samples,
         gpu_ms: times.median().unwrap_or(0.0),
         spread_ms: times.quantile(0.1).zip(times.quantile(0.9)),

@@ -80,6 +80,8 @@ pub struct ProfileRun {
 /// One measured environment row.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EnvRow {
+    /// The variant that drew it, by its command-line name.
+    pub variant: String,
     pub samples: u32,
     /// Median time of the dispatches (submit to fence, as `render` reports it) (ms).
     pub gpu_ms: f64,
@@ -97,6 +99,7 @@ pub struct EnvRow {
 /// An environment row that did not fit the budget.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EnvSkipped {
+    pub variant: String,
     pub samples: u32,
     pub estimated_s: f64,
     pub reason: String,
@@ -132,12 +135,12 @@ pub struct EnvRun {
 impl EnvRow {
     /// The row's name in the table, the CSV and the plot.
     pub fn name(&self) -> String {
-        row_name(self.samples)
+        row_name(&self.variant, self.samples)
     }
 }
 
-pub(super) fn row_name(samples: u32) -> String {
-    format!("env {samples} spp")
+pub(super) fn row_name(variant: &str, samples: u32) -> String {
+    format!("env {variant} {samples} spp")
 }
 
 /// A time in ms to two decimals, `n/a` without one.
@@ -306,7 +309,7 @@ fn env_table(device: &str, setup: &ProfileSetup, e: &EnvRun) -> String {
     for k in &e.skipped {
         s.push_str(&format!(
             "\nskipped: {}: {}\n",
-            row_name(k.samples),
+            row_name(&k.variant, k.samples),
             k.reason
         ));
     }
@@ -449,7 +452,7 @@ fn env_csv(e: &EnvRun) -> String {
     }
     for k in &e.skipped {
         let mut c = vec![String::new(); 39];
-        c[0] = row_name(k.samples);
+        c[0] = row_name(&k.variant, k.samples);
         c[13] = "env".into();
         c[14] = k.reason.replace(',', ";");
         c[36] = "true".into();

@@ -160,4 +160,7 @@ pub struct EnvProfile {
     pub spec: TableSpec,
     /// Pixels scored, spread evenly over the map's disk.
     pub pixels: usize,
+    /// The variants drawn, a row per sample count each, in this order (each one's rows
+    /// ascend in samples).
+    pub variants: Vec<crate::render::variant::VariantKind>,
 }

@@ -91,10 +91,9 @@ pub fn profile_with_env(
                 Frames::Budget(b) => Some(start + Duration::from_secs_f64(share * b.total_s)),
                 Frames::Fixed(_) => None,
             };
-            let dev = renderer.device().clone();
             let size = setup.size;
             Some(env_rows(
-                &dev,
+                renderer,
                 &heightfield,
                 &setup.base,
                 size,
