@@ -749,9 +749,9 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
         .map_or("none".to_string(), |r| r.device_name().to_string());
     let budget = spec.budget_s;
     beat.step("the lighting cases");
-    let lighting_cells = match &renderer {
+    let lighting_cells = match renderer.as_mut() {
         Some(r) => {
-            let cells = lighting::run(r.device())?;
+            let cells = lighting::run(r)?;
             if r.validation_messages() > 0 {
                 return Err(Error::Validation(r.validation_messages()));
             }

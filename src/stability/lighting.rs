@@ -1,8 +1,8 @@
 //! The matrix's lighting cases: environment maps that are hard on an importance sampler, on
 //! a flat patch whose lobe has a closed form ([`FlatLobe`]), drawn as environment-lit BRDF
-//! maps on the device and checked pixel by pixel against the f64 quadrature of the same
-//! lighting (a second method: midpoint rule over `(u, v)` against Monte Carlo with multiple
-//! importance sampling).
+//! maps on the device by every variant that can be lit by an environment, and checked
+//! pixel by pixel against the f64 quadrature of the same lighting (a second method:
+//! midpoint rule over `(u, v)` against Monte Carlo with multiple importance sampling).
 //!
 //! - **A sun hidden in an HDR map**: a clear sky with a 1° disc of irradiance 5 in it, 1024×512:
 //!   nearly all of the map's power in a few dozen pixels.
@@ -21,10 +21,11 @@ use crate::brdf::env_reference::{env_radiance_converged, FlatLobe, Frame, Quadra
 use crate::brdf::table::{Region, TableSpec};
 use crate::brdf::Shading;
 use crate::colour::ColourTable;
-use crate::gpu::Device;
 use crate::heightfield::HeightField;
 use crate::light::env::{map_to_direction, sky, tabulate, EnvMap};
 use crate::render::env::{map_direction, render_env_brdf_map, EnvLighting, EnvMapRequest};
+use crate::render::variant::VariantKind;
+use crate::render::Renderer;
 use crate::Result;
 
 /// Samples per pixel of every case: the renderer's default.
@@ -42,6 +43,8 @@ pub const LIT: f64 = 0.01;
 #[derive(Debug, Clone, PartialEq)]
 pub struct LightingCell {
     pub case: &'static str,
+    /// The variant that drew it.
+    pub variant: &'static str,
     /// Pixels compared, and how many of them are lit.
     pub pixels: usize,
     pub lit: usize,
@@ -107,13 +110,17 @@ fn one_pixel() -> EnvMap {
     map
 }
 
-/// Draws and checks every case on `dev`.
-pub fn run(dev: &Arc<Device>) -> Result<Vec<LightingCell>> {
+/// Draws and checks every case with every variant that can be lit by an environment, on
+/// `r`'s device (the default variant first).
+pub fn run(r: &mut Renderer) -> Result<Vec<LightingCell>> {
     let coherence = crate::material::DEFAULT_COHERENCE_UM;
     let shading = Shading::default();
-    // A flat 65 µm patch: its lobe lies within 0.04 of (u, v) = 0 for every view.
-    let n = 64;
-    let hf = HeightField::new(n, n, coherence / n as f64, vec![0.0; n * n])?;
+    // A flat patch: its lobe lies within 0.04 of (u, v) = 0 for every view. Sampled at
+    // 90 nm, so that the discrete spectrum's first alias (at u = λ/dH) lies beyond every
+    // reachable |u| ≤ 2 at 380 nm: the variants that evaluate the DFT terms wherever a
+    // direction falls (flss) see the lobe alone, as the tables over the lobe's region do.
+    let n = 256;
+    let hf = HeightField::new(n, n, 0.09, vec![0.0; n * n])?;
     let spec = TableSpec {
         region: Region {
             lo: [-0.04, -0.04, -2.0],
@@ -127,39 +134,109 @@ pub fn run(dev: &Arc<Device>) -> Result<Vec<LightingCell>> {
     let lighting = EnvLighting::build(&hf, coherence, &shading, &spec)?;
     let lobe = FlatLobe::new(&ColourTable::new(spec.step_nm)?, coherence, &shading);
     let g = |uvw: [f64; 3]| lobe.g(uvw);
+    let material = crate::material::Material {
+        lambda_step_nm: spec.step_nm,
+        coherence_um: coherence,
+        ..crate::material::Material::default()
+    };
+    let plan = material.plan_loaded(
+        &hf,
+        &crate::brdf::truncation::Reach::ALL,
+        crate::brdf::truncation::Precision::F32,
+        &crate::report::Stderr,
+    )?;
+    let prepared = material.prepare_planned_deferred(hf.clone(), plan, None)?;
+    // A variant that refuses the flat patch (nmm and pq find no period in it) is a
+    // refused cell per case, with its reason.
+    let mut brdfs = Vec::new();
+    for kind in lit_variants() {
+        let brdf = match kind {
+            VariantKind::ChebyshevW => Ok(None),
+            k => {
+                r.set_variant(k);
+                r.env_brdf(&prepared, &lighting, &shading)
+                    .map(Some)
+                    .map_err(|e| e.to_string())
+            }
+        };
+        brdfs.push((kind.name(), brdf));
+    }
+    let dev = Arc::clone(r.device());
     let mut out = Vec::new();
     for (case, env, judged) in cases() {
-        let req = EnvMapRequest {
-            env: &env,
-            shading,
-            samples: SAMPLES,
-            size: MAP_SIZE,
-            sun: None,
-            seed: 0,
-            brdf: None,
-            per_dispatch: None,
-        };
-        let pic = render_env_brdf_map(dev, &lighting, &req)?;
-        let mut rows = Vec::new();
+        // The reference once per case, then every variant's map against it.
+        let mut want = Vec::new();
         for j in 0..MAP_SIZE {
             for i in 0..MAP_SIZE {
                 let Some(wr) = map_direction(i, j, MAP_SIZE).filter(|&wr| judged(wr)) else {
                     continue;
                 };
                 let q = Quadrature::around(0.0, 0.0, 0.04, 0.001);
-                let (want, quad) =
+                let (xyz, quad) =
                     env_radiance_converged(&env, &Frame::BRDF_MAP, wr, &shading, &g, &q);
-                let got = pic.xyz[(j * MAP_SIZE + i) as usize].map(f64::from);
-                rows.push((got, want, quad));
+                want.push(((j * MAP_SIZE + i) as usize, xyz, quad));
             }
         }
-        out.push(judge(case, &rows));
+        for (variant, brdf) in &brdfs {
+            let brdf = match brdf {
+                Ok(b) => b,
+                Err(e) => {
+                    out.push(LightingCell {
+                        case,
+                        variant,
+                        pixels: 0,
+                        lit: 0,
+                        worst_lit: 0.0,
+                        worst_dark: 0.0,
+                        quadrature: 0.0,
+                        status: Status::Refused,
+                        message: e.clone(),
+                    });
+                    continue;
+                }
+            };
+            let req = EnvMapRequest {
+                env: &env,
+                shading,
+                samples: SAMPLES,
+                size: MAP_SIZE,
+                sun: None,
+                seed: 0,
+                brdf: brdf.as_ref(),
+                per_dispatch: None,
+            };
+            let pic = render_env_brdf_map(&dev, &lighting, &req)?;
+            let rows: Vec<_> = want
+                .iter()
+                .map(|&(p, xyz, quad)| (pic.xyz[p].map(f64::from), xyz, quad))
+                .collect();
+            out.push(judge(case, variant, &rows));
+        }
     }
     Ok(out)
 }
 
+/// Every variant that can be lit by an environment, the default first.
+pub fn lit_variants() -> Vec<VariantKind> {
+    let lit = |k: &VariantKind| {
+        crate::render::env_brdf::env_spirv(*k, crate::render::env_brdf::EnvStage::Map).is_ok()
+    };
+    std::iter::once(VariantKind::DEFAULT)
+        .chain(
+            VariantKind::ALL
+                .into_iter()
+                .filter(|k| *k != VariantKind::DEFAULT),
+        )
+        .filter(lit)
+        .collect()
+}
+
 /// The verdict of a case from `(device, reference, quadrature error)` per pixel.
-fn judge(case: &'static str, rows: &[([f64; 3], [f64; 3], f64)]) -> LightingCell {
+fn judge(
+    case: &'static str,
+    variant: &'static str,
+    rows: &[([f64; 3], [f64; 3], f64)],
+) -> LightingCell {
     let y_max = rows.iter().fold(0.0f64, |m, r| m.max(r.1[1]));
     let (mut worst_lit, mut worst_dark, mut quadrature) = (0.0f64, 0.0f64, 0.0f64);
     let (mut bad, mut lit) = (0, 0);
@@ -183,6 +260,7 @@ fn judge(case: &'static str, rows: &[([f64; 3], [f64; 3], f64)]) -> LightingCell
     };
     LightingCell {
         case,
+        variant,
         pixels: rows.len(),
         lit,
         worst_lit,
@@ -204,15 +282,17 @@ pub fn to_markdown(cells: &[LightingCell]) -> String {
          of a flat patch against the f64 quadrature of the same lighting with the lobe's \
          closed form. A lit pixel (reference Y ≥ {LIT} of the brightest) passes within \
          {:.0} % of its Y, a dark one within {:.0} % of the brightest; every pixel must be \
-         finite and ≥ 0.\n\n| case | pixels (lit) | worst ΔY/Y, lit | worst ΔY/Y_max, dark | \
-         quadrature error | status |\n|---|---|---|---|---|---|\n",
+         finite and ≥ 0. Every variant that can be lit by an environment draws every case \
+         through its own shader.\n\n| case | variant | pixels (lit) | worst ΔY/Y, lit | \
+         worst ΔY/Y_max, dark | quadrature error | status |\n|---|---|---|---|---|---|---|\n",
         100.0 * BOUND,
         100.0 * BOUND
     );
     for c in cells {
         s += &format!(
-            "| {} | {} ({}) | {:.2e} | {:.2e} | {:.1e} | {}{} |\n",
+            "| {} | {} | {} ({}) | {:.2e} | {:.2e} | {:.1e} | {}{} |\n",
             c.case,
+            c.variant,
             c.pixels,
             c.lit,
             c.worst_lit,
@@ -235,8 +315,8 @@ pub fn summary(cells: &[LightingCell]) -> Vec<String> {
         .iter()
         .map(|c| {
             format!(
-                "lighting, {}: {} over {} pixels ({} lit); worst ΔY/Y {:.1e} lit, {:.1e} of the brightest dark (bound {BOUND})",
-                c.case, c.status, c.pixels, c.lit, c.worst_lit, c.worst_dark
+                "lighting, {}, {}: {} over {} pixels ({} lit); worst ΔY/Y {:.1e} lit, {:.1e} of the brightest dark (bound {BOUND})",
+                c.case, c.variant, c.status, c.pixels, c.lit, c.worst_lit, c.worst_dark
             )
         })
         .collect()
@@ -253,25 +333,32 @@ mod tests {
         let far = [0.5, 1.0 + 2.0 * BOUND, 0.8];
         let dark = [0.0, 0.0, 0.0];
         assert_eq!(
-            judge("ok", &[(near, want, 0.0), (dark, dark, 0.0)]).status,
+            judge("ok", "v", &[(near, want, 0.0), (dark, dark, 0.0)]).status,
             Status::Pass
         );
-        let c = judge("ok", &[(near, want, 0.0), (dark, dark, 0.0)]);
+        let c = judge("ok", "v", &[(near, want, 0.0), (dark, dark, 0.0)]);
         assert_eq!((c.pixels, c.lit), (2, 1));
-        assert_eq!(judge("far", &[(far, want, 0.0)]).status, Status::Fail);
+        assert_eq!(judge("far", "v", &[(far, want, 0.0)]).status, Status::Fail);
         // A dark pixel lit by the device beyond the bound of the brightest.
         let glow = [0.0, 2.0 * BOUND, 0.0];
         assert_eq!(
-            judge("glow", &[(want, want, 0.0), (glow, dark, 0.0)]).status,
+            judge("glow", "v", &[(want, want, 0.0), (glow, dark, 0.0)]).status,
             Status::Fail
         );
         for bad in [f64::NAN, f64::INFINITY, -1e-3] {
-            let c = judge("bad", &[(want, want, 0.0), ([0.0, bad, 0.0], dark, 0.0)]);
+            let c = judge(
+                "bad",
+                "v",
+                &[(want, want, 0.0), ([0.0, bad, 0.0], dark, 0.0)],
+            );
             assert_eq!(c.status, Status::Fail, "{bad}");
             assert!(c.message.contains("not finite or negative"));
         }
         // Nothing lit: nothing was checked.
-        assert_eq!(judge("black", &[(dark, dark, 0.0)]).status, Status::Fail);
+        assert_eq!(
+            judge("black", "v", &[(dark, dark, 0.0)]).status,
+            Status::Fail
+        );
     }
 
     #[test]
