@@ -255,25 +255,24 @@ fn warn_dropped(dropped: u64) {
     }
 }
 
-/// `render` of a scene lit by an environment, disc lights or `--no-sun`: the scene in
-/// radiance units ([`crate::render::env_scene`]), written as `render` writes scenes
-/// (supersampled, exposed, tone-mapped for a PNG).
-pub fn run_env_scene(
-    args: &crate::cli::render::RenderArgs,
-    scene: &Scene,
-    env: Option<&EnvMap>,
-) -> Result<()> {
-    crate::guard::refuse_flags(
-        &[
-            ("--per-vertex", args.gpu.per_vertex),
-            ("--repeat", args.repeat > 0),
-        ],
-        "a scene lit by an environment, disc lights or --no-sun (its pixels are integrated by compute stages, once)",
-    )?;
+/// What `render` hands [`run_env_scene`]: its flags that apply to an environment-lit
+/// scene, and the material with its flags applied.
+pub struct EnvSceneArgs<'a> {
+    pub material: crate::material::Material,
+    pub gpu: &'a crate::cli::gpu::GpuArgs,
+    pub env: &'a EnvArgs,
+    pub cache: &'a crate::cli::cache::CacheArgs,
+    pub out: &'a std::path::Path,
+}
+
+/// A scene lit by an environment, disc lights or `--no-sun` (`render`'s flags for it in
+/// `args`): the scene in radiance units ([`crate::render::env_scene`]), written as
+/// `render` writes scenes (supersampled, exposed, tone-mapped for a PNG).
+pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap>) -> Result<()> {
     crate::render::env_scene::check_size(None, scene)?;
     refuse_variant(args.gpu.variant)?;
     let start = std::time::Instant::now();
-    let material = args.material.apply(scene.material.clone());
+    let material = args.material.clone();
     let (hf, _) = material.load_planned(
         &crate::brdf::truncation::Reach::ALL,
         crate::brdf::truncation::Precision::F32,
@@ -325,7 +324,7 @@ pub fn run_env_scene(
     )?;
     warn_dropped(frame.dropped);
     let out = &scene.output;
-    let rgb = match crate::image_io::output_format(&args.out)? {
+    let rgb = match crate::image_io::output_format(args.out)? {
         crate::image_io::OutputFormat::Exr => {
             let (_, _, px) = crate::image_io::box_downsample(
                 frame.width,
@@ -348,7 +347,7 @@ pub fn run_env_scene(
             ),
         ));
     }
-    crate::image_io::write_image(&args.out, out.width, out.height, &rgb, 1.0)?;
+    crate::image_io::write_image(args.out, out.width, out.height, &rgb, 1.0)?;
     println!("{}", table_line(&lighting, &spec, built));
     println!(
         "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: variant {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",

@@ -76,7 +76,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     match env {
         Some(env) if args.brdf_map => return run_env_map(args, &scene, &env),
         env if !args.brdf_map && args.env.lights_scene(env.as_ref(), &scene) => {
-            return crate::cli::env::run_env_scene(args, &scene, env.as_ref());
+            crate::guard::refuse_flags(
+                &[
+                    ("--per-vertex", args.gpu.per_vertex),
+                    ("--repeat", args.repeat > 0),
+                ],
+                "a scene lit by an environment, disc lights or --no-sun (its pixels are integrated by compute stages, once)",
+            )?;
+            let run = crate::cli::env::EnvSceneArgs {
+                material: args.material.apply(scene.material.clone()),
+                gpu: &args.gpu,
+                env: &args.env,
+                cache: &args.cache,
+                out: &args.out,
+            };
+            return crate::cli::env::run_env_scene(&run, &scene, env.as_ref());
         }
         _ => {}
     }
