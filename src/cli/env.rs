@@ -287,14 +287,14 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     let dev = crate::gpu::Device::new(crate::cli::gpu::validation_requested())?;
     crate::render::env_scene::check_size(Some(&dev), scene)?;
     let shading = material.shading();
-    let (lighting, built) = lighting_for(&hf, &material, &spec, &args.cache)?;
+    let (lighting, built) = lighting_for(&hf, &material, &spec, args.cache)?;
     let variant = env_variant(
         &dev,
         args.gpu.variant,
         &material,
         &lighting,
         &args.gpu.table,
-        &args.cache,
+        args.cache,
     )?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);
     let samples = args
