@@ -197,7 +197,7 @@ pub fn draw_map(
         size,
         sun,
         seed: 0,
-        brdf: variant.as_ref().map(|v| &v.brdf),
+        brdf: Some(&variant.brdf),
         per_dispatch: None,
     };
     let pic = render_env_brdf_map(dev, &lighting, &req)?;
@@ -229,17 +229,8 @@ pub fn draw_map(
         gpu_ms: pic.gpu_ms,
         table_line,
         samples,
-        variant: variant_name(variant.as_ref()),
+        variant: variant.name.clone(),
     })
-}
-
-/// What the stages evaluated: the variant's report name, or `chebyshev-w` from the
-/// environment table.
-fn variant_name(variant: Option<&EnvVariant>) -> String {
-    variant.map_or_else(
-        || "chebyshev-w (the environment table)".to_string(),
-        |v| v.name.clone(),
-    )
 }
 
 /// Says how many batches of samples the estimator left out for a NaN or an infinity (the
@@ -319,7 +310,7 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
             samples,
             seed: 0,
             noise: (noise > 0.0).then_some(noise),
-            brdf: variant.as_ref().map(|v| &v.brdf),
+            brdf: Some(&variant.brdf),
         },
     )?;
     warn_dropped(frame.dropped);
@@ -360,7 +351,7 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
         env.map_or("no environment".to_string(), |e| e.name.clone()),
         scene.disc_lights.len(),
         if args.env.no_sun { "off" } else { "on" },
-        variant_name(variant.as_ref()),
+        variant.name,
         frame.samples_mean,
         frame.samples_most,
         if noise > 0.0 {
@@ -381,11 +372,12 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     Ok(())
 }
 
-/// The variant the environment-lit stages evaluate for `--variant`: `None` for the default
-/// (`chebyshev-w` drawn from the environment table itself), else `variant` built on `dev`
-/// in radiance units with the table options of `table` ([`crate::render::Renderer::env_brdf`];
-/// a variant that cannot be lit by an environment is refused there, before any build). The
-/// renderer comes back too: it owns what the variant's set points at.
+/// The variant the environment-lit stages evaluate for `--variant`: for the default,
+/// `chebyshev-w` drawn from the environment table itself in `--table-format`; else
+/// `variant` built on `dev` in radiance units with the table options of `table`
+/// ([`crate::render::Renderer::env_brdf`]; a variant that cannot be lit by an environment
+/// is refused there, before any build). The renderer comes back too: it owns what the
+/// variant's set points at.
 pub fn env_variant(
     dev: &std::sync::Arc<crate::gpu::Device>,
     variant: crate::render::variant::VariantKind,
@@ -393,10 +385,18 @@ pub fn env_variant(
     lighting: &EnvLighting,
     table: &crate::cli::gpu::TableArgs,
     cache: &crate::cli::cache::CacheArgs,
-) -> Result<Option<EnvVariant>> {
+) -> Result<EnvVariant> {
     use crate::render::variant::VariantKind;
     if matches!(variant, VariantKind::Default | VariantKind::ChebyshevW) {
-        return Ok(None);
+        let brdf = lighting.brdf_in(dev, &material.shading(), table.table_format)?;
+        return Ok(EnvVariant {
+            brdf: std::sync::Arc::new(brdf),
+            name: format!(
+                "chebyshev-w (the environment table, {})",
+                table.table_format.name()
+            ),
+            _renderer: None,
+        });
     }
     refuse_variant(variant)?;
     let mut renderer = crate::render::Renderer::on(std::sync::Arc::clone(dev))?;
@@ -414,11 +414,11 @@ pub fn env_variant(
     let name = renderer
         .prepared_stats()
         .map_or_else(|| variant.name().to_string(), |s| s.name);
-    Ok(Some(EnvVariant {
+    Ok(EnvVariant {
         brdf,
         name,
-        _renderer: renderer,
-    }))
+        _renderer: Some(renderer),
+    })
 }
 
 /// The error of a variant that cannot be lit by an environment (a debug view), before any
@@ -433,7 +433,7 @@ pub struct EnvVariant {
     pub brdf: std::sync::Arc<crate::render::env_brdf::EnvBrdf>,
     /// What the variant's report calls it (`flss T=12 R=1 dλ=10`, a table's nodes).
     pub name: String,
-    _renderer: crate::render::Renderer,
+    _renderer: Option<crate::render::Renderer>,
 }
 
 /// The radiance table of `spec` and its density, through the cache unless `--no-cache`;

@@ -332,15 +332,26 @@ impl EnvLighting {
 
 impl EnvLighting {
     /// `chebyshev-w` drawn from the lighting's own table for the environment-lit stages,
-    /// stored in float32 (its values near a mirror's peak pass float16's range).
+    /// stored in float32.
     pub(crate) fn brdf(&self, dev: &Arc<Device>, shading: &Shading) -> Result<EnvBrdf> {
+        self.brdf_in(dev, shading, crate::render::variant::TableFormat::Rgba32f)
+    }
+
+    /// [`EnvLighting::brdf`] stored in `format` (`--table-format`: the values are those of
+    /// a relative table, [`EnvBrdf::scale`], so float16 holds them).
+    pub fn brdf_in(
+        &self,
+        dev: &Arc<Device>,
+        shading: &Shading,
+        format: crate::render::variant::TableFormat,
+    ) -> Result<EnvBrdf> {
         EnvBrdf::chebyshev_w(
             dev,
             &self.table,
             &self.spec,
             shading,
             self.mirror_scale,
-            crate::render::variant::TableFormat::Rgba32f,
+            format,
         )
     }
 }
