@@ -37,7 +37,7 @@ layout(std430, set = 1, binding = 2) readonly buffer EnvCdf { float envCdf[]; };
 layout(std430, set = 1, binding = 3) readonly buffer GCdf { float gCdf[]; };
 // The sums over the samples so far (the CPU divides by their number): each dispatch adds
 // samples [base, base + count); the first also adds the point lights. The stage decides
-// what a pixel holds (env_map.comp, env_scene.comp).
+// what a pixel holds (env_map.glsl, env_scene.glsl).
 layout(std430, set = 1, binding = 4) buffer Out { vec4 outSum[]; };
 // Point lights (2 vec4 each: towards the light in world space; irradiance XYZ), then disc
 // lights (3 vec4 each: towards the centre, w: cos of the angular radius; radiance XYZ,

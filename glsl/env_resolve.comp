@@ -1,7 +1,7 @@
 #version 450
 // The viewer's progressive environment-lit picture, resolved into the texels of a swapchain
 // image (src/view/env.rs): one invocation per pixel of a rectangle of the window. The
-// running sums of env_scene.comp or env_map.comp hold the samples' sum and their number k,
+// running sums of env_scene.glsl or env_map.glsl hold the samples' sum and their number k,
 // and the point lights apart, so a pixel is points + sum/k, as the offscreen render
 // reads it. Then the picture goes as `render` writes a PNG: over the mirror scale, times
 // the exposure, the scene's tone curve, the sRGB transfer curve, 8 bits.

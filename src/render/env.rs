@@ -1,7 +1,9 @@
-//! BRDF maps lit by an environment map (MODEL §10), as a compute dispatch
-//! (glsl/env_map.comp): what the CPU prepares (the radiance-weighted `chebyshev-w` table,
-//! the density the BRDF's `(u, v)` samples are drawn from, the environment's CDFs) and the
-//! one dispatch that integrates every pixel with `N` samples.
+//! Environment light for the compute stages (MODEL §10): what the CPU prepares once
+//! ([`EnvLighting`]: the radiance-weighted table the BRDF's `(u, v)` samples are drawn
+//! from, which also draws `chebyshev-w`; the environment's CDFs; the lights), the stages'
+//! device objects ([`EnvKernel`]) with the variant they evaluate bound beside them
+//! ([`crate::render::env_brdf`]), and the dispatches that add `N` samples per pixel in
+//! passes ([`dispatch_passes`]), a BRDF map's (glsl/env_map.glsl) among them.
 //!
 //! **The BRDF's sampler.** The largest over `M` nodes uniform in `w` of the table's
 //! `G_X + G_Y + G_Z` is evaluated (as the spline interpolates it) at the corners of cells

@@ -1,8 +1,9 @@
 //! Scenes (meshes) lit by an environment map, disc lights and the sun in radiance units
 //! (MODEL §10): the mesh is rasterised once on the CPU into a G-buffer (per covered pixel:
-//! the orthonormal tangent frame, `ωr` in it and the texture's albedo), then one compute
-//! dispatch (glsl/env_scene.comp) integrates every covered pixel with the estimator that
-//! the environment-lit BRDF map uses (glsl/env_common.glsl).
+//! the orthonormal tangent frame, `ωr` in it and the texture's albedo), then the compute
+//! stage (glsl/env_scene.glsl, with the variant's BRDF) integrates the covered pixels in
+//! passes, each pass narrowed to the pixels whose noise is still above the target, with
+//! the estimator the environment-lit BRDF map uses (glsl/env_common.glsl).
 //!
 //! **Units.** The picture is radiance (linear sRGB). The texture of thesis Algorithm 4 is an
 //! albedo on the scale of the diffraction colours (`[texture] gain`, relative to a mirror's
@@ -340,7 +341,7 @@ pub const DEFAULT_NOISE: f64 = 0.3;
 
 /// vec4s a G-buffer pixel of the scene's stage writes: (the samples' linear-sRGB sum, their
 /// number), (the sum of the squared batch sums, 0), (the point lights' linear sRGB, 0)
-/// (glsl/env_scene.comp).
+/// (glsl/env_scene.glsl).
 pub const SCENE_OUTPUTS: u64 = 3;
 
 /// Samples per noise batch of a G-buffer pixel: the noise of a pixel is estimated from the
@@ -409,7 +410,7 @@ fn output_groups(g: &GBuffer) -> Vec<Vec<u32>> {
 }
 
 /// The estimated standard error and mean (linear sRGB) of an output pixel from the raw
-/// sums of its covered G-buffer pixels (three vec4 each, glsl/env_scene.comp).
+/// sums of its covered G-buffer pixels (three vec4 each, glsl/env_scene.glsl).
 fn pixel_noise(sums: &[[f32; 4]], members: &[u32]) -> ([f64; 3], [f64; 3]) {
     let c = members.len() as f64;
     let (mut mean, mut var) = ([0.0; 3], [0.0; 3]);

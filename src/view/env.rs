@@ -4,7 +4,8 @@
 //! The radiance-weighted table ([`EnvLighting::build_cached`], on disk after the first
 //! build) is prepared on a worker thread; the sun-lit passes draw meanwhile. Once it is
 //! there, the device objects that stay while the environment, the material and the
-//! switches stay ([`EnvKernel`]: table, environment, densities, pipelines) are made once;
+//! switches stay ([`EnvKernel`]: the `chebyshev-w` table as its shader reads it, the
+//! environment, densities, pipelines) are made once;
 //! each change of the view (camera, light, exposure, map, rotation, window) rasterises a
 //! new G-buffer on the CPU and binds a new [`Picture`]. Every frame then adds a small batch
 //! of samples per pixel to the running sums and resolves them into the window with a
