@@ -2,6 +2,12 @@
 //! binary embeds shaders that were checked at build time. `#include "x.glsl"` resolves to
 //! `glsl/x.glsl`. A GLSL error fails the build and prints `file:line: message`.
 //!
+//! A variant's fragment file (one that ends its evaluator with `#include "shade.glsl"`) is
+//! compiled twice more as compute stages, that line replaced by the environment-lit
+//! stages' `main()` (`env_map.glsl`, `env_scene.glsl`): `chebyshev_w.frag` also gives
+//! `chebyshev_w.env_map` and `chebyshev_w.env_scene`, so every light evaluates the
+//! variant's one `diffractionXyz`.
+//!
 //! It also writes `OUT_DIR/shaders.rs`, the table of what it compiled: one constant per
 //! stage (`flss.frag` → `FLSS_FRAG`) and `FILES`, every stage by its file name, which
 //! `gpu::shaders` includes. A new stage in glsl/ is embedded without a hand-written line.
