@@ -341,7 +341,7 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     crate::image_io::write_image(args.out, out.width, out.height, &rgb, 1.0)?;
     println!("{}", table_line(&lighting, &spec, built));
     println!(
-        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: variant {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (CPU), GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",
+        "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: variant {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (raster pipeline and readback), GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",
         dev.info.name,
         out.width,
         out.height,

@@ -1,6 +1,7 @@
 //! Scenes (meshes) lit by an environment map, disc lights and the sun in radiance units
-//! (MODEL §10): the mesh is rasterised once on the CPU into a G-buffer (per covered pixel:
-//! the orthonormal tangent frame, `ωr` in it and the texture's albedo), then the compute
+//! (MODEL §10): the mesh is rasterised once by the raster pipeline into a G-buffer
+//! ([`super::gbuffer`]; per covered pixel the orthonormal tangent frame, `ωr` in it and
+//! the texture's albedo), then the compute
 //! stage (glsl/env_scene.glsl, with the variant's BRDF) integrates the covered pixels in
 //! passes, each pass narrowed to the pixels whose noise is still above the target, with
 //! the estimator the environment-lit BRDF map uses (glsl/env_common.glsl).
@@ -18,7 +19,6 @@
 
 use std::sync::Arc;
 
-use glam::DVec3;
 use rayon::prelude::*;
 
 use super::env::{dispatch_passes, Dispatch, EnvLighting, Lights, PointLight, SampledDisc};
@@ -27,8 +27,9 @@ use crate::colour::linear_srgb_to_xyz;
 use crate::gpu::Device;
 use crate::light::env::EnvMap;
 use crate::mesh::Mesh;
-use crate::scene::{Camera, Scene};
+use crate::scene::Scene;
 use crate::Result;
+use glam::DVec3;
 
 /// A texture as the G-buffer reads it: linear-sRGB albedo, top row first, repeated.
 pub struct Albedo {
@@ -55,26 +56,6 @@ impl Albedo {
             rgb: bytes.iter().map(|p| p.map(lin)).collect(),
         }
     }
-
-    /// Bilinear lookup with repeat at texture coordinates `(s, t)` (`t` down).
-    fn at(&self, s: f64, t: f64) -> [f32; 3] {
-        let (w, h) = (self.width as i64, self.height as i64);
-        let x = s * w as f64 - 0.5;
-        let y = t * h as f64 - 0.5;
-        let (x0, y0) = (x.floor(), y.floor());
-        let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
-        let texel = |i: i64, j: i64| self.rgb[(j.rem_euclid(h) * w + i.rem_euclid(w)) as usize];
-        let (i, j) = (x0 as i64, y0 as i64);
-        let (a, b, c, d) = (
-            texel(i, j),
-            texel(i + 1, j),
-            texel(i, j + 1),
-            texel(i + 1, j + 1),
-        );
-        [0, 1, 2].map(|k| {
-            (1.0 - fy) * ((1.0 - fx) * a[k] + fx * b[k]) + fy * ((1.0 - fx) * c[k] + fx * d[k])
-        })
-    }
 }
 
 /// The covered pixels of a frame and what the shader reads at each.
@@ -88,193 +69,6 @@ pub struct GBuffer {
     /// output pixel × 16 plus the pixel's place among its output pixel's `ss²`: they share
     /// one low-discrepancy sequence, each taking the next stretch of samples.
     pub data: Vec<f32>,
-}
-
-/// A vertex after the vertex stage: clip position, frame, world position, texture coordinate.
-#[derive(Clone, Copy)]
-struct Projected {
-    clip: [f64; 4],
-    t: DVec3,
-    b: DVec3,
-    n: DVec3,
-    p: DVec3,
-    uv: [f64; 2],
-}
-
-fn project(mesh: &Mesh, camera: &Camera, aspect: f32) -> Vec<Projected> {
-    let vp = camera.view_proj(aspect).as_dmat4();
-    mesh.vertices
-        .iter()
-        .map(|v| {
-            let p = DVec3::from(v.position.map(f64::from));
-            let c = vp * p.extend(1.0);
-            // frame.glsl's tangentFrame with an identity model matrix (the mesh is in world
-            // space).
-            let n = DVec3::from(v.normal.map(f64::from)).normalize_or(DVec3::Z);
-            let any = n
-                .cross(if n.x.abs() < 0.9 { DVec3::X } else { DVec3::Y })
-                .normalize();
-            let t0 = DVec3::new(
-                f64::from(v.tangent[0]),
-                f64::from(v.tangent[1]),
-                f64::from(v.tangent[2]),
-            );
-            let t = (t0 - n * n.dot(t0)).try_normalize().unwrap_or(any);
-            let sign = if v.tangent[3] < 0.0 { -1.0 } else { 1.0 };
-            Projected {
-                clip: c.to_array(),
-                t,
-                b: sign * n.cross(t),
-                n,
-                p,
-                uv: [f64::from(v.uv[0]), 1.0 - f64::from(v.uv[1])],
-            }
-        })
-        .collect()
-}
-
-/// The nearest triangle at each pixel centre and its perspective-correct barycentrics.
-/// Triangles with a vertex at or behind the eye plane are left out (no clipping); both
-/// windings are drawn, as the graphics pipeline draws them (no culling).
-fn nearest_triangles(
-    verts: &[Projected],
-    indices: &[u32],
-    width: u32,
-    height: u32,
-) -> Vec<Option<(u32, [f64; 3])>> {
-    let (w, h) = (width as usize, height as usize);
-    let screen: Vec<Option<[f64; 3]>> = verts
-        .iter()
-        .map(|v| {
-            let [x, y, z, cw] = v.clip;
-            (cw > 1e-9).then(|| {
-                [
-                    (x / cw * 0.5 + 0.5) * w as f64,
-                    (y / cw * 0.5 + 0.5) * h as f64,
-                    z / cw,
-                ]
-            })
-        })
-        .collect();
-    let edge = |a: [f64; 3], b: [f64; 3], p: [f64; 2]| {
-        (b[0] - a[0]) * (p[1] - a[1]) - (b[1] - a[1]) * (p[0] - a[0])
-    };
-    const BAND: usize = 8;
-    let mut out = vec![None; w * h];
-    out.par_chunks_mut(w * BAND)
-        .enumerate()
-        .for_each(|(band, rows)| {
-            let (y0, y1) = (band * BAND, (band * BAND + rows.len() / w).min(h));
-            let mut depth = vec![f64::INFINITY; rows.len()];
-            for (k, tri) in indices.chunks_exact(3).enumerate() {
-                let ids = [tri[0], tri[1], tri[2]].map(|i| i as usize);
-                let (Some(a), Some(b), Some(c)) = (screen[ids[0]], screen[ids[1]], screen[ids[2]])
-                else {
-                    continue;
-                };
-                let area = edge(a, b, [c[0], c[1]]);
-                if area.abs() < 1e-12 {
-                    continue;
-                }
-                let ymin = a[1].min(b[1]).min(c[1]);
-                let ymax = a[1].max(b[1]).max(c[1]);
-                let py0 = ((ymin - 0.5).ceil().max(y0 as f64)) as usize;
-                let py1 = ((ymax - 0.5).floor().min(y1 as f64 - 1.0)).max(-1.0);
-                if py1 < py0 as f64 {
-                    continue;
-                }
-                let xmin = a[0].min(b[0]).min(c[0]);
-                let xmax = a[0].max(b[0]).max(c[0]);
-                let px0 = (xmin - 0.5).ceil().max(0.0) as usize;
-                let px1 = (xmax - 0.5).floor().min(w as f64 - 1.0);
-                if px1 < px0 as f64 {
-                    continue;
-                }
-                for py in py0..=py1 as usize {
-                    for px in px0..=px1 as usize {
-                        let p = [px as f64 + 0.5, py as f64 + 0.5];
-                        let l0 = edge(b, c, p) / area;
-                        let l1 = edge(c, a, p) / area;
-                        let l2 = 1.0 - l0 - l1;
-                        if l0 < 0.0 || l1 < 0.0 || l2 < 0.0 {
-                            continue;
-                        }
-                        let z = l0 * a[2] + l1 * b[2] + l2 * c[2];
-                        let slot = (py - y0) * w + px;
-                        if !(0.0..=1.0).contains(&z) || z >= depth[slot] {
-                            continue;
-                        }
-                        depth[slot] = z;
-                        let q = [l0, l1, l2];
-                        let pw = [0, 1, 2].map(|i| q[i] / verts[ids[i]].clip[3]);
-                        let s = pw[0] + pw[1] + pw[2];
-                        rows[slot] = Some((k as u32, pw.map(|x| x / s)));
-                    }
-                }
-            }
-        });
-    out
-}
-
-/// Rasterises `mesh` (world space) as `camera` sees it at `width`×`height`, `ss`×`ss`
-/// pixels to an output pixel (the key of each pixel's sequence, [`GBuffer::data`]).
-pub fn rasterise(
-    mesh: &Mesh,
-    camera: &Camera,
-    (width, height, ss): (u32, u32, u32),
-    albedo: Option<&Albedo>,
-) -> GBuffer {
-    let verts = project(mesh, camera, width as f32 / height as f32);
-    let hits = nearest_triangles(&verts, &mesh.indices, width, height);
-    let eye = DVec3::from(camera.eye.map(f64::from));
-    let covered: Vec<u32> = (0..hits.len() as u32)
-        .filter(|&i| hits[i as usize].is_some())
-        .collect();
-    let data: Vec<f32> = covered
-        .par_iter()
-        .flat_map_iter(|&i| {
-            let (k, bary) = hits[i as usize].unwrap_or_default();
-            let ids = &mesh.indices[3 * k as usize..3 * k as usize + 3];
-            let lerp = |f: &dyn Fn(&Projected) -> DVec3| {
-                ids.iter()
-                    .zip(bary)
-                    .fold(DVec3::ZERO, |a, (&v, w)| a + w * f(&verts[v as usize]))
-            };
-            let n = lerp(&|v| v.n).normalize_or(DVec3::Z);
-            let t0 = lerp(&|v| v.t);
-            let t = (t0 - n * n.dot(t0))
-                .try_normalize()
-                .unwrap_or_else(|| n.any_orthonormal_vector());
-            let b0 = lerp(&|v| v.b);
-            let b = if b0.dot(n.cross(t)) < 0.0 {
-                -n.cross(t)
-            } else {
-                n.cross(t)
-            };
-            let to_eye = (eye - lerp(&|v| v.p)).normalize_or(n);
-            let wr = [to_eye.dot(t), to_eye.dot(b), to_eye.dot(n)];
-            let uv = lerp(&|v| DVec3::new(v.uv[0], v.uv[1], 0.0));
-            let tex = albedo.map_or([0.0; 3], |a| a.at(uv.x, uv.y));
-            let f = |v: DVec3| v.to_array().map(|x| x as f32);
-            let (t, b, n) = (f(t), f(b), f(n));
-            let ss = ss.max(1);
-            let (x, y) = (i % width, i / width);
-            let out = (y / ss) * (width / ss) + x / ss;
-            let key = f32::from_bits((out << 4) | ((y % ss) * ss + x % ss));
-            #[rustfmt::skip]
-            let px = [
-                t[0], t[1], t[2], tex[0], b[0], b[1], b[2], tex[1], n[0], n[1], n[2], tex[2],
-                wr[0] as f32, wr[1] as f32, wr[2] as f32, key,
-            ];
-            px
-        })
-        .collect();
-    GBuffer {
-        width,
-        height,
-        covered,
-        data,
-    }
 }
 
 /// The lights of `scene` besides its environment: the sun over its disc (a point light per
@@ -603,7 +397,7 @@ pub fn render_env_scene(
             f64::from(spec.gain) * lighting.mirror_scale,
         )
     });
-    let g = rasterise(req.mesh, &scene.camera, (w, h, ss), albedo.as_ref());
+    let g = super::gbuffer::rasterise(dev, req.mesh, &scene.camera, (w, h, ss), albedo.as_ref())?;
     let raster_ms = start.elapsed().as_secs_f64() * 1e3;
     let black;
     let env = match req.env {

@@ -17,6 +17,7 @@ mod background;
 pub mod env;
 pub mod env_brdf;
 pub mod env_scene;
+pub mod gbuffer;
 mod offscreen;
 mod params;
 mod pass;

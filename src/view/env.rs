@@ -31,7 +31,7 @@ use crate::material::PreparedMaterial;
 use crate::mesh::Mesh;
 use crate::render::env::{map_lights, Dispatch, EnvKernel, EnvLighting, EnvTarget};
 use crate::render::env_brdf::EnvStage;
-use crate::render::env_scene::{rasterise, scene_lights, Albedo, NOISE_BATCH, SCENE_OUTPUTS};
+use crate::render::env_scene::{scene_lights, Albedo, NOISE_BATCH, SCENE_OUTPUTS};
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -482,7 +482,8 @@ impl EnvView {
         let mut camera_scene = view_scene.clone();
         camera_scene.output.width = w;
         camera_scene.output.height = h;
-        let g = rasterise(mesh, &view_scene.camera, (w, h, 1), albedo);
+        let g =
+            crate::render::gbuffer::rasterise(dev, mesh, &view_scene.camera, (w, h, 1), albedo)?;
         let bg = crate::render::env_scene::background(
             &camera_scene,
             env_on.then_some(env),

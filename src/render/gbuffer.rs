@@ -1,0 +1,232 @@
+//! The G-buffer of a scene's environment-lit pixels, drawn by the Vulkan raster pipeline
+//! (glsl/gbuffer.vert, glsl/gbuffer.frag): the mesh as the sun-lit pass draws it (the
+//! same vertex layout, transforms, depth test and no culling, so the same pixels are
+//! covered), per pixel the frame made orthonormal, `ωr` towards the eye in it and the
+//! texture's albedo. A colour target holds four floats, so the G-buffer's sixteen are
+//! drawn in four passes into one RGBA32F target and read back after each; the host then
+//! keeps the covered pixels ([`GBuffer`]) for the compute stages.
+
+use std::sync::Arc;
+
+use ash::vk;
+
+use super::env_scene::{Albedo, GBuffer};
+use super::record::{mesh_vertex_layout, record_pass, Geometry, Transforms};
+use crate::gpu::memory::{Buffer, Image, ImageDesc, Sampler};
+use crate::gpu::pipeline::{
+    Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
+};
+use crate::gpu::target::OffscreenTarget;
+use crate::gpu::{shaders, Device};
+use crate::mesh::Mesh;
+use crate::scene::Camera;
+use crate::{Error, Result};
+
+/// Mirror of `Quarter` in glsl/gbuffer.frag.
+#[repr(C)]
+#[derive(Clone, Copy)]
+struct QuarterUbo {
+    eye: [f32; 4],
+    component: [i32; 4],
+}
+
+// SAFETY: repr(C) of 4-byte scalars in 16-byte groups: no padding.
+unsafe impl crate::gpu::memory::Pod for QuarterUbo {}
+
+/// Rasterises `mesh` (world space) as `camera` sees it at `width`×`height` on `dev`,
+/// `ss`×`ss` pixels to an output pixel (the key of each pixel's sequence,
+/// [`GBuffer::data`]), with the texture's albedo from `albedo` (zero without one).
+pub fn rasterise(
+    dev: &Arc<Device>,
+    mesh: &Mesh,
+    camera: &Camera,
+    (width, height, ss): (u32, u32, u32),
+    albedo: Option<&Albedo>,
+) -> Result<GBuffer> {
+    if mesh.indices.is_empty() {
+        return Ok(GBuffer {
+            width,
+            height,
+            covered: Vec::new(),
+            data: Vec::new(),
+        });
+    }
+    let target = OffscreenTarget::new(dev, width, height)?;
+    let vertices = Buffer::with_data(
+        dev,
+        &format!("{} vertices (G-buffer)", mesh.name),
+        vk::BufferUsageFlags::VERTEX_BUFFER,
+        &mesh.vertices,
+    )?;
+    let indices = Buffer::with_data(
+        dev,
+        &format!("{} indices (G-buffer)", mesh.name),
+        vk::BufferUsageFlags::INDEX_BUFFER,
+        &mesh.indices,
+    )?;
+    let texture = albedo_image(dev, albedo)?;
+    let sampler = Sampler::new(
+        dev,
+        "G-buffer albedo (linear)",
+        vk::Filter::LINEAR,
+        vk::SamplerAddressMode::REPEAT,
+    )?;
+    let layout = PipelineLayout::new(
+        dev,
+        "G-buffer layout",
+        &[
+            Binding {
+                binding: 0,
+                kind: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                stages: vk::ShaderStageFlags::FRAGMENT,
+            },
+            Binding {
+                binding: 1,
+                kind: vk::DescriptorType::UNIFORM_BUFFER,
+                stages: vk::ShaderStageFlags::FRAGMENT,
+            },
+        ],
+        (
+            vk::ShaderStageFlags::VERTEX,
+            std::mem::size_of::<Transforms>() as u32,
+        ),
+    )?;
+    let vertex = ShaderModule::new(dev, "gbuffer.vert", shaders::GBUFFER_VERT)?;
+    let fragment = ShaderModule::new(dev, "gbuffer.frag", shaders::GBUFFER_FRAG)?;
+    let pipeline = Pipeline::new(
+        dev,
+        &PipelineDesc {
+            name: "G-buffer",
+            vertex: &vertex,
+            fragment: &fragment,
+            spec: &[],
+            vertex_layout: Some(&mesh_vertex_layout()),
+            layout: &layout,
+            render_pass: target.render_pass(),
+            depth_test: true,
+        },
+    )?;
+    let transforms = Transforms {
+        model: glam::Mat4::IDENTITY.to_cols_array(),
+        view_proj: camera
+            .view_proj(width as f32 / height as f32)
+            .to_cols_array(),
+    };
+    let eye = camera.eye;
+    let mut quarters: Vec<Vec<[f32; 4]>> = Vec::with_capacity(4);
+    for k in 0..4 {
+        let ubo = Buffer::with_data(
+            dev,
+            "G-buffer quarter",
+            vk::BufferUsageFlags::UNIFORM_BUFFER,
+            &[QuarterUbo {
+                eye: [eye[0], eye[1], eye[2], 1.0],
+                component: [k, 0, 0, 0],
+            }],
+        )?;
+        let set = DescriptorSet::new(
+            dev,
+            "G-buffer set",
+            &layout,
+            &[
+                (0, Resource::Sampled(&texture, &sampler)),
+                (1, Resource::Uniform(&ubo)),
+            ],
+        )?;
+        dev.submit_once("G-buffer", |cb| {
+            record_pass(
+                dev,
+                cb,
+                &target.target(),
+                &pipeline,
+                &layout,
+                &set,
+                &Geometry::Mesh {
+                    vertices: &vertices,
+                    indices: &indices,
+                    index_count: mesh.indices.len() as u32,
+                    transforms,
+                },
+                [0.0; 4],
+            );
+            target.record_readback(cb);
+            Ok(())
+        })?;
+        quarters.push(target.read_rgba()?);
+    }
+    Ok(assemble(width, height, ss, &quarters))
+}
+
+/// The covered pixels (the last quarter's `w` is 1 there, 0 where the clear stayed) and
+/// their sixteen floats, with each pixel's key.
+fn assemble(width: u32, height: u32, ss: u32, q: &[Vec<[f32; 4]>]) -> GBuffer {
+    let covered: Vec<u32> = (0..width * height)
+        .filter(|&i| q[3][i as usize][3] > 0.5)
+        .collect();
+    let ss = ss.max(1);
+    let mut data = Vec::with_capacity(covered.len() * 16);
+    for &i in &covered {
+        let p = i as usize;
+        let (x, y) = (i % width, i / width);
+        let out = (y / ss) * (width / ss) + x / ss;
+        let key = f32::from_bits((out << 4) | ((y % ss) * ss + x % ss));
+        let [a, b, c, d] = [q[0][p], q[1][p], q[2][p], q[3][p]];
+        data.extend_from_slice(&a);
+        data.extend_from_slice(&b);
+        data.extend_from_slice(&c);
+        data.extend_from_slice(&[d[0], d[1], d[2], key]);
+    }
+    GBuffer {
+        width,
+        height,
+        covered,
+        data,
+    }
+}
+
+/// The albedo as a linear float texture (float32 where the device filters it, else
+/// float16), or a 1×1 black one.
+fn albedo_image(dev: &Arc<Device>, albedo: Option<&Albedo>) -> Result<Image> {
+    let (w, h, rgb): (u32, u32, Vec<[f32; 3]>) = match albedo {
+        Some(a) => (a.width, a.height, a.rgb.clone()),
+        None => (1, 1, vec![[0.0; 3]]),
+    };
+    let max = dev.info.max_image_dimension_2d;
+    if w == 0 || h == 0 || w > max || h > max {
+        return Err(Error::invalid(
+            "texture size",
+            format!("{w}×{h}; each side must be 1..={max} on this device"),
+        ));
+    }
+    let linear = vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
+    let (format, bytes, texel) = if dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear) {
+        let b: Vec<u8> = rgb
+            .iter()
+            .flat_map(|p| [p[0], p[1], p[2], 1.0])
+            .flat_map(f32::to_le_bytes)
+            .collect();
+        (vk::Format::R32G32B32A32_SFLOAT, b, 16)
+    } else {
+        let b: Vec<u8> = rgb
+            .iter()
+            .flat_map(|p| [p[0], p[1], p[2], 1.0])
+            .flat_map(|x| crate::gpu::formats::f32_to_f16(x).to_le_bytes())
+            .collect();
+        (vk::Format::R16G16B16A16_SFLOAT, b, 8)
+    };
+    Image::sampled_with_data(
+        dev,
+        "G-buffer albedo",
+        ImageDesc {
+            format,
+            width: w,
+            height: h,
+            layers: 1,
+            usage: vk::ImageUsageFlags::SAMPLED,
+            aspect: vk::ImageAspectFlags::COLOR,
+            view_type: vk::ImageViewType::TYPE_2D,
+        },
+        texel,
+        &bytes,
+    )
+}
