@@ -87,6 +87,8 @@ fn bad_maps_and_flags_get_one_error_line() {
             "cannot be lit by an environment",
         ),
         (&["--env", "builtin:sky", "--per-vertex"], "--per-vertex"),
+        (&["--brdf-map", "--shading", "compute"], "--shading compute"),
+        (&["--shading", "compute", "--per-vertex"], "--per-vertex"),
         (&["--env", "builtin:sky", "--repeat", "2"], "--repeat"),
         (&["--env", "builtin:sky", "--size", "8"], "--size"),
         (
@@ -123,6 +125,51 @@ fn bad_maps_and_flags_get_one_error_line() {
         );
         assert!(lines[0].contains(want), "{args:?}: {err}");
     }
+}
+
+/// `--shading compute`: the sun-lit scene drawn by the G-buffer and the compute stages,
+/// the sun's directions as point lights, one sample a pixel (nothing to sample).
+#[test]
+fn the_sun_lit_scene_is_shaded_by_the_compute_stages_on_request() {
+    if gpu_util::device().is_none() {
+        return;
+    }
+    let d = dir("shading");
+    let out = d.join("compute.png");
+    let _ = std::fs::remove_file(&out);
+    let o = render(
+        &[
+            "--shading",
+            "compute",
+            "--width",
+            "32",
+            "--height",
+            "32",
+            "--table-texel",
+            "0.02",
+            "--table-w-nodes",
+            "4",
+            "--table-step-nm",
+            "20",
+            "--no-cache",
+            "-o",
+            out.to_str().unwrap(),
+        ],
+        &d,
+    );
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        o.status.success(),
+        "{}{}",
+        text,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    assert!(
+        text.contains("in radiance units") && text.contains("(1 everywhere)"),
+        "{text}"
+    );
+    let img = image::open(&out).unwrap().to_rgb8();
+    assert_eq!(img.dimensions(), (32, 32));
 }
 
 /// `--variant` under an environment: the map is drawn by that variant's shader and the

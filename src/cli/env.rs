@@ -288,15 +288,21 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
         args.cache,
     )?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);
-    let samples = args
-        .env
-        .env_samples
-        .unwrap_or(crate::render::env_scene::DEFAULT_SAMPLES);
-    let noise = args
-        .env
-        .env_noise
-        .unwrap_or(crate::render::env_scene::DEFAULT_NOISE)
-        .max(0.0);
+    // Without an environment or disc lights there is nothing to sample: the sun's
+    // directions are point lights, evaluated in full once a pixel (`--shading compute`).
+    let nothing_sampled = env.is_none() && lights.discs.is_empty();
+    let samples = match (nothing_sampled, args.env.env_samples) {
+        (true, None) => 1,
+        (_, n) => n.unwrap_or(crate::render::env_scene::DEFAULT_SAMPLES),
+    };
+    let noise = match nothing_sampled {
+        true => 0.0,
+        false => args
+            .env
+            .env_noise
+            .unwrap_or(crate::render::env_scene::DEFAULT_NOISE)
+            .max(0.0),
+    };
     let frame = crate::render::env_scene::render_env_scene(
         &dev,
         &lighting,

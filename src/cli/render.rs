@@ -61,6 +61,20 @@ pub struct RenderArgs {
     /// driver (on lavapipe, about twice the time of a later draw of a small map). 0: one draw.
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub repeat: u32,
+    /// How a scene's pixels are shaded: `fragment`, the thesis's raster pass (relative
+    /// reflectance, the sun over its disc, the ambient on the skin), or `compute`, the
+    /// G-buffer and the compute stages of environment light (radiance units, the sun's
+    /// directions as point lights, no ambient), to measure one against the other. A scene
+    /// lit by an environment or disc lights, or with `--no-sun`, is always `compute`.
+    #[arg(long, value_enum, default_value_t = Shading::Fragment)]
+    pub shading: Shading,
+}
+
+/// How `render` shades a scene's pixels (`--shading`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum Shading {
+    Fragment,
+    Compute,
 }
 
 /// Most draws `--repeat` asks for.
@@ -75,7 +89,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let env = args.env.load(args.brdf_map, &scene)?;
     match env {
         Some(env) if args.brdf_map => return run_env_map(args, &scene, &env),
-        env if !args.brdf_map && args.env.lights_scene(env.as_ref(), &scene) => {
+        env if !args.brdf_map
+            && (args.env.lights_scene(env.as_ref(), &scene)
+                || args.shading == Shading::Compute) =>
+        {
             crate::guard::refuse_flags(
                 &[
                     ("--per-vertex", args.gpu.per_vertex),
@@ -525,6 +542,7 @@ pub fn render_args(args: &RenderArgs, scene: &crate::scene::Scene) -> Result<()>
             &[
                 ("--width", args.scene.width.is_some()),
                 ("--height", args.scene.height.is_some()),
+                ("--shading compute", args.shading == Shading::Compute),
             ],
             "a scene render (without --brdf-map)",
         )?;
