@@ -32,6 +32,47 @@ fn render(args: &[&str], cwd: &Path) -> std::process::Output {
         .unwrap()
 }
 
+/// A small table for quick draws: coarse, few `w` nodes, a 20 nm step, no cache.
+const TINY_TABLE: [&str; 7] = [
+    "--table-texel",
+    "0.02",
+    "--table-w-nodes",
+    "4",
+    "--table-step-nm",
+    "20",
+    "--no-cache",
+];
+
+/// A small environment-lit BRDF map: 8², four samples, a blazed grating under the studio.
+const SMALL_MAP: [&str; 9] = [
+    "--brdf-map",
+    "--env",
+    "builtin:studio",
+    "--heightfield",
+    "builtin:blazed",
+    "--size",
+    "8",
+    "--env-samples",
+    "4",
+];
+
+/// `render ARGS` with [`TINY_TABLE`] writing `out`, which must succeed: its stdout.
+fn render_tiny(args: &[&str], out: &Path, cwd: &Path) -> String {
+    let _ = std::fs::remove_file(out);
+    let mut all: Vec<&str> = args.to_vec();
+    all.extend(TINY_TABLE);
+    all.extend(["-o", out.to_str().unwrap()]);
+    let o = render(&all, cwd);
+    let text = String::from_utf8_lossy(&o.stdout).into_owned();
+    assert!(
+        o.status.success(),
+        "{args:?}: {}{}",
+        text,
+        String::from_utf8_lossy(&o.stderr)
+    );
+    text
+}
+
 #[test]
 fn bad_maps_and_flags_get_one_error_line() {
     let d = dir("bad");
@@ -136,33 +177,10 @@ fn the_sun_lit_scene_is_shaded_by_the_compute_stages_on_request() {
     }
     let d = dir("shading");
     let out = d.join("compute.png");
-    let _ = std::fs::remove_file(&out);
-    let o = render(
-        &[
-            "--shading",
-            "compute",
-            "--width",
-            "32",
-            "--height",
-            "32",
-            "--table-texel",
-            "0.02",
-            "--table-w-nodes",
-            "4",
-            "--table-step-nm",
-            "20",
-            "--no-cache",
-            "-o",
-            out.to_str().unwrap(),
-        ],
+    let text = render_tiny(
+        &["--shading", "compute", "--width", "32", "--height", "32"],
+        &out,
         &d,
-    );
-    let text = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{}{}",
-        text,
-        String::from_utf8_lossy(&o.stderr)
     );
     assert!(
         text.contains("in radiance units") && text.contains("(1 everywhere)"),
@@ -182,38 +200,10 @@ fn a_variant_draws_the_environment_lit_map() {
     let d = dir("variant");
     for variant in ["flss", "volume"] {
         let out = d.join(format!("{variant}.exr"));
-        let _ = std::fs::remove_file(&out);
-        let o = render(
-            &[
-                "--brdf-map",
-                "--env",
-                "builtin:studio",
-                "--heightfield",
-                "builtin:blazed",
-                "--variant",
-                variant,
-                "--size",
-                "8",
-                "--env-samples",
-                "4",
-                "--table-texel",
-                "0.02",
-                "--table-w-nodes",
-                "4",
-                "--table-step-nm",
-                "20",
-                "--no-cache",
-                "-o",
-                out.to_str().unwrap(),
-            ],
+        let text = render_tiny(
+            &[SMALL_MAP.as_slice(), &["--variant", variant]].concat(),
+            &out,
             &d,
-        );
-        let text = String::from_utf8_lossy(&o.stdout);
-        assert!(
-            o.status.success(),
-            "{}{}",
-            text,
-            String::from_utf8_lossy(&o.stderr)
         );
         assert!(text.contains(&format!("variant {variant} ")), "{text}");
         let (_, _, px) = diffract::image_io::read_exr(&out).unwrap();
@@ -229,37 +219,7 @@ fn a_small_environment_lit_map_is_drawn() {
     }
     let d = dir("ok");
     let out = d.join("studio.exr");
-    let _ = std::fs::remove_file(&out);
-    let o = render(
-        &[
-            "--brdf-map",
-            "--env",
-            "builtin:studio",
-            "--heightfield",
-            "builtin:blazed",
-            "--size",
-            "8",
-            "--env-samples",
-            "4",
-            "--table-texel",
-            "0.02",
-            "--table-w-nodes",
-            "4",
-            "--table-step-nm",
-            "20",
-            "--no-cache",
-            "-o",
-            out.to_str().unwrap(),
-        ],
-        &d,
-    );
-    let text = String::from_utf8_lossy(&o.stdout);
-    assert!(
-        o.status.success(),
-        "{}{}",
-        text,
-        String::from_utf8_lossy(&o.stderr)
-    );
+    let text = render_tiny(&SMALL_MAP, &out, &d);
     assert!(
         text.contains("environment table:") && text.contains("4 samples per pixel"),
         "{text}"
