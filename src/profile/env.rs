@@ -80,7 +80,9 @@ pub(super) fn env_rows(
         let t = Instant::now();
         render_env_brdf_map(&dev, &lighting, &req).map(|p| (p, t.elapsed().as_secs_f64() * 1e3))
     };
-    let (first, first_wall_ms) = draw(None, 1)?;
+    // chebyshev-w draws from the environment table itself: uploaded once for every row.
+    let own = Arc::new(lighting.brdf(&dev, &shading)?);
+    let (first, first_wall_ms) = draw(Some(&own), 1)?;
     let pixels = pick_pixels(&first.xyz, size, 0, env.pixels);
     let ref_end = end.map(|e| {
         let left = e.saturating_duration_since(Instant::now());
@@ -123,7 +125,7 @@ pub(super) fn env_rows(
                     .map_err(|e| e.to_string())
             }
             Err(e) if kind != VariantKind::ChebyshevW => Err(e.clone()),
-            _ => Ok(None),
+            _ => Ok(Some(Arc::clone(&own))),
         };
         let brdf = match built {
             Ok(b) => b,

@@ -256,6 +256,9 @@ impl super::Renderer {
         let table = self.table;
         let leave_out = self.leave_out;
         let region = self.table_region;
+        let keep = self.keep_models;
+        // The stages need no f64 model (it would hold the whole region in f64).
+        self.keep_models = false;
         self.table = super::variant::TableOptions {
             texel_uv: table.texel_uv.or(Some(lighting.spec.texel_uv)),
             step_nm: table.step_nm.or(Some(lighting.spec.step_nm)),
@@ -273,6 +276,7 @@ impl super::Renderer {
         self.table = table;
         self.leave_out = leave_out;
         self.table_region = region;
+        self.keep_models = keep;
         built?;
         let variant = self
             .prepared
