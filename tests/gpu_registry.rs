@@ -261,3 +261,46 @@ fn listed_fetches_and_memory_are_what_render_draws() {
     assert_no_validation(&r);
     let _ = std::fs::remove_dir_all(dir);
 }
+
+/// The hand-written lists of variants stay the registry's: a variant added by its file, its
+/// GLSL and its registry line, and missed in one of them, fails here. The viewer's `V` key
+/// (docs/viewer.md), the table variants in docs/tables.md, and each table variant's
+/// default `w` nodes where `--table-w-nodes` states them (its help and `TableOptions`).
+#[test]
+fn the_hand_written_lists_name_every_registered_variant() {
+    let read = |f: &str| {
+        std::fs::read_to_string(format!("{}/{f}", env!("CARGO_MANIFEST_DIR")))
+            .unwrap_or_else(|e| panic!("{f}: {e}"))
+    };
+    let viewer = read("docs/viewer.md");
+    let v_row = viewer
+        .lines()
+        .find(|l| l.starts_with("| `V` |"))
+        .expect("docs/viewer.md has the V key's row");
+    let tables = read("docs/tables.md");
+    let help = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
+        .args(["render", "--help"])
+        .output()
+        .expect("render --help");
+    let help = String::from_utf8_lossy(&help.stdout).replace('\n', " ");
+    let help = help.split_whitespace().collect::<Vec<_>>().join(" ");
+    for kind in VariantKind::ALL {
+        let name = kind.name();
+        assert!(
+            v_row.contains(&format!("`{name}`")),
+            "docs/viewer.md's V row misses {name}: {v_row}"
+        );
+        if kind.family() == Family::Table {
+            assert!(
+                tables.contains(&format!("`{name}`")),
+                "docs/tables.md misses {name}"
+            );
+            let nodes = TableOptions::default().w_nodes_for(kind);
+            let stated = format!("{name} {nodes}");
+            assert!(
+                help.contains(&stated),
+                "render --help's --table-w-nodes does not state '{stated}': {help}"
+            );
+        }
+    }
+}
