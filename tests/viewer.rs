@@ -1184,6 +1184,42 @@ fn environment_lit_view_matches_render() {
     let _ = std::fs::remove_dir_all(&dir);
 }
 
+/// `view --variant volume --env builtin:sky`: the environment-lit picture is drawn by the
+/// variant the view shows, as `render --env --variant volume` draws it.
+#[test]
+fn the_environment_lit_view_draws_the_variant_shown() {
+    let Some(x) = Xvfb::start() else { return };
+    let dir = temp_dir("env-variant");
+    let scene = small_default_scene(&dir, "");
+    let scene_arg = scene.to_str().unwrap();
+    let env = [
+        "--env",
+        "builtin:sky",
+        "--env-samples",
+        "8",
+        "--variant",
+        "volume",
+    ];
+    let mut args = vec!["--scene", scene_arg, "--vsync", "off", "--frames", "2"];
+    args.extend(env);
+    args.extend(SMALL_TABLE);
+    args.extend(["--screenshot", "view.png"]);
+    let stdout = run_view_in(&x, &dir, &args);
+    assert!(stdout.contains("environment: building volume"), "{stdout}");
+    assert!(stdout.contains("sky: 8/8 spp in "), "{stdout}");
+    let view = read_linear(&dir.join("view.png"));
+    let mut render_args = env.to_vec();
+    render_args.extend(SMALL_TABLE);
+    let render = render_env_png(&dir, &scene, &render_args, "render.png");
+    let diff = image_io::compare_images(&view, &render);
+    eprintln!("view vs render, volume under builtin:sky, 8 spp: {diff}");
+    assert!(
+        diff.mean_delta_e <= MAX_ENV_MEAN_DELTA_E,
+        "{diff} (limit mean ΔE {MAX_ENV_MEAN_DELTA_E})"
+    );
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
 /// `E` after a sun-lit frame switches to builtin:sky: the picture accumulates to the cap
 /// (the log counts the samples), `.` turns the map by 5° and the accumulation starts again;
 /// the last frame is `render --env builtin:sky --env-rotate-deg 5` and differs from the

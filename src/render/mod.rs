@@ -398,6 +398,11 @@ impl Renderer {
         self.prepared.as_ref().and_then(|(_, v)| v.model())
     }
 
+    /// The table options the next builds use.
+    pub fn table_options(&self) -> TableOptions {
+        self.table
+    }
+
     /// What the prepared variant reports about itself (`None` before a draw).
     pub fn prepared_stats(&self) -> Option<variant::VariantStats> {
         self.prepared.as_ref().map(|(_, v)| v.stats())

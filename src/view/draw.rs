@@ -280,6 +280,7 @@ impl Draw {
             &self.mesh,
             extent,
             (mesh_rect, map),
+            (self.renderer.variant(), self.renderer.table_options()),
         );
         if let Err(e) = result {
             eprintln!("error: {e} (environment off)");

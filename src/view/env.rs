@@ -30,8 +30,9 @@ use crate::light::env::{EnvMap, EnvSource};
 use crate::material::PreparedMaterial;
 use crate::mesh::Mesh;
 use crate::render::env::{map_lights, Dispatch, EnvKernel, EnvLighting, EnvTarget};
-use crate::render::env_brdf::EnvStage;
+use crate::render::env_brdf::{EnvBrdf, EnvStage};
 use crate::render::env_scene::{scene_lights, Albedo, NOISE_BATCH, SCENE_OUTPUTS};
+use crate::render::variant::VariantKind;
 use crate::scene::Scene;
 use crate::{Error, Result};
 
@@ -85,8 +86,9 @@ type LightingKey = (usize, bool);
 
 /// The objects of one environment, material and set of switches.
 struct Kernels {
-    /// The lighting, the map, and shadowing (a specialisation constant of the stages).
-    key: (LightingKey, usize, bool),
+    /// The lighting, the map, shadowing (a specialisation constant of the stages) and the
+    /// variant drawn.
+    key: (LightingKey, usize, bool, VariantKind),
     scene: EnvKernel,
     map: EnvKernel,
     albedo: Option<Albedo>,
@@ -140,6 +142,10 @@ pub(super) struct EnvView {
     bgra: bool,
     /// The map's turn about +Y shown (degrees).
     turned_deg: f64,
+    /// Builds the variants other than `chebyshev-w` for the stages (made on first use;
+    /// `chebyshev-w` draws from the environment table itself). Last: what it built is held
+    /// by the kernels above.
+    variants: Option<crate::render::Renderer>,
 }
 
 impl EnvView {
@@ -159,6 +165,7 @@ impl EnvView {
             batch: 1,
             bgra: true,
             turned_deg,
+            variants: None,
         }
     }
 
@@ -271,6 +278,7 @@ impl EnvView {
         mesh: &Mesh,
         extent: vk::Extent2D,
         rects: (vk::Rect2D, Option<(vk::Rect2D, [f64; 3])>),
+        (variant, table): (VariantKind, crate::render::TableOptions),
     ) -> Result<()> {
         if !self.on() {
             return Ok(());
@@ -280,13 +288,22 @@ impl EnvView {
             return Ok(());
         };
         self.load_map(state)?;
-        let kernel_key = (key, self.current, state.shadowing);
+        // A debug view draws no BRDF: the environment shows the default variant's.
+        let variant = match crate::render::env_brdf::env_spirv(
+            variant.resolve(),
+            crate::render::env_brdf::EnvStage::Map,
+        ) {
+            Ok(_) => variant.resolve(),
+            Err(_) => VariantKind::DEFAULT,
+        };
+        let kernel_key = (key, self.current, state.shadowing, variant);
         if self.kernels.as_ref().is_none_or(|k| k.key != kernel_key) {
             self.reset_kernels(frames);
             let mut shading = material.material.shading();
             shading.fresnel = state.fresnel;
             shading.shadowing = state.shadowing;
-            self.kernels = Some(self.make_kernels(dev, &lighting, kernel_key, &shading)?);
+            let brdf = self.brdf_for(dev, (variant, table), material, &lighting, &shading)?;
+            self.kernels = Some(self.make_kernels(dev, &lighting, kernel_key, &brdf)?);
         }
         self.make_resolve(dev)?;
         if self.view.is_none() {
@@ -393,19 +410,48 @@ impl EnvView {
         Ok(())
     }
 
+    /// `variant` bound for the stages with `shading` (the lighting's Fresnel, the view's
+    /// shadowing): `chebyshev-w` from the environment table itself, any other built now by
+    /// the view's own renderer with the view's table options (a table variant's build takes
+    /// seconds; it is said).
+    fn brdf_for(
+        &mut self,
+        dev: &Arc<Device>,
+        (variant, table): (VariantKind, crate::render::TableOptions),
+        material: &PreparedMaterial,
+        lighting: &EnvLighting,
+        shading: &crate::brdf::Shading,
+    ) -> Result<Arc<EnvBrdf>> {
+        if variant == VariantKind::ChebyshevW {
+            return Ok(Arc::new(lighting.brdf(dev, shading)?));
+        }
+        println!("environment: building {variant} for the environment's stages");
+        let renderer = match &mut self.variants {
+            Some(r) => r,
+            None => {
+                let mut r = crate::render::Renderer::on(Arc::clone(dev))?;
+                r.set_cache_dir(self.settings.cache_dir.clone());
+                self.variants.insert(r)
+            }
+        };
+        renderer.set_variant(variant);
+        renderer.set_table_options(table);
+        renderer.env_brdf(material, lighting, shading)
+    }
+
     /// The stages of the scene and the map for the lighting and map of `key`, evaluating
-    /// the BRDF with `shading` (the lighting's Fresnel, the key's shadowing).
+    /// `brdf`.
     fn make_kernels(
         &self,
         dev: &Arc<Device>,
         lighting: &EnvLighting,
-        key: (LightingKey, usize, bool),
-        shading: &crate::brdf::Shading,
+        key: (LightingKey, usize, bool, VariantKind),
+        brdf: &Arc<EnvBrdf>,
     ) -> Result<Kernels> {
         let env = self.maps[self.current]
             .as_ref()
             .ok_or_else(|| Error::invalid("environment", "not loaded"))?;
-        let brdf = Arc::new(lighting.brdf(dev, shading)?);
+        let brdf = Arc::clone(brdf);
         let scene = EnvKernel::new(
             dev,
             lighting,
@@ -786,12 +832,13 @@ mod tests {
         let state = ViewState::from_scene(scene);
         let mesh = scene.mesh.load().unwrap();
         view.load_map(&state).unwrap();
+        let brdf = Arc::new(lighting.brdf(dev, &scene.material.shading()).unwrap());
         view.kernels = Some(
             view.make_kernels(
                 dev,
                 lighting,
-                ((0, true), 0, true),
-                &scene.material.shading(),
+                ((0, true), 0, true, VariantKind::ChebyshevW),
+                &brdf,
             )
             .unwrap(),
         );
