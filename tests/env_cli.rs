@@ -190,6 +190,37 @@ fn the_sun_lit_scene_is_shaded_by_the_compute_stages_on_request() {
     assert_eq!(img.dimensions(), (32, 32));
 }
 
+/// `--table-budget-mb` holds the environment table as it holds every table: the spacing
+/// is coarsened to fit, and a line says so and what it costs.
+#[test]
+fn the_environment_table_fits_the_table_budget() {
+    if gpu_util::device().is_none() {
+        return;
+    }
+    let d = dir("budget");
+    let out = d.join("budget.exr");
+    let _ = std::fs::remove_file(&out);
+    let mut args: Vec<&str> = SMALL_MAP.to_vec();
+    args.extend([
+        "--table-budget-mb",
+        "1",
+        "--table-w-nodes",
+        "4",
+        "--table-step-nm",
+        "20",
+        "--no-cache",
+        "-o",
+        out.to_str().unwrap(),
+    ]);
+    let o = render(&args, &d);
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(o.status.success(), "{err}");
+    assert!(
+        err.contains("environment table coarsened from texel 0.0037") && err.contains("1 MB"),
+        "{err}"
+    );
+}
+
 /// `--variant` under an environment: the map is drawn by that variant's shader and the
 /// report names it.
 #[test]

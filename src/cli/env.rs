@@ -147,14 +147,51 @@ pub fn map_table_spec(
 }
 
 impl crate::cli::gpu::TableArgs {
-    /// The environment table these flags ask for ([`map_table_spec`]).
+    /// The environment table these flags ask for ([`map_table_spec`]), its `(u, v)`
+    /// spacing coarsened, as every table's is, until its texels fit `--table-budget-mb`
+    /// in `--table-format` (said in one line: a spacing wider than the narrowest lobe lets
+    /// the spline ring below zero beside the blue lobes).
     pub fn env_spec(&self, coherence_um: f64) -> Result<TableSpec> {
-        map_table_spec(
+        let mut spec = map_table_spec(
             self.table_texel,
             self.table_w_nodes,
             self.table_step_nm,
             coherence_um,
-        )
+        )?;
+        let budget = self.table_budget_mb.saturating_mul(1 << 20) as f64;
+        let bytes = |t: f64| {
+            let side = (4.0 / t).ceil() + 3.0; // nodes plus the splines' two ghosts
+            side * side
+                * crate::render::variant::table::packed_layers(spec.w_nodes) as f64
+                * self.table_format.texel_bytes() as f64
+        };
+        let asked = spec.texel_uv;
+        let smallest = bytes(4.0);
+        if smallest > budget {
+            return Err(Error::invalid(
+                "table budget",
+                format!(
+                    "{} MB cannot hold the environment table even at 2×2 nodes ({:.1} MB)",
+                    self.table_budget_mb,
+                    smallest / 1e6
+                ),
+            ));
+        }
+        while bytes(spec.texel_uv) > budget {
+            spec.texel_uv *= 1.1;
+        }
+        if spec.texel_uv > asked {
+            crate::report::Report::warn(
+                &crate::report::Stderr,
+                &format!(
+                    "environment table coarsened from texel {asked:.4} to {:.4} to fit {} MB in {}: wider than the narrowest lobe, its spline may ring below zero beside the blue lobes (the white furnace's Z rises)",
+                    spec.texel_uv,
+                    self.table_budget_mb,
+                    self.table_format.name()
+                ),
+            );
+        }
+        Ok(spec)
     }
 }
 
