@@ -254,7 +254,7 @@ pub fn draw_map(
             ),
         );
     }
-    let table_line = table_line(&lighting, spec, built);
+    let table_line = lighting.report_line(!built);
     let rgb = pic
         .xyz
         .iter()
@@ -382,7 +382,7 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
         ));
     }
     crate::image_io::write_image(args.out, out.width, out.height, &rgb, 1.0)?;
-    println!("{}", table_line(&lighting, &spec, built));
+    println!("{}", lighting.report_line(!built));
     println!(
         "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: variant {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (raster pipeline and readback), GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",
         dev.info.name,
@@ -497,42 +497,4 @@ fn lighting_for(
         &crate::report::Stderr,
     )?;
     Ok((l, !cached))
-}
-
-/// The one line that says what the environment table holds and where it came from.
-fn table_line(lighting: &EnvLighting, spec: &TableSpec, built: bool) -> String {
-    let t = &lighting.table;
-    let mb = (t.nu + 2) * (t.nv + 2) * t.coeffs.len() * 12;
-    let origin = if built {
-        let sums = match lighting.probe {
-            Some(e) => format!(" (f32 sums, within {e:.1e} of f64 at its peak)"),
-            None => String::new(),
-        };
-        format!("built on the CPU{sums} in {:.1} s", lighting.build_ms / 1e3)
-    } else {
-        format!(
-            "samples read from the cache, prepared in {:.1} s",
-            lighting.build_ms / 1e3
-        )
-    };
-    format!(
-        "environment table: u, v ∈ [−2, 2], w ∈ [−2, 0], texel {:.4}, K = {}{}, {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",
-        spec.texel_uv,
-        t.coeffs.len(),
-        if lighting.dropped > 0 {
-            format!(
-                " of {} (the rest below {:.0e} of the peak)",
-                t.coeffs.len() + lighting.dropped,
-                crate::render::env::TERM_TOLERANCE
-            )
-        } else {
-            String::new()
-        },
-        t.nu,
-        t.nv,
-        mb as f64 / 1e6,
-        spec.step_nm,
-        lighting.density.bins[0],
-        lighting.density.bins[1]
-    )
 }

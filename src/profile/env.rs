@@ -14,7 +14,7 @@ use super::plan::EnvProfile;
 use super::score::pick_pixels;
 use super::stats::{bootstrap, error_stats};
 use crate::brdf::env_reference::{env_radiance, Frame, Quadrature};
-use crate::brdf::table::{GTable, TableSpec};
+use crate::brdf::table::GTable;
 use crate::heightfield::HeightField;
 use crate::material::Material;
 use crate::render::env::{render_env_brdf_map, EnvLighting, EnvMapRequest, EnvPicture};
@@ -64,7 +64,7 @@ pub(super) fn env_rows(
     let dev = Arc::clone(renderer.device());
     let shading = base.shading();
     let lighting = EnvLighting::build(hf, base.coherence_um, &shading, &env.spec)?;
-    let table = table_line(&lighting, &env.spec);
+    let table = lighting.report_line(false);
     eprintln!("profile: {table}");
     let draw = |brdf: Option<&Arc<EnvBrdf>>, samples: u32| {
         let req = EnvMapRequest {
@@ -337,27 +337,4 @@ fn reference(
         h: finest,
         error,
     }
-}
-
-/// The table and its density on one line.
-fn table_line(lighting: &EnvLighting, spec: &TableSpec) -> String {
-    let t = &lighting.table;
-    let r = t.region;
-    format!(
-        "environment table: u ∈ [{}, {}], v ∈ [{}, {}], w ∈ [{}, {}], texel {:.4}, K = {}, {}×{} nodes, {} nm, built on the CPU in {:.1} s; BRDF density {}×{} cells",
-        r.lo[0],
-        r.hi[0],
-        r.lo[1],
-        r.hi[1],
-        r.lo[2],
-        r.hi[2],
-        spec.texel_uv,
-        t.coeffs.len(),
-        t.nu,
-        t.nv,
-        spec.step_nm,
-        lighting.build_ms / 1e3,
-        lighting.density.bins[0],
-        lighting.density.bins[1]
-    )
 }

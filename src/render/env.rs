@@ -358,6 +358,57 @@ impl EnvLighting {
     }
 }
 
+impl EnvLighting {
+    /// The one line that says what the table holds and how it was obtained, in the words
+    /// every table's report uses ([`crate::render::table_build::Built`]); `cached`: its
+    /// samples were read from the table cache (then the fit and the density are what
+    /// `build_ms` took).
+    pub fn report_line(&self, cached: bool) -> String {
+        let t = &self.table;
+        let r = t.region;
+        let mb = (t.nu + 2) * (t.nv + 2) * t.coeffs.len() * 12;
+        let seconds = self.build_ms / 1e3;
+        let origin = if cached {
+            format!(
+                "{}, prepared in {seconds:.1} s",
+                crate::render::table_build::Built::Cached
+            )
+        } else {
+            crate::render::table_build::Built::Cpu {
+                seconds,
+                probe: self.probe,
+            }
+            .to_string()
+        };
+        format!(
+            "environment table: u ∈ [{}, {}], v ∈ [{}, {}], w ∈ [{}, {}], texel {:.4}, K = {}{}, {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",
+            r.lo[0],
+            r.hi[0],
+            r.lo[1],
+            r.hi[1],
+            r.lo[2],
+            r.hi[2],
+            self.spec.texel_uv,
+            t.coeffs.len(),
+            if self.dropped > 0 {
+                format!(
+                    " of {} (the rest below {:.0e} of the peak)",
+                    t.coeffs.len() + self.dropped,
+                    TERM_TOLERANCE
+                )
+            } else {
+                String::new()
+            },
+            t.nu,
+            t.nv,
+            mb as f64 / 1e6,
+            self.spec.step_nm,
+            self.density.bins[0],
+            self.density.bins[1]
+        )
+    }
+}
+
 /// One environment-lit BRDF map.
 pub struct EnvMapRequest<'a> {
     pub env: &'a EnvMap,
