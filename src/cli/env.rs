@@ -224,7 +224,14 @@ pub fn draw_map(
     let shading = material.shading();
     refuse_variant(gpu.variant)?;
     let (lighting, built) = lighting_for(hf, material, spec, cache)?;
-    let variant = env_variant(dev, gpu.variant, material, &lighting, &gpu.table, cache)?;
+    let variant = env_variant(
+        dev,
+        gpu.variant,
+        (material, hf),
+        &lighting,
+        &gpu.table,
+        cache,
+    )?;
     let samples = args.env_samples.unwrap_or(DEFAULT_SAMPLES);
     let sun = (!args.no_sun).then(|| (crate::brdf::direction(sun_deg.0, sun_deg.1), 1.0));
     let req = EnvMapRequest {
@@ -319,7 +326,7 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     let variant = env_variant(
         &dev,
         args.gpu.variant,
-        &material,
+        (&material, &hf),
         &lighting,
         &args.gpu.table,
         args.cache,
@@ -417,14 +424,15 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
 
 /// The variant the environment-lit stages evaluate for `--variant`: for the default,
 /// `chebyshev-w` drawn from the environment table itself in `--table-format`; else
-/// `variant` built on `dev` in radiance units with the table options of `table`
+/// `variant` built on `dev` from `material` and its height field `hf` (already loaded)
+/// in radiance units with the table options of `table`
 /// ([`crate::render::Renderer::env_brdf`]; a variant that cannot be lit by an environment
 /// is refused there, before any build). The renderer comes back too: it owns what the
 /// variant's set points at.
 pub fn env_variant(
     dev: &std::sync::Arc<crate::gpu::Device>,
     variant: crate::render::variant::VariantKind,
-    material: &crate::material::Material,
+    (material, hf): (&crate::material::Material, &crate::heightfield::HeightField),
     lighting: &EnvLighting,
     table: &crate::cli::gpu::TableArgs,
     cache: &crate::cli::cache::CacheArgs,
@@ -447,12 +455,13 @@ pub fn env_variant(
     renderer.set_table_options(table.options());
     let dir = cache.dir();
     renderer.set_cache_dir(dir.clone());
-    let (hf, plan) = material.load_planned(
+    let plan = material.plan_loaded(
+        hf,
         &crate::brdf::truncation::Reach::ALL,
         crate::brdf::truncation::Precision::F32,
         &crate::report::Stderr,
     )?;
-    let prepared = material.prepare_planned_deferred(hf, plan, dir.as_deref())?;
+    let prepared = material.prepare_planned_deferred(hf.clone(), plan, dir.as_deref())?;
     let brdf = renderer.env_brdf(&prepared, lighting, &material.shading())?;
     let name = renderer
         .prepared_stats()
