@@ -228,23 +228,15 @@ fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>
 /// without `--only`; with it, those it names that can (the default variant alone when it
 /// names only `env`); the default variant first.
 fn env_variants(args: &ProfileArgs) -> Result<Vec<VariantKind>> {
-    use crate::render::env_brdf::{env_spirv, EnvStage};
-    let named = !args.only.is_empty();
-    let candidates: Vec<VariantKind> = if named {
+    let candidates: Vec<VariantKind> = if args.only.is_empty() {
+        VariantKind::ALL.to_vec()
+    } else {
         selected_rows(args)?
             .iter()
             .map(|v| v.kind.resolve())
             .collect()
-    } else {
-        VariantKind::ALL.to_vec()
     };
-    let mut kinds: Vec<VariantKind> = Vec::new();
-    let first = std::iter::once(VariantKind::DEFAULT).filter(|k| !named || candidates.contains(k));
-    for k in first.chain(candidates.iter().copied()) {
-        if env_spirv(k, EnvStage::Map).is_ok() && !kinds.contains(&k) {
-            kinds.push(k);
-        }
-    }
+    let mut kinds = crate::render::env_brdf::lightable(&candidates);
     if kinds.is_empty() {
         kinds.push(VariantKind::DEFAULT);
     }

@@ -188,6 +188,19 @@ impl EnvBrdf {
     }
 }
 
+/// The variants of `candidates` that can be lit by an environment, each once, the default
+/// first when it is among them.
+pub fn lightable(candidates: &[VariantKind]) -> Vec<VariantKind> {
+    let default = std::iter::once(VariantKind::DEFAULT).filter(|k| candidates.contains(k));
+    let mut kinds: Vec<VariantKind> = Vec::new();
+    for k in default.chain(candidates.iter().copied()) {
+        if env_spirv(k, EnvStage::Map).is_ok() && !kinds.contains(&k) {
+            kinds.push(k);
+        }
+    }
+    kinds
+}
+
 /// The SPIR-V of `stage` that build.rs made of `kind`'s fragment file, or why there is
 /// none (a debug view draws no BRDF).
 pub fn env_spirv(kind: VariantKind, stage: EnvStage) -> Result<&'static [u8]> {

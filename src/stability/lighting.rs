@@ -218,17 +218,7 @@ pub fn run(r: &mut Renderer) -> Result<Vec<LightingCell>> {
 
 /// Every variant that can be lit by an environment, the default first.
 pub fn lit_variants() -> Vec<VariantKind> {
-    let lit = |k: &VariantKind| {
-        crate::render::env_brdf::env_spirv(*k, crate::render::env_brdf::EnvStage::Map).is_ok()
-    };
-    std::iter::once(VariantKind::DEFAULT)
-        .chain(
-            VariantKind::ALL
-                .into_iter()
-                .filter(|k| *k != VariantKind::DEFAULT),
-        )
-        .filter(lit)
-        .collect()
+    crate::render::env_brdf::lightable(&VariantKind::ALL)
 }
 
 /// The verdict of a case from `(device, reference, quadrature error)` per pixel.
