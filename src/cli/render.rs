@@ -77,6 +77,31 @@ pub enum Shading {
     Compute,
 }
 
+/// A scene shaded by the compute stages (lit by an environment, disc lights or `--no-sun`,
+/// or `--shading compute`): `render`'s flags that apply handed to
+/// [`crate::cli::env::run_env_scene`], those that do not refused.
+fn run_compute_scene(
+    args: &RenderArgs,
+    scene: &Scene,
+    env: Option<&crate::light::env::EnvMap>,
+) -> Result<()> {
+    crate::guard::refuse_flags(
+        &[
+            ("--per-vertex", args.gpu.per_vertex),
+            ("--repeat", args.repeat > 0),
+        ],
+        "a scene lit by an environment, disc lights or --no-sun (its pixels are integrated by compute stages, once)",
+    )?;
+    let run = crate::cli::env::EnvSceneArgs {
+        material: args.material.apply(scene.material.clone()),
+        gpu: &args.gpu,
+        env: &args.env,
+        cache: &args.cache,
+        out: &args.out,
+    };
+    crate::cli::env::run_env_scene(&run, scene, env)
+}
+
 /// Most draws `--repeat` asks for.
 pub const MAX_REPEAT: u32 = 1000;
 
@@ -93,21 +118,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             && (args.env.lights_scene(env.as_ref(), &scene)
                 || args.shading == Shading::Compute) =>
         {
-            crate::guard::refuse_flags(
-                &[
-                    ("--per-vertex", args.gpu.per_vertex),
-                    ("--repeat", args.repeat > 0),
-                ],
-                "a scene lit by an environment, disc lights or --no-sun (its pixels are integrated by compute stages, once)",
-            )?;
-            let run = crate::cli::env::EnvSceneArgs {
-                material: args.material.apply(scene.material.clone()),
-                gpu: &args.gpu,
-                env: &args.env,
-                cache: &args.cache,
-                out: &args.out,
-            };
-            return crate::cli::env::run_env_scene(&run, &scene, env.as_ref());
+            return run_compute_scene(args, &scene, env.as_ref());
         }
         _ => {}
     }

@@ -148,6 +148,20 @@ pub(super) struct EnvView {
     variants: Option<crate::render::Renderer>,
 }
 
+/// What the resolve reads per pixel of a rectangle (glsl/env_resolve.comp): the
+/// background `bg` and, as the bits of `w`, the index of the picture's pixel among the
+/// `covered` ones (`0xffffffff`: background).
+fn resolve_pixels(bg: &[[f32; 3]], covered: &[u32]) -> Vec<[f32; 4]> {
+    let mut pixels: Vec<[f32; 4]> = bg
+        .iter()
+        .map(|c| [c[0], c[1], c[2], f32::from_bits(u32::MAX)])
+        .collect();
+    for (k, &i) in covered.iter().enumerate() {
+        pixels[i as usize][3] = f32::from_bits(k as u32);
+    }
+    pixels
+}
+
 impl EnvView {
     pub fn new(settings: EnvSettings, first_map: Option<EnvMap>) -> Self {
         let turned_deg = settings.rotate_deg;
@@ -537,13 +551,7 @@ impl EnvView {
             h,
             lighting.mirror_scale,
         );
-        let mut pixels: Vec<[f32; 4]> = bg
-            .iter()
-            .map(|c| [c[0], c[1], c[2], f32::from_bits(u32::MAX)])
-            .collect();
-        for (k, &i) in g.covered.iter().enumerate() {
-            pixels[i as usize][3] = f32::from_bits(k as u32);
-        }
+        let pixels = resolve_pixels(&bg, &g.covered);
         let lights = scene_lights(&view_scene, s.sun, lighting.white);
         let gbytes: Vec<u8> = g.data.iter().flat_map(|x| x.to_le_bytes()).collect();
         let texels = compute::storage(
