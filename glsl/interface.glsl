@@ -38,19 +38,23 @@ const int MAX_TERMS = 65;
 // Capacity of the light's disc directions; light::MAX_DISK_SAMPLES on the CPU.
 const int MAX_DISK_SAMPLES = 256;
 const float PI = 3.14159265358979;
+// Nodes of the uniform sky's table; light::sky::TAIL_NODES on the CPU.
+const int SKY_TAIL_NODES = 16;
 
 // --- descriptor set 0 ----------------------------------------------------------------
 layout(set = 0, binding = 0, std140) uniform Params {
     vec4 eyeWorld;        // xyz: eye position in world space (mesh mode)
     vec4 lightDirWorld;   // xyz: direction the light travels, world space (mesh mode)
-    vec4 lighting;        // x: light intensity, y: exposure, z: w_diffuse (Algorithm 4), w: ambient
+    vec4 lighting;        // x: light intensity, y: exposure, z: w_diffuse (Algorithm 4), w: the uniform sky's radiance (sky.glsl)
     vec4 mapWi;           // xyz: ωi of a BRDF map (tangent space), w: λ in µm (spectral map)
     vec4 mapInfo;         // x: map size S in pixels
     ivec4 spectrumSize;   // x: N_x, y: N_y, z: b_x = floor(N_x/2), w: b_y = floor(N_y/2)
     ivec4 band;           // x0, y0, width, height of the stored texels
     vec4 lookup;          // x: dH (µm), y: 1/(2σx²), z: 1/(2σy²), w: Chebyshev half range A (µm)
-    vec4 shading;         // x: Schlick R0, y: texture gain
+    vec4 shading;         // x: Schlick R0, y: texture gain, z: 1/S, the picture's scale (1/Response::scale)
     ivec4 lightInfo;      // x: directions over the light's disc in lightDisk (1: a point light)
+    // The uniform sky's J(cos θr) at cos θr = i/(SKY_TAIL_NODES − 1) (light::sky::tail_table).
+    vec4 skyTail[SKY_TAIL_NODES / 4];
     // Per term: value = (x + stored.r * y, z + stored.g * w) (thesis eq. 1.1 inverted).
     vec4 decode[MAX_TERMS];
     // Mesh mode: xyz towards a point of the light's disc (world space, unit), w its weight;

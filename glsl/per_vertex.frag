@@ -5,6 +5,7 @@
 #include "interface.glsl"
 #include "gain.glsl"
 #include "colour.glsl"
+#include "sky.glsl"
 
 layout(location = 0) in vec3 inWi;
 layout(location = 1) in vec3 inWr;
@@ -25,14 +26,14 @@ void main() {
     vec3 c = inDiffraction * params.lighting.x;
     if (TEXTURE_BLENDING) {
         // Algorithm 4 (colour.glsl's textureBlend), its texture part lit from the disc's
-        // centre: (1 − w_d)·c_diffraction + ((1 − α) + w_d)·t, plus the sky's ambient·t.
+        // centre: (1 − w_d)·c_diffraction + ((1 − α) + w_d)·t, plus the uniform sky (sky.glsl).
         float irradiance = max(wi.z, 0.0) * params.lighting.x;
         vec3 cTexture = params.shading.y * texture(surfaceTexture, inUv).rgb;
         vec3 h = safeNormalize(wi + wr);
         float f = schlickFresnel(clamp(dot(wr, h), 0.0, 1.0));
         c = textureBlend(c, vec3(0.0), f, params.lighting.z)
           + textureBlend(vec3(0.0), cTexture, f, params.lighting.z) * irradiance
-          + params.lighting.w * cTexture;
+          + uniformSky(wr, cTexture);
     }
     c *= params.lighting.y;
     outColour = vec4((any(isnan(c)) || any(isinf(c))) ? vec3(0.0) : c, 1.0);

@@ -9,6 +9,7 @@
 #include "interface.glsl"
 #include "gain.glsl"
 #include "colour.glsl"
+#include "sky.glsl"
 
 // Mesh mode: the tangent frame (T, B, N) in world space and ωr in it (diffraction.vert).
 layout(location = 0) in vec3 inTangent;
@@ -64,9 +65,9 @@ void main() {
             }
             c += weight * irradiance * ck;
         }
-        // Plus the sky's ambient·t on the skin.
+        // Plus the scene's ambient light, a uniform sky (sky.glsl).
         if (TEXTURE_BLENDING) {
-            c += params.lighting.w * cTexture;
+            c += uniformSky(wr, cTexture);
         }
         // Then the camera's exposure.
         outColour = vec4(finiteOrZero(c * params.lighting.y), 1.0);

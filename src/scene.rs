@@ -301,9 +301,10 @@ pub struct TextureSpec {
     /// Weight of the diffuse texture part, in [0, 1].
     #[serde(default = "default_w_diffuse")]
     pub w_diffuse: f32,
-    /// Optional diffuse term for the sky: the texture colour times this irradiance (relative
-    /// to the light's), added without the light's `cos θi`, so the skin turned away from the
-    /// sun is dim rather than black. 0..=1; 0 is the thesis (Algorithm 4 alone).
+    /// The ambient sky: a uniform environment whose irradiance on a surface facing up is
+    /// this times the light's intensity ([`crate::light::sky`]), so the skin turned away
+    /// from the sun is dim rather than black. 0..=1; 0 is the thesis (the sun alone). An
+    /// `--env` map takes its place.
     #[serde(default)]
     pub ambient: f32,
     /// Linear multiplier of the texture colour, > 0 (1: the thesis). The diffraction colour
@@ -320,12 +321,13 @@ fn default_w_diffuse() -> f32 {
 }
 
 impl TextureSpec {
-    /// The shaded colour of one pixel (linear sRGB, before exposure), the CPU statement of
-    /// what the fragment shader computes with a texture:
-    /// `intensity · max(cos θi, 0) · Algorithm4(c_diffraction, t, F) + ambient · t` with
+    /// The sun's part of one pixel's colour (linear sRGB, before exposure), the CPU
+    /// statement of what the fragment shader computes with a texture:
+    /// `intensity · max(cos θi, 0) · Algorithm4(c_diffraction, t, F)` with
     /// `t = gain · c_texture` and Algorithm 4 `= (1 − w_d)·c_diffraction + (1 − α)·t + w_d·t`,
     /// `α = min(1, |F|)`, `F` the Schlick reflectance at the half vector. With a finite
-    /// light, `c_diffraction` is the weighted sum over [`Light::disk_samples`].
+    /// light, `c_diffraction` is the weighted sum over [`Light::disk_samples`]. The pixel
+    /// is this plus [`TextureSpec::sky`].
     pub fn shade(
         &self,
         c_diffraction: [f32; 3],
@@ -340,8 +342,31 @@ impl TextureSpec {
         [0, 1, 2].map(|c| {
             let tex = self.gain * c_texture[c];
             let blend = (1.0 - w) * c_diffraction[c] + (1.0 - alpha) * tex + w * tex;
-            lit * blend + self.ambient * tex
+            lit * blend
         })
+    }
+
+    /// The ambient sky's part of one pixel's colour (linear sRGB, before exposure) towards
+    /// `cos θr`, under a light of `intensity`, in a picture of radiance over `scale`
+    /// ([`crate::brdf::table::Response::scale`]): [`crate::light::sky::UniformSky`] with
+    /// this texture's `gain`, `w_diffuse` and `ambient`; `fresnel`: Schlick's `R0` and
+    /// whether the BRDF has Fresnel on.
+    pub fn sky(
+        &self,
+        c_texture: [f32; 3],
+        cos_theta_r: f32,
+        intensity: f32,
+        fresnel: (f64, bool),
+        scale: f64,
+    ) -> [f32; 3] {
+        let sky = crate::light::sky::UniformSky::of_ambient(
+            f64::from(self.ambient),
+            f64::from(intensity),
+        );
+        let t = c_texture.map(|c| f64::from(self.gain * c));
+        let w = f64::from(self.w_diffuse);
+        sky.reflected(f64::from(cos_theta_r), t, w, fresnel, scale)
+            .map(|c| c as f32)
     }
 
     /// Whether the texture is generated (`builtin:elaphe-skin`), not read from a file.
@@ -838,7 +863,7 @@ mod tests {
     }
 
     #[test]
-    fn texture_shading_is_algorithm_4_lit_by_the_sun_plus_ambient() {
+    fn texture_shading_is_algorithm_4_lit_by_the_sun_plus_the_sky() {
         let t = TextureSpec {
             path: "x.png".into(),
             w_diffuse: 0.25,
@@ -849,14 +874,25 @@ mod tests {
         // lit = 2·0.5 = 1; tex = 0.5·c_texture; (1 − α) = 0.96.
         let want = [0, 1, 2].map(|i| {
             let tex = 0.5 * [0.2f32, 0.4, 1.0][i];
-            0.75 * [0.8f32, 0.4, 0.0][i] + 0.96 * tex + 0.25 * tex + 0.1 * tex
+            0.75 * [0.8f32, 0.4, 0.0][i] + 0.96 * tex + 0.25 * tex
         });
         for i in 0..3 {
             assert!((c[i] - want[i]).abs() < 1e-6, "{c:?} vs {want:?}");
         }
-        // Facing away from the sun: only the ambient part is left.
+        // Facing away from the sun: nothing of it is left.
         let dark = t.shade([5.0; 3], [0.2, 0.4, 1.0], 0.04, -0.3, 2.0);
-        assert_eq!(dark, [0.1f32 * 0.1, 0.1 * 0.2, 0.1 * 0.5]);
+        assert_eq!(dark, [0.0; 3]);
+        // The sky, seen head-on without Fresnel on the scale 1: radiance 0.1·2/π times
+        // (1 − w_d) of the mirror's 1 plus t·(π(1 + w_d) − A_α).
+        let sky = t.sky([0.2, 0.4, 1.0], 1.0, 2.0, (0.04, false), 1.0);
+        let a_alpha = std::f64::consts::PI * 0.04 + 0.96 * crate::light::sky::fresnel_tail(1.0);
+        let want = [0.2f64, 0.4, 1.0].map(|c| {
+            let tex = 0.5 * c * (std::f64::consts::PI * 1.25 - a_alpha);
+            (0.2 / std::f64::consts::PI * (0.75 + tex)) as f32
+        });
+        for i in 0..3 {
+            assert!((sky[i] - want[i]).abs() < 1e-5, "{sky:?} vs {want:?}");
+        }
     }
 
     #[test]

@@ -169,7 +169,8 @@ fn bad_maps_and_flags_get_one_error_line() {
 }
 
 /// `--shading compute`: the sun-lit scene drawn by the G-buffer and the compute stages,
-/// the sun's directions as point lights, one sample a pixel (nothing to sample).
+/// the sun's directions as point lights and the scene's ambient sky as the environment
+/// they sample (until the noise target).
 #[test]
 fn the_sun_lit_scene_is_shaded_by_the_compute_stages_on_request() {
     if gpu_util::device().is_none() {
@@ -183,7 +184,9 @@ fn the_sun_lit_scene_is_shaded_by_the_compute_stages_on_request() {
         &d,
     );
     assert!(
-        text.contains("in radiance units") && text.contains("(1 everywhere)"),
+        text.contains("in radiance units")
+            && text.contains("under the scene's sky (ambient)")
+            && text.contains("until the estimated noise is below"),
         "{text}"
     );
     let img = image::open(&out).unwrap().to_rgb8();

@@ -58,12 +58,23 @@ fn lighting() -> &'static EnvLighting {
 /// (world) whose radiance integrates to `irradiance_xyz` over the disc: each pixel holds
 /// the disc's radiance times the part of the pixel the disc covers (16×16 points a pixel).
 fn disc_map(w: u32, towards: [f64; 3], radius: f64, irradiance_xyz: [f64; 3]) -> EnvMap {
+    disc_over_sky(w, towards, radius, irradiance_xyz, 0.0)
+}
+
+/// [`disc_map`] over a uniform sky of radiance `sky` (white, linear sRGB) in every pixel.
+fn disc_over_sky(
+    w: u32,
+    towards: [f64; 3],
+    radius: f64,
+    irradiance_xyz: [f64; 3],
+    sky: f32,
+) -> EnvMap {
     let h = w / 2;
     let omega = 2.0 * std::f64::consts::PI * (1.0 - radius.cos());
     let rgb = xyz_to_linear_srgb(irradiance_xyz.map(|c| c / omega));
     let cos_r = radius.cos();
     let dot = |d: [f64; 3]| d[0] * towards[0] + d[1] * towards[1] + d[2] * towards[2];
-    let mut px = vec![[0.0f32; 3]; (w * h) as usize];
+    let mut px = vec![[sky; 3]; (w * h) as usize];
     // Only the pixels within a few pixels of the disc's centre can be covered.
     let (cx, cy) = diffract::light::env::direction_to_map(towards);
     let (ci, cj) = ((cx * f64::from(w)) as i64, (cy * f64::from(h)) as i64);
@@ -83,7 +94,7 @@ fn disc_map(w: u32, towards: [f64; 3], radius: f64, irradiance_xyz: [f64; 3]) ->
                 }
             }
             let f = f64::from(inside) / f64::from(n * n);
-            px[(j * i64::from(w) + i) as usize] = rgb.map(|c| (c * f) as f32);
+            px[(j * i64::from(w) + i) as usize] = rgb.map(|c| (c * f) as f32 + sky);
         }
     }
     EnvMap::from_pixels(w, h, px, "the sun's disc").expect("disc map")
@@ -164,6 +175,128 @@ fn the_sun_as_a_map_renders_the_sun_lit_picture() {
         );
         assert!(lit > 100, "{lit} lit pixels");
         assert!(mean <= 0.5, "skin {skin}: mean ΔE2000 {mean}");
+    }
+    assert_eq!(dev.validation_messages(), 0);
+}
+
+/// The default material's radiance table as `render --env` builds it (its texel, step and
+/// `w` terms), for a comparison whose tolerance is the product's.
+fn fine_lighting() -> EnvLighting {
+    let scene = Scene::default_scene();
+    let m = &scene.material;
+    let hf = m
+        .load_heightfield(&diffract::report::Stderr)
+        .expect("height field");
+    let spec = TableSpec {
+        region: Region::ALL,
+        texel_uv: TableSpec::default_texel(m.coherence_um),
+        w_nodes: 8,
+        step_nm: 5,
+        response: diffract::brdf::table::Response::Relative,
+    };
+    let t = std::time::Instant::now();
+    let l = EnvLighting::build(&hf, m.coherence_um, &m.shading(), &spec).expect("table");
+    eprintln!("fine lighting built in {:.1} s", t.elapsed().as_secs_f64());
+    l
+}
+
+/// ΔE2000 mean and 99th percentile of `a` against `b` over `px`.
+fn mean_p99(a: &[[f32; 3]], b: &[[f32; 3]], px: &[u32]) -> (f64, f64) {
+    let mut de = delta_e(a, b, px);
+    de.sort_by(f64::total_cmp);
+    let mean = de.iter().sum::<f64>() / de.len() as f64;
+    (mean, de[(0.99 * de.len() as f64) as usize])
+}
+
+/// One unit system: the default scene as the sun-lit pass draws it (the sun's disc
+/// pre-filtered into its table, the `ambient` sky in closed form) is the picture that the
+/// environment-lit stages integrate, by Monte Carlo, under the same light described
+/// otherwise: an equirectangular map that holds the sun's disc over a uniform sky of the
+/// ambient's radiance, and a `[[disc_light]]` of the sun's size under that sky.
+#[test]
+fn a_sun_is_a_sun_however_its_light_is_described() {
+    let Some(mut r) = gpu_util::renderer() else {
+        return;
+    };
+    r.set_table_options(diffract::render::TableOptions::RENDER);
+    let dev = Arc::clone(r.device());
+    let l = &fine_lighting();
+    let size = 64;
+    let scene = small_scene(size);
+    let prepared = gpu_util::prepare(&scene.material);
+    let sun_lit = r
+        .render_output(&scene, None, &prepared, true)
+        .expect("sun-lit render")
+        .rgb;
+    let mesh = scene.mesh.load().expect("mesh");
+    let tex = scene.texture.as_ref().expect("skin").load().expect("skin");
+    let sky = diffract::render::env_scene::scene_sky(&scene)
+        .unwrap()
+        .expect("the default scene has an ambient sky");
+    let draw = |scene: &Scene, env: &EnvMap, lights: &Lights| {
+        let frame = render_env_scene(
+            &dev,
+            l,
+            &EnvScene {
+                scene,
+                mesh: &mesh,
+                texture: Some(&tex),
+                env: Some(env),
+                lights,
+                shading: scene.material.shading(),
+                samples: 1024,
+                seed: 0,
+                noise: None,
+                brdf: None,
+            },
+        )
+        .expect("env scene");
+        scene.output.resolve(&frame.rgb).expect("resolve")
+    };
+    let towards = scene.light.towards_light().to_array().map(f64::from);
+    let radius = f64::from(scene.light.angular_diameter_deg).to_radians() / 2.0;
+    let e = f64::from(scene.light.intensity);
+    let t = scene.texture.as_ref().unwrap();
+    let radiance = f64::from(t.ambient) * e / std::f64::consts::PI;
+    let map = disc_over_sky(
+        2048,
+        towards,
+        radius,
+        l.white.map(|c| c * e),
+        radiance as f32,
+    );
+    let mut with_disc = scene.clone();
+    with_disc.disc_lights = vec![diffract::light::area::DiscLight {
+        direction: scene.light.direction,
+        angular_diameter_deg: scene.light.angular_diameter_deg,
+        colour: [1.0; 3],
+        intensity: scene.light.intensity,
+        disk_samples: scene.light.disk_samples,
+    }];
+    let covered = rasterise(&dev, &mesh, &scene.camera, (size, size, 1), None)
+        .unwrap()
+        .covered;
+    assert!(covered.len() > 1000, "{} pixels", covered.len());
+    let cases = [
+        (
+            "a map of the disc over the sky",
+            draw(&scene, &map, &Lights::default()),
+        ),
+        (
+            "a disc light under the sky",
+            draw(&with_disc, &sky, &scene_lights(&with_disc, false, l.white)),
+        ),
+    ];
+    for (what, picture) in cases {
+        let (mean, p99) = mean_p99(&picture, &sun_lit, &covered);
+        eprintln!(
+            "the sun-lit default scene against {what}: ΔE2000 over {} snake pixels mean {mean:.3}, p99 {p99:.2}",
+            covered.len()
+        );
+        assert!(
+            mean <= 0.5 && p99 <= 3.0,
+            "{what}: mean {mean:.3}, p99 {p99:.2}"
+        );
     }
     assert_eq!(dev.validation_messages(), 0);
 }

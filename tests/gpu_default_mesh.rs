@@ -27,9 +27,11 @@
 mod gpu_util;
 
 use diffract::brdf::reference;
+use diffract::brdf::table::Response;
 use diffract::colour::{
     delta_e2000, linear_srgb_to_xyz, xyz_to_lab, xyz_to_linear_srgb, ColourTable,
 };
+use diffract::light::sky::UniformSky;
 use diffract::scene::Scene;
 use glam::DVec3;
 use gpu_util::golden::srgb8_to_linear;
@@ -251,7 +253,11 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
         })
         .collect();
     // Algorithm 4 with the diffraction colour `diff[k]` of each disc direction, plus the
-    // sky's ambient light on the skin, times the exposure.
+    // ambient sky in closed form (light::sky), times the exposure; in radiance over the
+    // picture's scale (MODEL §10).
+    let response = Response::radiance(prepared.material.coherence_um, &prepared.shading);
+    let sky = UniformSky::of_ambient(ambient, intensity);
+    let fresnel = (r0, prepared.shading.fresnel);
     let shade = |p: &Pixel, diff: &[[f64; 3]]| -> [f64; 3] {
         let mut c = [0.0; 3];
         for (k, &(_, lit, f)) in p.lights.iter().enumerate() {
@@ -261,7 +267,8 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
                 c[ch] += lit * blend;
             }
         }
-        [0, 1, 2].map(|ch| (c[ch] + ambient * p.tex[ch]) * exposure)
+        let sky = sky.reflected(p.wr.z, p.tex, w_d, fresnel, response.scale());
+        [0, 1, 2].map(|ch| (c[ch] + sky[ch]) * exposure)
     };
     assert!(pixels.len() > 1000, "{} mesh pixels hit", pixels.len());
 
@@ -287,7 +294,7 @@ fn the_default_configuration_matches_the_reference_on_the_default_scene() {
     // The BRDF is reciprocal (C and G depend on ωi and ωr symmetrically), so each pixel's
     // disc directions are the "view" directions of one xyz_many call lit from its ωr: the
     // same numbers as reference::xyz per direction (to rounding), several times faster.
-    let table = ColourTable::new(1).unwrap();
+    let table = response.colour(&ColourTable::new(1).unwrap());
     let diffraction = |wr: DVec3, lights: &[(DVec3, f64, f64)]| -> Vec<[f64; 3]> {
         let dirs: Vec<[f64; 3]> = lights.iter().map(|l| l.0.to_array()).collect();
         reference::xyz_many(

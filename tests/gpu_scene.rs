@@ -150,6 +150,9 @@ fn plane_pixels_match_cpu_model() {
         })
         .collect();
     assert_eq!(disk.len(), 8, "the plane scene uses the default disc");
+    // A scene is radiance over its scale: each wavelength weighted by f_r/ρ (MODEL §10).
+    let colour =
+        brdf::table::Response::radiance(p.material.coherence_um, &p.shading).colour(&p.colour);
     let scale = scene.light.intensity as f64 * scene.output.exposure as f64;
     let mut pixels: Vec<(u32, u32)> = (0..w).map(|i| (i, h / 2)).collect();
     pixels.extend((0..12).map(|k| ((k * 37 + 5) % w, (k * 23 + 3) % h)));
@@ -172,7 +175,7 @@ fn plane_pixels_match_cpu_model() {
                 p.terms(),
                 &p.window,
                 &p.shading,
-                &p.colour,
+                &colour,
                 wi.to_array(),
                 wr.to_array(),
             );
@@ -260,8 +263,8 @@ fn sun_disc_is_the_weighted_sum_of_its_point_lights() {
 }
 
 /// Thesis Algorithm 4 on a plane away from any diffraction lobe: the pixel is the texture
-/// colour times ((1 − α) + w_diffuse) with α = Schlick F, lit by cosθi · intensity and the
-/// exposure. The texture's top half is red and its bottom half blue, and must appear the
+/// colour times ((1 − α) + w_diffuse) with α = Schlick F, lit by cosθi · intensity, plus
+/// the ambient sky integrated over the hemisphere, times the exposure. The texture's top half is red and its bottom half blue, and must appear the
 /// right way up (OBJ UVs have v up).
 #[test]
 fn texture_blending_follows_algorithm_4() {
@@ -296,6 +299,7 @@ exposure = 1.5
 [texture]
 path = "{}"
 w_diffuse = 0.3
+ambient = 0.2
 "#,
         tex_path.display()
     );
@@ -312,18 +316,46 @@ w_diffuse = 0.3
         .inverse();
     let eye = glam::DVec3::new(0.0, 0.0, 3.0);
     let wi = glam::DVec3::Z;
+    let alpha = |wi: glam::DVec3, wr: glam::DVec3| {
+        let h = (wi + wr).normalize();
+        (r0 + (1.0 - r0) * (1.0 - wr.dot(h)).powi(5)).min(1.0)
+    };
+    // The ambient sky, a uniform radiance 0.2·0.7/π, by its own quadrature over the
+    // hemisphere (θi in 400 steps, φi in 800): the texture reflects ((1 − α) + w_d)·cos θi
+    // of it per steradian, the diffraction part (1 − w_d)·R(θr) in radiance, over the
+    // picture's scale.
+    let sky = 0.2 * 0.7 / std::f64::consts::PI;
+    let scale = brdf::table::Response::radiance(scene.material.coherence_um, &p.shading).scale();
+    let sky_texture = |wr: glam::DVec3| {
+        let (nt, np) = (400, 800);
+        let mut sum = 0.0;
+        for a in 0..nt {
+            let theta = (a as f64 + 0.5) / nt as f64 * std::f64::consts::FRAC_PI_2;
+            for b in 0..np {
+                let phi = (b as f64 + 0.5) / np as f64 * 2.0 * std::f64::consts::PI;
+                let w = glam::DVec3::new(
+                    theta.sin() * phi.cos(),
+                    theta.sin() * phi.sin(),
+                    theta.cos(),
+                );
+                sum += ((1.0 - alpha(w, wr)) + 0.3) * theta.cos() * theta.sin();
+            }
+        }
+        sum * (std::f64::consts::FRAC_PI_2 / nt as f64) * (2.0 * std::f64::consts::PI / np as f64)
+    };
     // Rows 4 and 27 are far from v = 0 (no diffraction there); columns away from the edges.
     for (j, expected_tex) in [(4u32, top), (27u32, bottom)] {
         for i in [6u32, 12, 19, 25] {
             let hit = plane_hit(&inv, i, j, 32, 32);
             let wr = (eye - hit).normalize();
-            let h = (wi + wr).normalize();
-            let f = r0 + (1.0 - r0) * (1.0 - wr.dot(h)).powi(5);
-            let k = ((1.0 - f.min(1.0)) + 0.3) * 0.7 * 1.5;
+            let f = alpha(wi, wr);
+            let k = ((1.0 - f) + 0.3) * 0.7 * 1.5 + sky * sky_texture(wr) * 1.5;
+            let mirror = r0 + (1.0 - r0) * (1.0 - wr.z).powi(5);
+            let sky_mirror = sky * 0.7 * mirror / scale * 1.5;
             let gpu = frame.at(i, j);
             for c in 0..3 {
                 // The texture went through 8-bit sRGB: compare with that precision.
-                let want = expected_tex[c] as f64 * k;
+                let want = expected_tex[c] as f64 * k + sky_mirror;
                 assert!(
                     (gpu[c] as f64 - want).abs() <= 0.01 * want + 2e-3,
                     "pixel ({i},{j}) channel {c}: {} vs {want}",

@@ -296,7 +296,8 @@ fn render_draws_a_spinner_on_a_terminal_only() {
     }
     // `render`'s one report line of what it left out is printed on a pipe too.
     assert_quiet(&o, &["left out:", "model check:"]);
-    assert!(String::from_utf8_lossy(&o.stdout).contains("BRDF map (XYZ) 32×32"));
+    assert!(String::from_utf8_lossy(&o.stdout)
+        .contains("BRDF map (XYZ of the relative reflectance ρ) 32×32"));
     if !have_script() {
         return;
     }
@@ -307,7 +308,10 @@ fn render_draws_a_spinner_on_a_terminal_only() {
         tty.contains("rendering"),
         "the spinner is not named: {tty:?}"
     );
-    assert!(stdout.contains("BRDF map (XYZ) 32×32"), "stdout: {stdout}");
+    assert!(
+        stdout.contains("BRDF map (XYZ of the relative reflectance ρ) 32×32"),
+        "stdout: {stdout}"
+    );
     let _ = std::fs::remove_dir_all(&d);
 }
 

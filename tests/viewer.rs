@@ -746,6 +746,16 @@ fn map_mode_screenshot_matches_offscreen_brdf_map() {
     let Some(mut r) = renderer() else { return };
     r.set_variant(VariantKind::Flss);
     let prepared = prepare(&scene.material);
+    // The viewer's map shares the scene's table, and so its units: radiance on the
+    // picture's scale (MODEL §10), which an offscreen map draws when asked.
+    let response = diffract::brdf::table::Response::radiance(
+        prepared.material.coherence_um,
+        &prepared.shading,
+    );
+    r.set_table_options(diffract::render::TableOptions {
+        response,
+        ..r.table_options()
+    });
     let side = 64;
     let map = r
         .render_brdf_map(&prepared, theta, phi, side, None)

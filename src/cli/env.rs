@@ -332,6 +332,12 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
         args.cache,
     )?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);
+    // Without a map the scene's own sky (its ambient) is the environment.
+    let sky = match env {
+        Some(_) => None,
+        None => crate::render::env_scene::scene_sky(scene)?,
+    };
+    let env = env.or(sky.as_ref());
     // Without an environment or disc lights there is nothing to sample: the sun's
     // directions are point lights, evaluated in full once a pixel (`--shading compute`).
     let nothing_sampled = env.is_none() && lights.discs.is_empty();

@@ -61,11 +61,12 @@ pub struct RenderArgs {
     /// driver (on lavapipe, about twice the time of a later draw of a small map). 0: one draw.
     #[arg(long, default_value_t = 0, value_name = "N")]
     pub repeat: u32,
-    /// How a scene's pixels are shaded: `fragment`, the thesis's raster pass (relative
-    /// reflectance, the sun over its disc, the ambient on the skin), or `compute`, the
-    /// G-buffer and the compute stages of environment light (radiance units, the sun's
-    /// directions as point lights, no ambient), to measure one against the other. A scene
-    /// lit by an environment or disc lights, or with `--no-sun`, is always `compute`.
+    /// How a scene's pixels are shaded: `fragment`, the thesis's raster pass (the sun's
+    /// disc pre-filtered into the table, the ambient sky in closed form), or `compute`,
+    /// the G-buffer and the compute stages of environment light (the sun's directions as
+    /// point lights, the ambient sky sampled); both draw radiance, the same picture, to
+    /// measure one against the other. A scene lit by an environment or disc lights, or
+    /// with `--no-sun`, is always `compute`.
     #[arg(long, value_enum, default_value_t = Shading::Fragment)]
     pub shading: Shading,
 }
@@ -198,14 +199,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let mut chosen_exposure = None;
     let what = if inputs.is_some() {
         crate::image_io::write_image(&args.out, frame.width, frame.height, &frame.rgb, 1.0)?;
-        "scene".to_string()
+        let s = crate::brdf::table::Response::radiance(
+            prepared.material.coherence_um,
+            &prepared.shading,
+        )
+        .scale();
+        format!(
+            "scene of radiance (× exposure {} / S = {s:.0})",
+            scene.output.exposure
+        )
     } else {
         if let Some(Exposure::Auto(e)) = write_map(args, &frame)? {
             chosen_exposure = Some(e);
         }
         match args.lambda_nm {
-            Some(l) => format!("BRDF map ρ at {l} nm"),
-            None => "BRDF map (XYZ)".to_string(),
+            Some(l) => format!("BRDF map ρ at {l} nm (relative reflectance)"),
+            None => "BRDF map (XYZ of the relative reflectance ρ)".to_string(),
         }
     };
     drop(spin);

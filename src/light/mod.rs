@@ -7,12 +7,14 @@
 //! spiral with equal-area placement on the cap — point `k` of `n` at `1 − cos ρ_k =
 //! (k + ½)/n · (1 − cos α)` and azimuth `k·` the golden angle — so equal weights `1/n` are
 //! a quadrature of the uniform cap with no clumping and no preferred axis. Pure geometry:
-//! no Vulkan, no physics. [`env`] holds the environment maps and their importance sampling.
+//! no Vulkan, no physics. [`env`] holds the environment maps and their importance sampling,
+//! [`sky`] the scene's ambient light as a uniform sky.
 
 use glam::DVec3;
 
 pub mod area;
 pub mod env;
+pub mod sky;
 
 /// Largest accepted angular diameter (degrees): beyond it the light is no longer a sun.
 pub const MAX_ANGULAR_DIAMETER_DEG: f32 = 20.0;

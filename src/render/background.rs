@@ -249,7 +249,7 @@ impl Renderer {
             return Ok(Readiness::Building);
         }
         let (key, region) = (wanted.key, wanted.region);
-        let options = self.build_options(region, output, disc);
+        let options = self.build_options(region, output, disc, key.table);
         let coarse =
             (coarse_first && self.variant.is_table()).then(|| options.coarse(&material.material));
         let coarse_building = coarse.is_some();

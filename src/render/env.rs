@@ -21,8 +21,8 @@ use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
 use super::env_brdf::{EnvBrdf, EnvStage};
-use crate::brdf::env_reference::{absolute_factor, radiance_planes, radiance_slices_in};
-use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, TableSpec};
+use crate::brdf::env_reference::{radiance_planes, radiance_slices_in};
+use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, Response, TableSpec};
 use crate::brdf::Shading;
 use crate::colour::{linear_srgb_to_xyz, ColourTable};
 use crate::gpu::compute::{self, ComputeLayout, ComputePipeline, StorageSet};
@@ -213,7 +213,8 @@ pub struct EnvLighting {
     pub white: [f64; 3],
     /// The factor that turns the relative reflectance `ρ` into the absolute BRDF,
     /// `A_λ·R0` (`A_λ` alone without Fresnel) weighted by D65's luminance `w_Y`:
-    /// `Σ A_λ R0 w_Y,λ / Σ w_Y,λ` (about 440 for 65 µm with Fresnel).
+    /// `Σ A_λ R0 w_Y,λ / Σ w_Y,λ` (about 440 for 65 µm with Fresnel), the scale of
+    /// [`Response::radiance`] that every radiance picture shares.
     pub mirror_scale: f64,
     /// Chebyshev terms sampled but left out ([`TERM_TOLERANCE`]).
     pub dropped: usize,
@@ -311,13 +312,7 @@ impl EnvLighting {
         let density = GDensity::new(&table);
         let colours = ColourTable::new(spec.step_nm)?;
         let white = crate::brdf::env_reference::white(&colours);
-        let mirror_scale = colours
-            .lambdas_nm
-            .iter()
-            .zip(&colours.weights)
-            .map(|(&l, w)| absolute_factor(l, coherence_um, shading) * w[1])
-            .sum::<f64>()
-            / white[1];
+        let mirror_scale = Response::radiance(coherence_um, shading).scale();
         let lighting = EnvLighting {
             table,
             spec: *spec,

@@ -16,7 +16,7 @@ use ash::vk;
 
 use super::params::ParamsUbo;
 use super::variant::{PreparedVariant, SpecConstant, Specialisation, VariantKind};
-use crate::brdf::table::{ChebyshevW, TableSpec};
+use crate::brdf::table::{ChebyshevW, Response, TableSpec};
 use crate::brdf::Shading;
 use crate::gpu::memory::{Buffer, Image, Sampler};
 use crate::gpu::pipeline::{DescriptorSet, PipelineLayout, Resource};
@@ -241,10 +241,10 @@ impl super::Renderer {
     /// The current variant bound for the environment-lit stages of `lighting` (its region,
     /// its scale to radiance), evaluated with `shading`. `chebyshev-w` draws from the
     /// lighting's own table (one table samples and draws); any other variant is built here
-    /// with its table in radiance units ([`crate::brdf::table::Response::Radiance`]) or
-    /// its colour weights carrying them, over the lighting's region and at its `(u, v)`
-    /// spacing and wavelength step unless the table options name others. Nothing is left out: the wavelengths'
-    /// weights differ from the sun-lit ones the leaving out is measured against.
+    /// with its table in radiance units ([`Response::radiance`] with `shading`) or its
+    /// colour weights carrying them, over the lighting's region and at its `(u, v)`
+    /// spacing and wavelength step unless the table options name others. Nothing is left
+    /// out: the stages reach every `(u, v)` of the region.
     pub fn env_brdf(
         &mut self,
         prepared: &crate::material::PreparedMaterial,
@@ -256,16 +256,6 @@ impl super::Renderer {
         if kind == VariantKind::ChebyshevW {
             return lighting.brdf(self.device(), shading).map(Arc::new);
         }
-        let r0 = if shading.fresnel {
-            crate::brdf::schlick_r0(shading.ior)
-        } else {
-            1.0
-        };
-        let response = crate::brdf::table::Response::Radiance {
-            coherence_um: prepared.material.coherence_um,
-            r0,
-            scale: lighting.mirror_scale,
-        };
         let table = self.table;
         let leave_out = self.leave_out;
         let region = self.table_region;
@@ -275,7 +265,7 @@ impl super::Renderer {
         self.table = super::variant::TableOptions {
             texel_uv: table.texel_uv.or(Some(lighting.spec.texel_uv)),
             step_nm: table.step_nm.or(Some(lighting.spec.step_nm)),
-            response,
+            response: Response::radiance(prepared.material.coherence_um, shading),
             ..table
         };
         self.leave_out = false;
@@ -291,26 +281,13 @@ impl super::Renderer {
         self.table_region = region;
         self.keep_models = keep;
         built?;
-        let variant = self
+        let (key, variant) = self
             .prepared
             .as_ref()
-            .map(|(_, v)| Arc::clone(v))
             .ok_or(Error::Internal("no variant prepared"))?;
-        let colour = &prepared.colour;
-        let factors = response.line_factors(colour);
-        let line = |i: usize| {
-            let (w, f) = (colour.weights[i], factors[i]);
-            [
-                (w[0] * f[0]) as f32,
-                (w[1] * f[1]) as f32,
-                (w[2] * f[2]) as f32,
-                colour.lambdas_nm[i] as f32,
-            ]
-        };
-        let weights: Vec<[f32; 4]> = match variant.kept_wavelengths() {
-            Some(kept) => kept.iter().map(|&i| line(i)).collect(),
-            None => (0..colour.len()).map(line).collect(),
-        };
+        let response = &key.table.response;
+        let weights = super::params::colour_weights(prepared, variant.as_ref(), response);
+        let variant = Arc::clone(variant);
         EnvBrdf::new(
             self.device(),
             kind,

@@ -12,10 +12,10 @@
 //! factor that turns the relative reflectance into the absolute BRDF
 //! ([`EnvLighting::mirror_scale`]: `A_λ·R0` weighted by D65's luminance), so texture and
 //! diffraction keep the balance they have under the sun. Each direction reflects
-//! `L·cos θi·[(1 − w_d)·f_r + ((1 − α) + w_d)·t]`, as Algorithm 4 does for the sun; the
-//! `ambient` term is left out (the environment is the light that reaches the skin turned
-//! away from the sun). The written picture is radiance × `exposure / S`, so a scene's
-//! exposure means what it means under the sun.
+//! `L·cos θi·[(1 − w_d)·f_r + ((1 − α) + w_d)·t]`, as Algorithm 4 does for the sun. The
+//! scene's `ambient` is a uniform sky ([`scene_sky`]), the environment when no map is
+//! given; a map takes its place. The written picture is radiance × `exposure / S`, the
+//! units of the sun-lit pass, so the same light gives the same picture either way.
 
 use std::sync::Arc;
 
@@ -105,6 +105,22 @@ pub fn scene_lights(scene: &Scene, sun: bool, white: [f64; 3]) -> Lights {
         }
     }
     lights
+}
+
+/// The scene's own sky: `[texture] ambient` as the uniform environment it stands for
+/// ([`crate::light::sky`], radiance `ambient·I/π` in white), `None` without one. A scene
+/// drawn without `--env` is lit by it, as the sun-lit pass lights it in closed form; an
+/// `--env` map takes its place.
+pub fn scene_sky(scene: &Scene) -> Result<Option<EnvMap>> {
+    let Some(t) = scene.texture.as_ref().filter(|t| t.ambient > 0.0) else {
+        return Ok(None);
+    };
+    let sky = crate::light::sky::UniformSky::of_ambient(
+        f64::from(t.ambient),
+        f64::from(scene.light.intensity),
+    );
+    let l = sky.radiance as f32;
+    EnvMap::from_pixels(2, 1, vec![[l; 3]; 2], "the scene's sky (ambient)").map(Some)
 }
 
 /// One environment-lit frame of covered pixels.

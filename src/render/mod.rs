@@ -36,7 +36,7 @@ pub(crate) use params::{OutputMode, ParamsUbo, MAX_TERMS};
 pub use pass::{MapView, PassOptions, ScenePass};
 pub use variant::{TableFormat, TableOptions, VariantKind, VariantStats};
 
-use crate::brdf::table::{DiscKernel, Region};
+use crate::brdf::table::{DiscKernel, Region, Response};
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Sampler};
 use crate::gpu::pipeline::ShaderModule;
 use crate::gpu::{shaders, Device, StorageFormat};
@@ -548,13 +548,22 @@ impl Renderer {
         let eye = scene.camera.eye;
         params.eye_world = [eye[0], eye[1], eye[2], 1.0];
         params.set_light(&scene.light);
-        // Algorithm 4's weight, the sky's ambient light on the skin, the texture's gain.
+        // Algorithm 4's weight, the scene's ambient light (a uniform sky), the texture's
+        // gain, and the picture's scale (radiance over S, MODEL §10).
         let (w_diffuse, ambient, gain) = scene
             .texture
             .as_ref()
             .map_or((0.0, 0.0, 1.0), |t| (t.w_diffuse, t.ambient, t.gain));
-        params.lighting = [scene.light.intensity, out.exposure, w_diffuse, ambient];
+        let sky = crate::light::sky::UniformSky::of_ambient(
+            f64::from(ambient),
+            f64::from(scene.light.intensity),
+        );
+        let light = scene.light.intensity;
+        params.lighting = [light, out.exposure, w_diffuse, sky.radiance as f32];
         params.shading[1] = gain;
+        if let Some((key, _)) = &self.prepared {
+            params.shading[2] = (1.0 / key.table.response.scale()) as f32;
+        }
         let bg = out.background;
 
         let transforms = Transforms {
@@ -588,7 +597,7 @@ impl Renderer {
         // ones.
         self.map = None;
         self.prepared = None;
-        let options = self.build_options(region, output, disc);
+        let options = self.build_options(region, output, disc, key.table);
         let built = self
             .variant
             .implementation()
@@ -653,7 +662,7 @@ impl Renderer {
                 .map(f64::to_bits)
             }),
             storage: self.storage,
-            table: self.table,
+            table: self.table_for(prepared, output),
             keep_model: self.keep_models,
             leave_out: self.leave_out,
             disc: disc.map(|k| {
@@ -679,6 +688,24 @@ impl Renderer {
         })
     }
 
+    /// The table options a draw of `output` builds with: what `G` answers follows the
+    /// picture (MODEL §10). A scene, and the viewer's map beside it (they share one table),
+    /// is radiance ([`Response::radiance`]); a BRDF map written for the thesis comparisons
+    /// is the relative reflectance of MODEL §2. Options that name a response keep it.
+    fn table_for(&self, prepared: &PreparedMaterial, output: OutputMode) -> TableOptions {
+        let radiance = matches!(output, OutputMode::Mesh | OutputMode::MapDisplay);
+        let response = match self.table.response {
+            Response::Relative if radiance => {
+                Response::radiance(prepared.material.coherence_um, &prepared.shading)
+            }
+            r => r,
+        };
+        TableOptions {
+            response,
+            ..self.table
+        }
+    }
+
     /// The settings a variant is built with, owned (a background build takes them to its
     /// thread).
     fn build_options(
@@ -686,12 +713,13 @@ impl Renderer {
         region: Region,
         output: OutputMode,
         disc: Option<DiscKernel>,
+        table: TableOptions,
     ) -> BuildOptions {
         BuildOptions {
             region,
             output,
             storage: self.storage,
-            table: self.table,
+            table,
             keep_model: self.keep_models,
             cache_dir: self.cache_dir.clone(),
             leave_out: self.leave_out,

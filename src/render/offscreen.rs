@@ -123,7 +123,7 @@ impl Renderer {
             shadowing: prepared.shading.shadowing,
             texture_blending: false,
         };
-        let Some((_, variant)) = &self.prepared else {
+        let Some((built, variant)) = &self.prepared else {
             return Err(Error::invalid("variant", "no variant prepared"));
         };
         let key = MapKey {
@@ -131,7 +131,7 @@ impl Renderer {
             output,
             options,
             size,
-            colour: colour_weights(prepared, variant.as_ref()),
+            colour: colour_weights(prepared, variant.as_ref(), &built.table.response),
         };
         // Taken out while it draws: a failed frame drops it rather than leave a pass in an
         // unknown state for the next one.

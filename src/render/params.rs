@@ -33,6 +33,7 @@ pub(crate) struct ParamsUbo {
     pub lookup: [f32; 4],
     pub(super) shading: [f32; 4],
     pub(super) light_info: [i32; 4],
+    pub(super) sky_tail: [[f32; 4]; crate::light::sky::TAIL_NODES / 4],
     pub decode: [[f32; 4]; MAX_TERMS],
     pub(super) light_disk: [[f32; 4]; crate::light::MAX_DISK_SAMPLES as usize],
 }
@@ -69,7 +70,7 @@ impl Renderer {
 
 impl ParamsUbo {
     /// The shared part of the uniform block for `shading` (Schlick's `R0`, texture gain 1,
-    /// a point light along −Z), before the variant and the scene or map fill in theirs.
+    /// the relative scale, a point light along −Z, no sky), before the variant and the scene or map fill in theirs.
     pub(crate) fn shared(shading: &crate::brdf::Shading) -> ParamsUbo {
         ParamsUbo {
             eye_world: [0.0; 4],
@@ -80,22 +81,27 @@ impl ParamsUbo {
             spectrum_size: [0; 4],
             band: [0; 4],
             lookup: [0.0; 4],
-            shading: [crate::brdf::schlick_r0(shading.ior) as f32, 1.0, 0.0, 0.0],
+            shading: [crate::brdf::schlick_r0(shading.ior) as f32, 1.0, 1.0, 0.0],
             light_info: [1, 0, 0, 0],
+            sky_tail: {
+                let t = crate::light::sky::tail_table();
+                std::array::from_fn(|i| std::array::from_fn(|j| t[4 * i + j] as f32))
+            },
             decode: [[0.0; 4]; MAX_TERMS],
             light_disk: [[0.0, 0.0, 1.0, 1.0]; crate::light::MAX_DISK_SAMPLES as usize],
         }
     }
 }
 
-/// The colour table as the shader reads it: the XYZ weights and `λ` of each line.
-/// The colour table as binding 2 holds it: per spectral sample the CIE weight and `λ`, only
-/// the samples the variant keeps (all of them when it leaves none out).
+/// The colour table as binding 2 holds it: per spectral sample the CIE weight times the
+/// factor of `response` (what the variant's `G` answers) and `λ`, only the samples the
+/// variant keeps (all of them when it leaves none out).
 pub(super) fn colour_weights(
     prepared: &PreparedMaterial,
     variant: &dyn PreparedVariant,
+    response: &crate::brdf::table::Response,
 ) -> Vec<[f32; 4]> {
-    let table = &prepared.colour;
+    let table = &response.colour(&prepared.colour);
     let sample = |i: usize| {
         let w = table.weights[i];
         [

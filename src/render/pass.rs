@@ -270,7 +270,7 @@ impl Renderer {
         render_pass: vk::RenderPass,
     ) -> Result<ScenePass> {
         let dev = &self.dev;
-        let Some((_, variant)) = &self.prepared else {
+        let Some((key, variant)) = &self.prepared else {
             return Err(Error::invalid("variant", "no variant prepared"));
         };
         let per_vertex = self.per_vertex && mesh.is_some();
@@ -288,7 +288,8 @@ impl Renderer {
                 std::mem::size_of::<Transforms>() as u32,
             ),
         )?;
-        let (ubo, colour) = pass_buffers(dev, prepared, variant.as_ref(), &params)?;
+        let colour = colour_weights(prepared, variant.as_ref(), &key.table.response);
+        let (ubo, colour) = pass_buffers(dev, &colour, &params)?;
         let texture_blending = texture.is_some();
         // The texture binding is statically used by the shader, so it always needs an
         // image; a scene without a texture gets 1×1 white (the variant never samples it).
@@ -454,8 +455,7 @@ pub(super) fn pass_bindings(variant: &dyn PreparedVariant, per_vertex: bool) -> 
 /// A pass's uniform block (binding 0, holding `params`) and colour table (binding 2).
 fn pass_buffers(
     dev: &Arc<Device>,
-    prepared: &PreparedMaterial,
-    variant: &dyn PreparedVariant,
+    colour: &[[f32; 4]],
     params: &ParamsUbo,
 ) -> Result<(Buffer, Buffer)> {
     // Device-written per frame (ScenePass::record), so TRANSFER_DST too.
@@ -469,7 +469,7 @@ fn pass_buffers(
         dev,
         "colour weights",
         vk::BufferUsageFlags::STORAGE_BUFFER,
-        &colour_weights(prepared, variant),
+        colour,
     )?;
     Ok((ubo, colour))
 }

@@ -125,6 +125,63 @@ pub enum Response {
 }
 
 impl Response {
+    /// Radiance for a material of coherence length `coherence_um` shaded with `shading`,
+    /// on the scale every radiance picture shares: `scale` is `A_λ·r0` weighted by D65's
+    /// luminance (at 1 nm, whatever step a table takes), so a mirror's `Y` stays 1 and an
+    /// exposure means what it means for the relative reflectance. One scale for every
+    /// light: the sun-lit pass and the environment-lit stages write the same units.
+    pub fn radiance(coherence_um: f64, shading: &crate::brdf::Shading) -> Response {
+        let r0 = if shading.fresnel {
+            crate::brdf::schlick_r0(shading.ior)
+        } else {
+            1.0
+        };
+        let unscaled = Response::Radiance {
+            coherence_um,
+            r0,
+            scale: 1.0,
+        };
+        let colour = ColourTable::new(1).expect("1 nm divides the visible range");
+        let factors = unscaled.line_factors(&colour);
+        let y: f64 = colour
+            .weights
+            .iter()
+            .zip(&factors)
+            .map(|(w, f)| w[1] * f[1])
+            .sum();
+        Response::Radiance {
+            coherence_um,
+            r0,
+            scale: y,
+        }
+    }
+
+    /// `f_r/ρ` of a mirror over this response's scale: what a picture in these units
+    /// gains per unit of relative reflectance, `r0·A_λ/scale` at D65's luminance
+    /// (1 for [`Response::Relative`]).
+    pub fn scale(&self) -> f64 {
+        match *self {
+            Response::Relative => 1.0,
+            Response::Radiance { scale, .. } => scale,
+        }
+    }
+
+    /// `colour` with each line's weight times its factor ([`Response::line_factors`]):
+    /// the weights a DFT-term variant sums and the leaving out measures.
+    pub fn colour(&self, colour: &ColourTable) -> ColourTable {
+        let factors = self.line_factors(colour);
+        ColourTable {
+            step_nm: colour.step_nm,
+            lambdas_nm: colour.lambdas_nm.clone(),
+            weights: colour
+                .weights
+                .iter()
+                .zip(&factors)
+                .map(|(w, f)| [w[0] * f[0], w[1] * f[1], w[2] * f[2]])
+                .collect(),
+        }
+    }
+
     /// The factor of each line of `colour` (per channel) that turns a relative `G` into
     /// this response.
     pub fn line_factors(&self, colour: &ColourTable) -> Vec<[f64; 3]> {

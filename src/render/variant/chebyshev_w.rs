@@ -4,7 +4,7 @@
 
 use std::sync::Arc;
 
-use super::table::{prepare, Layout, TableLayout};
+use super::table::{prepare, Layout, TableLayout, TableTraits};
 use super::{
     DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant,
 };
@@ -39,12 +39,12 @@ impl Variant for ChebyshevW {
         "chebyshev_w.frag"
     }
 
-    fn table_w_nodes(&self) -> Option<usize> {
-        Some(16)
-    }
-
-    fn w_nodes_follow_the_field(&self) -> bool {
-        true
+    fn table_traits(&self) -> Option<TableTraits> {
+        Some(TableTraits {
+            w_nodes: 16,
+            follows_field: true,
+            layout: LAYOUT,
+        })
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
@@ -53,10 +53,6 @@ impl Variant for ChebyshevW {
 
     fn fetch_formula(&self) -> &'static str {
         "4⌈3K/4⌉ (K coefficients, four values a texel, four bilinear fetches a spline)"
-    }
-
-    fn table_layout(&self) -> Option<TableLayout> {
-        Some(LAYOUT)
     }
 
     fn profile_presets(&self) -> &'static [Preset] {

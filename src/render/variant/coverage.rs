@@ -34,6 +34,10 @@ impl Variant for Coverage {
         Family::Debug
     }
 
+    fn table_traits(&self) -> Option<super::table::TableTraits> {
+        None
+    }
+
     fn fragment(&self) -> &'static str {
         "coverage.frag"
     }

@@ -6,7 +6,7 @@
 
 use std::sync::Arc;
 
-use super::table::{prepare, Layout, TableLayout};
+use super::table::{prepare, Layout, TableLayout, TableTraits};
 use super::{
     DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant,
 };
@@ -40,8 +40,12 @@ impl Variant for Dhillon {
         "dhillon.frag"
     }
 
-    fn table_w_nodes(&self) -> Option<usize> {
-        Some(12)
+    fn table_traits(&self) -> Option<TableTraits> {
+        Some(TableTraits {
+            w_nodes: 12,
+            follows_field: false,
+            layout: LAYOUT,
+        })
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
@@ -50,10 +54,6 @@ impl Variant for Dhillon {
 
     fn fetch_formula(&self) -> &'static str {
         "P ≤ K (the powers the fit keeps)"
-    }
-
-    fn table_layout(&self) -> Option<TableLayout> {
-        Some(LAYOUT)
     }
 
     fn profile_presets(&self) -> &'static [Preset] {

@@ -39,6 +39,10 @@ impl Variant for Flss {
         Family::Terms
     }
 
+    fn table_traits(&self) -> Option<super::table::TableTraits> {
+        None
+    }
+
     fn fragment(&self) -> &'static str {
         "flss.frag"
     }
@@ -163,8 +167,11 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
     let start = Instant::now();
     let prepared = setup.prepared;
     let stack = prepared.load_terms(setup.report)?;
-    let (selection, wavelengths) =
-        WavelengthsLeft::of(&prepared.colour, setup.lambda_tolerance(), "per pixel");
+    let (selection, wavelengths) = WavelengthsLeft::of(
+        &setup.colour(&prepared.colour),
+        setup.lambda_tolerance(),
+        "per pixel",
+    );
     // A single-wavelength map may ask for any λ; the scene's colour only for the kept ones.
     let lambda_nm = if setup.output == OutputMode::MapSpectral {
         (LAMBDA_MIN_NM as f64, LAMBDA_MAX_NM as f64)

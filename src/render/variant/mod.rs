@@ -166,7 +166,7 @@ impl VariantKind {
     /// Table variants: the table's planes, fetches and memory for `inputs`, as `render`
     /// uploads it (`None` for other variants).
     pub fn footprint(self, inputs: &FetchInputs<'_>) -> Option<Result<table::Footprint>> {
-        let t = self.implementation().table_layout()?;
+        let t = self.implementation().table_traits()?.layout;
         Some((|| {
             let (spec, _) =
                 inputs
@@ -278,6 +278,7 @@ impl FetchInputs<'_> {
 
     fn kept(&self) -> Option<crate::leave_out::WavelengthsLeft> {
         let colour = crate::colour::ColourTable::new(self.material.lambda_step_nm).ok()?;
+        let colour = self.table.response.colour(&colour);
         let tolerance = self.leave_out.then_some(self.material.tolerance);
         Some(crate::leave_out::WavelengthsLeft::of(&colour, tolerance, "per pixel").1)
     }
@@ -435,7 +436,7 @@ impl TableOptions {
     /// ([`TableOptions::w_nodes_for_field`]).
     pub fn w_nodes_for(&self, kind: VariantKind) -> usize {
         self.w_nodes
-            .or(kind.implementation().table_w_nodes())
+            .or(kind.implementation().table_traits().map(|t| t.w_nodes))
             .unwrap_or(16)
     }
 
@@ -444,7 +445,11 @@ impl TableOptions {
     /// An explicit `w_nodes` is kept as given.
     pub fn w_nodes_for_field(&self, kind: VariantKind, h_range_um: f64, w: [f64; 2]) -> usize {
         let base = self.w_nodes_for(kind);
-        if self.w_nodes.is_some() || !kind.implementation().w_nodes_follow_the_field() {
+        let follows = kind
+            .implementation()
+            .table_traits()
+            .is_some_and(|t| t.follows_field);
+        if self.w_nodes.is_some() || !follows {
             return base;
         }
         chebyshev_w_nodes(h_range_um, w)
@@ -561,6 +566,12 @@ impl DrawSetup<'_> {
     pub fn lambda_tolerance(&self) -> Option<f64> {
         self.leave_out.then_some(self.prepared.material.tolerance)
     }
+
+    /// `colour` weighted as this draw's `G` is ([`TableOptions::response`]): what the
+    /// variant sums, and what the leaving out of wavelengths is measured against.
+    pub fn colour(&self, colour: &crate::colour::ColourTable) -> crate::colour::ColourTable {
+        self.table.response.colour(colour)
+    }
 }
 
 /// A variant: everything it declares about itself, and how to build its resources. One
@@ -583,23 +594,15 @@ pub(crate) trait Variant: Sync {
     fn spectral(&self) -> bool {
         false
     }
-    /// Table variants: the default number of `w` nodes.
-    fn table_w_nodes(&self) -> Option<usize> {
-        None
-    }
-    /// Table variants: whether the `w` nodes grow with the height range (a series in `w`
-    /// whose coefficients decay like Bessel functions; [`TableOptions::w_nodes_for_field`]).
-    fn w_nodes_follow_the_field(&self) -> bool {
-        false
-    }
+    /// What a table variant states about its table (`None` for every other family): its
+    /// `w` nodes, whether they follow the field, its layout on the GPU. Required, and one
+    /// value, so a new table variant cannot inherit another's by leaving a method out
+    /// (the registry's test holds it to [`Variant::family`]).
+    fn table_traits(&self) -> Option<table::TableTraits>;
     /// Texel fetches per evaluation (one pixel, one direction of the light).
     fn fetches(&self, inputs: &FetchInputs<'_>) -> usize;
     /// How its fetch count grows, for the docs' table (`λ·(T+1)·(2R+1)²`).
     fn fetch_formula(&self) -> &'static str;
-    /// Table variants: how the planes lie on the GPU ([`table::footprint`]).
-    fn table_layout(&self) -> Option<table::TableLayout> {
-        None
-    }
     /// Whether its resources depend on the region the draw reaches (leaving out on or off).
     fn reads_region(&self, _leave_out: bool) -> bool {
         true
@@ -938,6 +941,23 @@ pub(super) mod testing {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A table variant states its table (`w` nodes, whether they follow the field, layout)
+    /// in one required value, and no other family states one: a variant whose family says
+    /// "table" but whose traits were left `None` fails here, not silently in a draw.
+    #[test]
+    fn a_table_variant_states_its_table_and_no_other_does() {
+        for kind in VariantKind::ALL {
+            let traits = kind.implementation().table_traits();
+            assert_eq!(kind.is_table(), traits.is_some(), "{kind}");
+            if let Some(t) = traits {
+                assert!(
+                    (2..=crate::brdf::table::MAX_NODES_W).contains(&t.w_nodes),
+                    "{kind}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn table_options_refuse_nonsense_and_fit_the_budget() {

@@ -48,6 +48,10 @@ impl Variant for Nmm {
         Family::Terms
     }
 
+    fn table_traits(&self) -> Option<super::table::TableTraits> {
+        None
+    }
+
     fn fragment(&self) -> &'static str {
         "nmm.frag"
     }

@@ -47,6 +47,10 @@ impl Variant for Pq {
         Family::Terms
     }
 
+    fn table_traits(&self) -> Option<super::table::TableTraits> {
+        None
+    }
+
     fn fragment(&self) -> &'static str {
         "pq.frag"
     }

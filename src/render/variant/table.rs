@@ -37,6 +37,19 @@ pub(crate) enum Layout {
     PackedPlanes,
 }
 
+/// What a table variant states about its table, all of it: no part has a default that a
+/// new variant could inherit without saying so ([`super::Variant::table_traits`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) struct TableTraits {
+    /// Nodes along `w` unless the options or the height field ask for more.
+    pub w_nodes: usize,
+    /// Whether the `w` nodes grow with the height range (a series in `w` whose coefficients
+    /// decay like Bessel functions; [`super::TableOptions::w_nodes_for_field`]).
+    pub follows_field: bool,
+    /// How its planes lie on the GPU ([`footprint`]).
+    pub layout: TableLayout,
+}
+
 /// How a table variant lays its planes out on the GPU.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(crate) struct TableLayout {
@@ -219,7 +232,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     }
     // Leaving out: the build integrates only the wavelengths whose weight matters.
     let (selection, wavelengths) = WavelengthsLeft::of(
-        &ColourTable::new(spec.step_nm)?,
+        &setup.colour(&ColourTable::new(spec.step_nm)?),
         setup.lambda_tolerance(),
         "in the table build",
     );
@@ -301,7 +314,8 @@ pub(crate) fn upload_built(
 ) -> Result<Box<dyn PreparedVariant>> {
     let layout = kind
         .implementation()
-        .table_layout()
+        .table_traits()
+        .map(|t| t.layout)
         .ok_or_else(|| Error::invalid("variant", format!("'{kind}' is not a table variant")))?;
     let (gpu, _) = TableGpu::upload(
         kind,

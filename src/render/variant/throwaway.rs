@@ -1,13 +1,14 @@
 //! A throwaway variant, registered only in the library's own tests: `volume`'s table and
 //! shader under another name, with a CPU model and a float32 mirror of its own that count
 //! their calls. Its test shows that a variant's file and its registry line put it in
-//! `diffract variants`, in the profiler's rows and in the stability matrix, each time
-//! scored against its own model.
+//! `diffract variants`, in the profiler's rows, in the stability matrix (each time scored
+//! against its own model), in the viewer's `V` cycle, and under an environment (its own
+//! fragment file compiled into the compute stages, drawing `volume`'s picture).
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
-use super::table::{prepare, Layout, TableLayout};
+use super::table::{prepare, Layout, TableLayout, TableTraits};
 use super::{
     CpuModel, DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability,
     Variant, VariantStats,
@@ -41,8 +42,16 @@ impl Variant for Throwaway {
         "volume.frag"
     }
 
-    fn table_w_nodes(&self) -> Option<usize> {
-        Some(8)
+    fn table_traits(&self) -> Option<TableTraits> {
+        Some(TableTraits {
+            w_nodes: 8,
+            follows_field: false,
+            layout: TableLayout {
+                layout: Layout::Volume,
+                ghosts: 0,
+                fitted: false,
+            },
+        })
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
@@ -51,14 +60,6 @@ impl Variant for Throwaway {
 
     fn fetch_formula(&self) -> &'static str {
         "1"
-    }
-
-    fn table_layout(&self) -> Option<TableLayout> {
-        Some(TableLayout {
-            layout: Layout::Volume,
-            ghosts: 0,
-            fitted: false,
-        })
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
@@ -195,5 +196,74 @@ mod tests {
         assert_eq!(r.variant.kind, kind);
         assert!(MODEL_CALLS.load(Ordering::Relaxed) >= before + 8);
         assert!(r.vs_model.rel_l2 < 1e-4, "{:?}", r.vs_model);
+
+        // The viewer's `V` reaches it.
+        let state =
+            crate::view::input::ViewState::from_scene(&crate::scene::Scene::default_scene());
+        let mut controls = crate::view::input::Controls::new(state, VariantKind::Flss);
+        let v = winit::keyboard::Key::Character("v".into());
+        let reached = (0..VariantKind::ALL.len()).any(|_| {
+            controls.key(&v);
+            controls.variant == kind
+        });
+        assert!(reached, "V never shows {kind}");
+
+        // Under an environment it draws `volume`'s picture: the same table and shader, built
+        // for the compute stages from its own registry entry.
+        let hf = crate::heightfield::HeightField::new(64, 64, 0.09, vec![0.0; 64 * 64]).unwrap();
+        let shading = crate::brdf::Shading::default();
+        let spec = table::TableSpec {
+            region: table::Region {
+                lo: [-0.04, -0.04, -2.0],
+                hi: [0.04, 0.04, -0.01],
+            },
+            texel_uv: 0.002,
+            w_nodes: 4,
+            step_nm: 20,
+            response: table::Response::Relative,
+        };
+        let lighting = crate::render::env::EnvLighting::build(&hf, 65.0, &shading, &spec).unwrap();
+        let material = crate::material::Material {
+            lambda_step_nm: 20,
+            ..Default::default()
+        };
+        let plan = material
+            .plan_loaded(
+                &hf,
+                &crate::brdf::truncation::Reach::ALL,
+                crate::brdf::truncation::Precision::F32,
+                &crate::report::Stderr,
+            )
+            .unwrap();
+        let prepared = material.prepare_planned_deferred(hf, plan, None).unwrap();
+        let sky =
+            crate::light::env::EnvMap::load(&crate::light::env::EnvSource::Sky, 1.0, 0.0).unwrap();
+        let mut draw = |k: VariantKind| {
+            renderer.set_variant(k);
+            let brdf = renderer.env_brdf(&prepared, &lighting, &shading).unwrap();
+            crate::render::env::render_env_brdf_map(
+                renderer.device(),
+                &lighting,
+                &crate::render::env::EnvMapRequest {
+                    env: &sky,
+                    shading,
+                    samples: 64,
+                    size: 9,
+                    sun: None,
+                    seed: 0,
+                    brdf: Some(&brdf),
+                    per_dispatch: None,
+                },
+            )
+            .unwrap()
+            .xyz
+        };
+        let (mine, volume) = (draw(kind), draw(VariantKind::Volume));
+        assert_eq!(renderer.validation_messages(), 0);
+        assert!(mine.iter().any(|p| p[1] > 0.0), "an all-black map");
+        assert_eq!(
+            mine, volume,
+            "the throwaway under the sky is volume's picture"
+        );
     }
 }

@@ -3,7 +3,7 @@
 
 use std::sync::Arc;
 
-use super::table::{prepare, Layout, TableLayout};
+use super::table::{prepare, Layout, TableLayout, TableTraits};
 use super::TableFormat;
 use super::{
     DrawSetup, Family, FetchInputs, Mirrored, PreparedVariant, Preset, Stability, Variant,
@@ -31,8 +31,16 @@ impl Variant for Volume {
         "volume.frag"
     }
 
-    fn table_w_nodes(&self) -> Option<usize> {
-        Some(32)
+    fn table_traits(&self) -> Option<TableTraits> {
+        Some(TableTraits {
+            w_nodes: 32,
+            follows_field: false,
+            layout: TableLayout {
+                layout: Layout::Volume,
+                ghosts: 0,
+                fitted: false,
+            },
+        })
     }
 
     fn fetches(&self, f: &FetchInputs<'_>) -> usize {
@@ -41,14 +49,6 @@ impl Variant for Volume {
 
     fn fetch_formula(&self) -> &'static str {
         "1 (one trilinear fetch)"
-    }
-
-    fn table_layout(&self) -> Option<TableLayout> {
-        Some(TableLayout {
-            layout: Layout::Volume,
-            ghosts: 0,
-            fitted: false,
-        })
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
