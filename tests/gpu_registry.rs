@@ -264,7 +264,8 @@ fn listed_fetches_and_memory_are_what_render_draws() {
 
 /// The hand-written lists of variants stay the registry's: a variant added by its file, its
 /// GLSL and its registry line, and missed in one of them, fails here. The viewer's `V` key
-/// (docs/viewer.md), the table variants in docs/tables.md, and each table variant's
+/// (docs/viewer.md), the table variants in docs/tables.md and in docs/stability.md's
+/// narrow-region table, and each table variant's
 /// default `w` nodes where `--table-w-nodes` states them (its help and `TableOptions`).
 #[test]
 fn the_hand_written_lists_name_every_registered_variant() {
@@ -278,6 +279,12 @@ fn the_hand_written_lists_name_every_registered_variant() {
         .find(|l| l.starts_with("| `V` |"))
         .expect("docs/viewer.md has the V key's row");
     let tables = read("docs/tables.md");
+    let stability = read("docs/stability.md");
+    let stability = stability
+        .lines()
+        .find(|l| l.starts_with("| case | h_max (µm) | max G |"))
+        .expect("docs/stability.md has the narrow-region table")
+        .to_string();
     let help = std::process::Command::new(env!("CARGO_BIN_EXE_diffract"))
         .args(["render", "--help"])
         .output()
@@ -294,6 +301,10 @@ fn the_hand_written_lists_name_every_registered_variant() {
             assert!(
                 tables.contains(&format!("`{name}`")),
                 "docs/tables.md misses {name}"
+            );
+            assert!(
+                stability.contains(&format!(" {name} |")),
+                "docs/stability.md's narrow-region table misses {name}: {stability}"
             );
             let nodes = TableOptions::default().w_nodes_for(kind);
             let stated = format!("{name} {nodes}");
