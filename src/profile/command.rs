@@ -98,6 +98,28 @@ pub struct ProfileArgs {
     /// map's disk [default: 8].
     #[arg(long)]
     pub env_pixels: Option<usize>,
+    /// Also score whole pictures: the default scene (or --picture-scene) at --picture-size,
+    /// drawn by each table variant's rows (or the rows --only names) at each --picture-aa
+    /// mode, against the same scene drawn by the default variant at
+    /// --picture-reference-ss² samples a pixel: relative L2, CIEDE2000 and ꟻLIP with the
+    /// GPU time of each (on with --full).
+    #[arg(long)]
+    pub picture: bool,
+    /// The scene of the picture rows (TOML) [default: the embedded default scene].
+    #[arg(long, value_name = "S.toml")]
+    pub picture_scene: Option<PathBuf>,
+    /// Side of the picture rows' pictures [default: 128, the size CI renders at].
+    #[arg(long)]
+    pub picture_size: Option<u32>,
+    /// Anti-aliasing modes of the picture rows, samples a pixel per side [default: 1,2,4].
+    #[arg(long, value_delimiter = ',', value_name = "N,...")]
+    pub picture_aa: Vec<u32>,
+    /// Samples a pixel per side of the picture rows' reference [default: 16].
+    #[arg(long)]
+    pub picture_reference_ss: Option<u32>,
+    /// Write each picture row's ꟻLIP error map (magma, PNG) into this directory.
+    #[arg(long, value_name = "DIR")]
+    pub picture_maps: Option<PathBuf>,
     #[command(flatten)]
     pub table: TableArgs,
     #[command(flatten)]
@@ -140,6 +162,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     let variants = selected_rows(args)?;
     let base = args.material.apply(Material::default());
     let env = env_profile(args, &base)?;
+    let picture = picture_setup(args)?;
     // The user's numbers and height field are checked before the device opens (each
     // variant loads the field again when it prepares; that is cheap next to its terms).
     base.validate()?;
@@ -167,8 +190,19 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         per_vertex: args.per_vertex,
         cache_dir: args.cache.dir(),
     };
-    let run = profile_with_env(&mut renderer, &setup, env.as_ref())?;
+    let mut run = profile_with_env(&mut renderer, &setup, env.as_ref())?;
     print!("{}", format_table(renderer.device_name(), &setup, &run));
+    if let Some(p) = &picture {
+        let rows = picture_rows(args)?;
+        let frames = match counts.frames {
+            Frames::Fixed(n) => n,
+            Frames::Budget(_) => 3,
+        };
+        let cache = setup.cache_dir.as_deref();
+        let done = super::picture::run(&mut renderer, p, &rows, &setup.base, frames, cache)?;
+        print!("{}", done.table());
+        run.picture = Some(done);
+    }
     if let Some(path) = &args.csv {
         crate::fsutil::write_atomic(path, format_csv(&run).as_bytes())?;
     }
@@ -222,6 +256,92 @@ fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>
         pixels: args.env_pixels.unwrap_or(DEFAULT_ENV_PIXELS),
         variants: env_variants(args)?,
     }))
+}
+
+/// The picture rows' set-up, when `--picture` (or `--full`, or any `--picture-*` flag)
+/// asks for them: the scene loaded and sized, the modes and the reference checked, the
+/// error maps' directory made, before any device work.
+fn picture_setup(args: &ProfileArgs) -> Result<Option<super::picture::PictureSetup>> {
+    use super::picture::{DEFAULT_AA, DEFAULT_SIZE, REFERENCE_SS};
+    let asked = args.picture
+        || args.full
+        || args.picture_scene.is_some()
+        || args.picture_size.is_some()
+        || !args.picture_aa.is_empty()
+        || args.picture_reference_ss.is_some()
+        || args.picture_maps.is_some();
+    if !asked {
+        return Ok(None);
+    }
+    let mut scene = match &args.picture_scene {
+        Some(p) => Scene::load(p)?,
+        None => Scene::default_scene(),
+    };
+    let size = args.picture_size.unwrap_or(DEFAULT_SIZE);
+    if !(1..=1024).contains(&size) {
+        return Err(Error::invalid(
+            "picture-size",
+            format!("{size}; expected 1..=1024 pixels"),
+        ));
+    }
+    scene.output.width = size;
+    scene.output.height = size;
+    let mut aa = if args.picture_aa.is_empty() {
+        DEFAULT_AA.to_vec()
+    } else {
+        args.picture_aa.clone()
+    };
+    aa.sort_unstable();
+    aa.dedup();
+    let reference_ss = args.picture_reference_ss.unwrap_or(REFERENCE_SS);
+    if aa.iter().any(|&n| !(1..=8).contains(&n)) {
+        return Err(Error::invalid(
+            "picture-aa",
+            format!("{aa:?}; each mode is 1..=8 samples a pixel per side"),
+        ));
+    }
+    let most = aa.last().copied().unwrap_or(1);
+    if !(2..=32).contains(&reference_ss) || reference_ss <= most {
+        return Err(Error::invalid(
+            "picture-reference-ss",
+            format!("{reference_ss}; expected 2..=32 and more than the largest mode ({most})"),
+        ));
+    }
+    if u64::from(size) * u64::from(reference_ss) > 8192 {
+        return Err(Error::invalid(
+            "picture-reference-ss",
+            format!(
+                "{size} pixels × {reference_ss} samples a side is a {}² picture; at most 8192²",
+                size * reference_ss
+            ),
+        ));
+    }
+    if let Some(dir) = &args.picture_maps {
+        std::fs::create_dir_all(dir)
+            .map_err(|e| Error::invalid("picture-maps", format!("{}: {e}", dir.display())))?;
+    }
+    Ok(Some(super::picture::PictureSetup {
+        scene,
+        aa,
+        reference_ss,
+        error_maps: args.picture_maps.clone(),
+    }))
+}
+
+/// The rows drawn as whole pictures: those `--only` names (less the debug views), else
+/// every table variant's (a DFT-term variant evaluates thousands of terms a pixel: at a
+/// picture's size and supersampling, minutes on a CPU device; `--only` adds it).
+fn picture_rows(args: &ProfileArgs) -> Result<Vec<Variant>> {
+    let rows = selected_rows(args)?;
+    let named = args.only.iter().any(|n| n != "env");
+    Ok(rows
+        .into_iter()
+        .filter(|v| match v.kind.family() {
+            crate::render::variant::Family::Table => true,
+            crate::render::variant::Family::Terms => named,
+            crate::render::variant::Family::Debug => false,
+        })
+        .collect())
 }
 
 /// The variants the environment rows draw: every one that can be lit by an environment

@@ -21,12 +21,14 @@
 //! (the entry [`profile`] and each row's measurement), `budget` (frames, budget, pace),
 //! `score` (the scored pixels, the references and a row's scores), `stats` (the error
 //! figures and their bootstrap intervals), `output` (the reports, table, CSV and plot),
-//! `progress` (the lines on stderr) and `command` (`diffract profile`'s flags and run).
+//! `progress` (the lines on stderr), `picture` (the whole-picture rows: a scene against
+//! the same scene supersampled) and `command` (`diffract profile`'s flags and run).
 
 mod budget;
 mod command;
 mod env;
 mod output;
+mod picture;
 mod plan;
 mod progress;
 mod run;
@@ -38,6 +40,7 @@ pub use command::{profile_args, run, Counts, ProfileArgs};
 pub use output::{
     format_csv, format_table, EnvRow, EnvRun, EnvSkipped, ProfileRun, Skipped, VariantReport,
 };
+pub use picture::{PictureError, PictureRow, PictureRun, PictureSetup};
 pub use plan::{
     flss_variants, standard_variants, table_variants, EnvProfile, ProfileSetup, Variant,
     DEFAULT_ENV_PIXELS, DEFAULT_ENV_SPP,

@@ -75,6 +75,8 @@ pub struct ProfileRun {
     pub scored: usize,
     /// The environment-lit rows (`--env`), when asked for.
     pub env: Option<EnvRun>,
+    /// The whole-picture rows (`--picture`), when asked for.
+    pub picture: Option<super::picture::PictureRun>,
 }
 
 /// One measured environment row.
@@ -352,7 +354,7 @@ fn notes(run: &ProfileRun) -> String {
 /// intervals; a skipped row has its name, its settings, `skipped`, the reason and its
 /// estimated cost only.
 pub fn format_csv(run: &ProfileRun) -> String {
-    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref,overshoot,reference_dark,leave_out,frames,gpu_ms_p10,gpu_ms_p90,rel_l2_ref_lo,rel_l2_ref_hi,p99_de_ref_lo,p99_de_ref_hi,skipped,estimated_s,env_spp\n");
+    let mut csv = String::from("variant,expansion,terms,window_radius,lambda_step_nm,storage,gpu_ms,wall_ms,rel_l2_ref,max_abs_y_ref,mean_de_ref,max_de_ref,rel_l2_model,kind,detail,fetches,build_ms,gpu_bytes,mesh_gpu_ms,p50_de_ref,p99_de_ref,p99_de_model,conditioning,per_vertex,mesh_rel_l2_ref,mesh_p99_de_ref,overshoot,reference_dark,leave_out,frames,gpu_ms_p10,gpu_ms_p90,rel_l2_ref_lo,rel_l2_ref_hi,p99_de_ref_lo,p99_de_ref_hi,skipped,estimated_s,env_spp,picture_aa,flip_mean,p95_de_ref\n");
     let opt = |v: Option<f64>| v.map_or(String::new(), |g| g.to_string());
     let settings = |v: &Variant| {
         format!(
@@ -397,11 +399,14 @@ pub fn format_csv(run: &ProfileRun) -> String {
             "false".to_string(),
             String::new(),
             String::new(),
+            String::new(),
+            String::new(),
+            String::new(),
         ];
         csv.push_str(&format!("{},{}\n", settings(v), columns.join(",")));
     }
     for k in &run.skipped {
-        let mut columns = vec![String::new(); 33];
+        let mut columns = vec![String::new(); 36];
         columns[7] = k.variant.kind.to_string();
         columns[8] = k.reason.replace(',', ";");
         columns[22] = k.variant.leave_out.to_string();
@@ -411,6 +416,9 @@ pub fn format_csv(run: &ProfileRun) -> String {
     }
     if let Some(e) = &run.env {
         csv.push_str(&env_csv(e));
+    }
+    if let Some(p) = &run.picture {
+        csv.push_str(&p.csv());
     }
     csv
 }
@@ -422,7 +430,7 @@ fn env_csv(e: &EnvRun) -> String {
     let detail = format!("{}; {}", e.source, e.table).replace(',', ";");
     for r in &e.rows {
         let (v, i) = (&r.vs_reference, &r.intervals);
-        let mut c = vec![String::new(); 39];
+        let mut c = vec![String::new(); 42];
         c[0] = r.name();
         c[6] = r.gpu_ms.to_string();
         c[7] = r.wall_ms.to_string();
@@ -451,7 +459,7 @@ fn env_csv(e: &EnvRun) -> String {
         csv.push_str(&(c.join(",") + "\n"));
     }
     for k in &e.skipped {
-        let mut c = vec![String::new(); 39];
+        let mut c = vec![String::new(); 42];
         c[0] = row_name(&k.variant, k.samples);
         c[13] = "env".into();
         c[14] = k.reason.replace(',', ";");
