@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Installs what diffract needs on a Debian (bookworm or later) machine, as root:
 #   Vulkan loader, headers, Mesa's drivers (lavapipe) and the Khronos validation layer;
-#   Xvfb for the viewer's tests; shaderc (libshaderc-dev, with glslang-dev and spirv-tools).
+#   Xvfb for the viewer's tests; shaderc (libshaderc-dev, with glslang-dev and spirv-tools);
+#   g++ for the ꟻLIP library that the nv-flip crate compiles.
 # Then it makes one complete static shaderc library for the shaderc crate. Debian splits
 # shaderc from its dependencies: libshaderc_combined.a lacks glslang and SPIRV-Tools, and the
 # shared libshaderc.so leaves glslang's front end undefined (linked with Debian's static
@@ -13,7 +14,7 @@
 set -euo pipefail
 
 packages=(mesa-vulkan-drivers libvulkan1 libvulkan-dev vulkan-validationlayers
-          cmake ninja-build python3 xvfb libshaderc-dev glslang-dev spirv-tools)
+          cmake ninja-build python3 xvfb libshaderc-dev glslang-dev spirv-tools g++)
 missing=()
 for p in "${packages[@]}"; do
     dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
