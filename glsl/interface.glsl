@@ -40,6 +40,13 @@ const int MAX_DISK_SAMPLES = 256;
 const float PI = 3.14159265358979;
 // Nodes of the uniform sky's table; light::sky::TAIL_NODES on the CPU.
 const int SKY_TAIL_NODES = 16;
+// Most levels of a table pre-filtered for a pixel's footprint; brdf::table::MAX_LEVELS.
+const int MAX_TABLE_LEVELS = 6;
+
+// The pixel's footprint in (u, v) = −(ωi + ωr)_xy at the light's centre: xy its change
+// across one pixel along x, zw along y. shade.glsl sets it in mesh mode before the variant
+// evaluates; elsewhere (maps, compute stages) it stays 0, a point.
+vec4 gUvFootprint = vec4(0.0);
 
 // --- descriptor set 0 ----------------------------------------------------------------
 layout(set = 0, binding = 0, std140) uniform Params {

@@ -44,6 +44,13 @@ void main() {
         // The light's disc: Σ_k weight_k · shade(ωi_k), every direction shaded in full
         // (scene::TextureSpec::shade states the same on the CPU); one entry for a point.
         vec3 c = vec3(0.0);
+        // The pixel's footprint in (u, v) at the light's centre, for a variant that reads
+        // a table filtered to it (computed here, in uniform control flow).
+        vec3 towardsCentre = -normalize(params.lightDirWorld.xyz);
+        vec2 uvCentre = -(safeNormalize(vec3(dot(towardsCentre, inTangent),
+                                             dot(towardsCentre, inBitangent),
+                                             dot(towardsCentre, inNormal))) + wr).xy;
+        gUvFootprint = vec4(dFdx(uvCentre), dFdy(uvCentre));
         int samples = DISC_PREFILTERED ? 1 : clamp(params.lightInfo.x, 1, MAX_DISK_SAMPLES);
         for (int k = 0; k < samples; ++k) {
             vec3 towardsLight = DISC_PREFILTERED ? -normalize(params.lightDirWorld.xyz)

@@ -9,6 +9,8 @@ layout(set = 0, binding = 4, std140) uniform TableInfo {
     vec4 lo;        // xyz: lower corner (u0, v0, w0) of the tabulated box
     vec4 invExtent; // xyz: 1/(u1 − u0), 1/(v1 − v0), 1/(w1 − w0)
     vec4 nodes;     // x: nodes along u, y: along v, z: along w (volume slices)
+    vec4 atlas;     // xy: the image's texels along u and v, z: levels (brdf::table::Levelled)
+    vec4 levels[MAX_TABLE_LEVELS]; // per level: xy nodes along u and v, zw its first texel
 } tableInfo;
 
 // Position of uvw in the box as fractions in [0, 1]; false outside (the variant writes

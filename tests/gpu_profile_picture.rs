@@ -77,12 +77,29 @@ fn the_picture_rows_fall_with_supersampling_against_a_finer_picture() {
         .map(|l| l.split(',').collect::<Vec<_>>())
         .filter(|c| c[col("kind")] == "picture")
         .collect();
-    assert_eq!(rows.len(), 3, "{text}");
+    // The three modes, and the default variant filtered to the pixel's footprint at the
+    // two smallest (its table's pre-filtered levels).
+    assert_eq!(rows.len(), 5, "{text}");
     let num = |r: &Vec<&str>, name: &str| -> f64 { r[col(name)].parse().unwrap() };
     for r in &rows {
         assert_eq!(r.len(), header.len(), "{r:?}");
     }
-    let score = |name: &str| rows.iter().map(|r| num(r, name)).collect::<Vec<f64>>();
+    let score = |name: &str| rows[..3].iter().map(|r| num(r, name)).collect::<Vec<f64>>();
+    let filtered = &rows[3..];
+    assert!(filtered.iter().all(|r| r[0].contains("filtered")), "{text}");
+    // Filtered to its footprint, a pixel's picture is nearer the converged one than the
+    // same mode read at the pixel's centre (relative L2 and ꟻLIP).
+    for (k, r) in filtered.iter().enumerate() {
+        for metric in ["rel_l2_ref", "flip_mean"] {
+            let (f, plain) = (num(r, metric), num(&rows[k], metric));
+            eprintln!("{metric}: {} {f} against {plain}", r[0]);
+            assert!(
+                f < plain,
+                "{}: {metric} {f} against {plain} unfiltered",
+                r[0]
+            );
+        }
+    }
     for metric in ["rel_l2_ref", "p99_de_ref", "flip_mean", "mean_de_ref"] {
         let s = score(metric);
         eprintln!("{metric} at 1×1, 2×2, 4×4: {s:?}");
@@ -92,6 +109,7 @@ fn the_picture_rows_fall_with_supersampling_against_a_finer_picture() {
         );
     }
     assert_eq!(score("picture_aa"), vec![1.0, 2.0, 4.0]);
+    assert_eq!(num(&filtered[1], "picture_aa"), 2.0);
     for aa in [1, 2, 4] {
         let map = maps.join(format!("flip_chebyshev-w_{aa}_{aa}.png"));
         let (w, h, _) = diffract::image_io::read_png_rgb8(&map).expect("ꟻLIP map");

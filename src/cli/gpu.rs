@@ -40,6 +40,11 @@ pub struct TableArgs {
     /// CPU when Vulkan itself runs on the CPU, e.g. lavapipe).
     #[arg(long, value_enum, default_value_t = TableBuild::Auto)]
     pub table_build: TableBuild,
+    /// chebyshev-w: levels of its table pre-filtered for a pixel's footprint, each twice as
+    /// coarse as the one before; a pixel reads the level its footprint in (u, v) spans
+    /// (1: the table alone, read at the pixel's centre) [default: 1].
+    #[arg(long, default_value_t = 1)]
+    pub table_levels: usize,
 }
 
 impl TableArgs {
@@ -53,6 +58,7 @@ impl TableArgs {
             format: self.table_format,
             build: self.table_build,
             response: crate::brdf::table::Response::Relative,
+            levels: self.table_levels,
         }
     }
 
@@ -61,7 +67,13 @@ impl TableArgs {
     /// the table supports, a wavelength step that divides the visible range, a budget of at
     /// least 1 MB.
     pub fn check(&self) -> Result<()> {
-        use crate::brdf::table::MAX_NODES_W;
+        use crate::brdf::table::{MAX_LEVELS, MAX_NODES_W};
+        if !(1..=MAX_LEVELS).contains(&self.table_levels) {
+            return Err(Error::invalid(
+                "table levels",
+                format!("{}; expected 1..={MAX_LEVELS}", self.table_levels),
+            ));
+        }
         if let Some(texel) = self.table_texel {
             crate::guard::positive("table texel", texel, "")?;
             if texel < MIN_TABLE_TEXEL {

@@ -14,6 +14,7 @@
 
 use std::path::{Path, PathBuf};
 
+use crate::brdf::table::MAX_LEVELS;
 use crate::colour::{delta_e2000, linear_srgb_to_xyz, linear_to_srgb8, xyz_to_lab};
 use crate::material::{Material, PreparedMaterial};
 use crate::render::{Renderer, SceneInputs, TableOptions, VariantKind};
@@ -235,11 +236,6 @@ pub fn run(
     for row in rows {
         r.set_variant(row.kind);
         r.set_storage_format(row.storage);
-        r.set_table_options(TableOptions {
-            format: row.table.format,
-            step_nm: row.table.step_nm,
-            ..TableOptions::RENDER
-        });
         r.set_leave_out(row.leave_out);
         let prepared = match prepare(&row.material(base), cache_dir) {
             Ok(p) => p,
@@ -248,8 +244,24 @@ pub fn run(
                 continue;
             }
         };
-        for &aa in &setup.aa {
-            let name = format!("{} {aa}×{aa}", row.name);
+        // Each mode as asked; a table that can be filtered to the pixel's footprint also
+        // filtered, at the two smallest modes.
+        let mut modes: Vec<(u32, usize)> =
+            setup.aa.iter().map(|&a| (a, row.table.levels)).collect();
+        if row.kind.resolve() == VariantKind::ChebyshevW && row.table.levels == 1 {
+            modes.extend(setup.aa.iter().take(2).map(|&a| (a, MAX_LEVELS)));
+        }
+        for (aa, levels) in modes {
+            r.set_table_options(TableOptions {
+                format: row.table.format,
+                step_nm: row.table.step_nm,
+                levels,
+                ..TableOptions::RENDER
+            });
+            let name = match levels {
+                1 => format!("{} {aa}×{aa}", row.name),
+                _ => format!("{} filtered {aa}×{aa}", row.name),
+            };
             eprintln!("profile: picture {name}");
             let drawn = match draw(r, scene, &inputs, &prepared, aa, frames.max(1)) {
                 Ok(d) => d,

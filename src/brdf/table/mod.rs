@@ -14,9 +14,11 @@
 //!
 //! One file each: the region and the spec ([`region`]), the exact sampler ([`sample`]), the
 //! disc pre-filter ([`disc`]), the splines ([`spline`]), the `w` nodes and how many a table
-//! needs ([`nodes`]) and the representations ([`representation`]).
+//! needs ([`nodes`]), the representations ([`representation`]) and the levels pre-filtered
+//! for a pixel's footprint ([`levels`]).
 
 mod disc;
+mod levels;
 mod nodes;
 mod region;
 mod representation;
@@ -24,6 +26,7 @@ mod sample;
 mod spline;
 
 pub use disc::{prefilter_disc, DiscKernel};
+pub use levels::{Levelled, MAX_LEVELS};
 pub use nodes::{
     chebyshev_nodes, chebyshev_w_nodes, uniform_nodes, CHEBYSHEV_W_TOLERANCE, MIN_CHEBYSHEV_W_NODES,
 };

@@ -37,6 +37,12 @@ pub trait GTable: Send + Sync {
         self.nodes_uv()
     }
 
+    /// Levels of the stored planes pre-filtered for a pixel's footprint
+    /// ([`super::Levelled`]); 1: the planes are the table alone.
+    fn footprint_levels(&self) -> usize {
+        1
+    }
+
     /// How much float32 rounding the representation amplifies (the condition number of its
     /// sum), where that is the limiting factor; `None` for stable representations.
     fn conditioning(&self) -> Option<f64> {

@@ -84,7 +84,10 @@ impl Variant for ChebyshevW {
             setup,
             LAYOUT.layout,
             table::ChebyshevW::nodes,
-            |r, s| Ok(table::ChebyshevW::from_nodes(r, &s)),
+            |r, s| {
+                let base = table::ChebyshevW::from_nodes(r, &s);
+                Ok(table::Levelled::new(base, setup.table.levels))
+            },
         )
     }
 }

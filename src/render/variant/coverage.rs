@@ -70,6 +70,7 @@ impl Variant for Coverage {
                 0.0,
             ],
             nodes: [0.0; 4],
+            levels: [[0.0; 4]; 1 + crate::brdf::table::MAX_LEVELS],
         };
         let info = Buffer::with_data(
             dev,
@@ -86,13 +87,15 @@ impl Variant for Coverage {
     }
 }
 
-/// Mirror of `TableInfo` in glsl/table.glsl (only `lo` and `invExtent` are read).
+/// Mirror of `TableInfo` in glsl/table.glsl (only `lo` and `invExtent` are read; the
+/// image's size and its levels stay 0).
 #[repr(C)]
 #[derive(Clone, Copy)]
 struct RegionUbo {
     lo: [f32; 4],
     inv_extent: [f32; 4],
     nodes: [f32; 4],
+    levels: [[f32; 4]; 1 + crate::brdf::table::MAX_LEVELS],
 }
 
 // SAFETY: repr(C) of f32 arrays: no padding.

@@ -397,6 +397,9 @@ pub struct TableOptions {
     /// What `G` answers: relative reflectance (the sun-lit passes) or radiance (the
     /// environment-lit stages, [`crate::render::env_brdf`]).
     pub response: crate::brdf::table::Response,
+    /// Levels of `chebyshev-w`'s table pre-filtered for a pixel's footprint
+    /// ([`crate::brdf::table::Levelled`]); 1: the table alone, read at a pixel's centre.
+    pub levels: usize,
 }
 
 impl Default for TableOptions {
@@ -409,6 +412,7 @@ impl Default for TableOptions {
             format: TableFormat::Rgba32f,
             build: Default::default(),
             response: Default::default(),
+            levels: 1,
         }
     }
 }
@@ -425,6 +429,7 @@ impl TableOptions {
         format: TableFormat::Rgba16f,
         build: crate::render::table_build::TableBuild::Auto,
         response: crate::brdf::table::Response::Relative,
+        levels: 1,
     };
 
     /// The step of a table that holds no disc, unless another is asked for: a line of the

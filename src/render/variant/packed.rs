@@ -13,12 +13,13 @@ use crate::report::Report;
 
 const MAGIC: &[u8; 8] = b"DIFFPACK";
 /// Bump when the layout of the texels or of the file changes.
-const VERSION: u64 = 1;
-/// Header: magic, version, key, 7 sizes, format, 6 region bounds, byte count.
-const HEADER: usize = 8 + 8 + 8 + 7 * 8 + 8 + 6 * 8 + 8;
+const VERSION: u64 = 2;
+/// Header: magic, version, key, 8 sizes, format, 6 region bounds, byte count.
+const HEADER: usize = 8 + 8 + 8 + 8 * 8 + 8 + 6 * 8 + 8;
 
 /// The texels of a table as one image: `planes` coefficient planes of `nu × nv` nodes,
-/// stored `pu × pv` texels a layer in `layers` layers of `format`, over `region`.
+/// stored `pu × pv` texels a layer in `layers` layers of `format`, over `region`, with
+/// `levels` levels pre-filtered for a pixel's footprint (`brdf::table::Levelled`; 1: none).
 #[derive(Debug, Clone, PartialEq)]
 pub struct Packed {
     pub nu: usize,
@@ -28,6 +29,7 @@ pub struct Packed {
     pub planes: usize,
     pub layers: usize,
     pub fetches: usize,
+    pub levels: usize,
     pub format: TableFormat,
     pub region: Region,
     pub bytes: Vec<u8>,
@@ -52,6 +54,7 @@ impl Packed {
             self.planes,
             self.layers,
             self.fetches,
+            self.levels,
         ] {
             out.extend_from_slice(&(v as u64).to_le_bytes());
         }
@@ -85,15 +88,15 @@ impl Packed {
             return Err("another version or key".into());
         }
         let size = |i: usize| usize::try_from(word(i)).map_err(|_| "size overflows".to_string());
-        let format = match word(9) {
+        let format = match word(10) {
             0 => TableFormat::Rgba32f,
             1 => TableFormat::Rgba16f,
             f => return Err(format!("unknown texel format {f}")),
         };
         let real = |i: usize| f64::from_bits(word(i));
         let region = Region {
-            lo: [real(10), real(11), real(12)],
-            hi: [real(13), real(14), real(15)],
+            lo: [real(11), real(12), real(13)],
+            hi: [real(14), real(15), real(16)],
         };
         let p = Packed {
             nu: size(2)?,
@@ -103,6 +106,7 @@ impl Packed {
             planes: size(6)?,
             layers: size(7)?,
             fetches: size(8)?,
+            levels: size(9)?,
             format,
             region,
             bytes: body[HEADER..].to_vec(),
@@ -111,7 +115,7 @@ impl Packed {
             p.pu.checked_mul(p.pv)
                 .and_then(|t| t.checked_mul(p.layers))
                 .and_then(|t| t.checked_mul(format.texel_bytes()));
-        if size(16)? != p.bytes.len() || expected != Some(p.bytes.len()) {
+        if size(17)? != p.bytes.len() || expected != Some(p.bytes.len()) {
             return Err("texel count does not match its sizes".into());
         }
         Ok(p)
@@ -176,6 +180,7 @@ mod tests {
             planes: 2,
             layers: 1,
             fetches: 4,
+            levels: 1,
             format: TableFormat::Rgba16f,
             region: Region {
                 lo: [-0.1, -0.2, -2.0],

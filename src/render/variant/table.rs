@@ -13,7 +13,7 @@ use super::{
     CpuModel, DrawSetup, PreparedVariant, SpecConstant, Specialisation, TableFormat, TableOptions,
     VariantKind, VariantStats,
 };
-use crate::brdf::table::{prefilter_disc, GTable, Region, Slices, TableSpec};
+use crate::brdf::table::{prefilter_disc, GTable, Levelled, Region, Slices, TableSpec};
 use crate::colour::ColourTable;
 use crate::gpu::formats::f32_to_f16;
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
@@ -176,6 +176,10 @@ struct TableInfoUbo {
     lo: [f32; 4],
     inv_extent: [f32; 4],
     nodes: [f32; 4],
+    /// The image's texels along u and v, and its levels ([`crate::brdf::table::Levelled`]).
+    atlas: [f32; 4],
+    /// Per level: nodes along u and v, and its first texel's column and row.
+    levels: [[f32; 4]; crate::brdf::table::MAX_LEVELS],
 }
 
 // SAFETY: repr(C) of f32 arrays: no padding.
@@ -243,7 +247,9 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let packed_key = packed_key(kind, dev, setup, &spec, nodes, keep, layout, smoothed)?;
     if let (Some(key), Some(dir)) = (packed_key, setup.cache_dir) {
         let (nu, nv) = spec.uv_nodes()?;
-        let most = ((nu + 3) * (nv + 3) * spec.w_nodes.max(1) * 16) as u64;
+        // The levels for a pixel's footprint take up to half as many texels again.
+        let levels = if setup.table.levels > 1 { 2 } else { 1 };
+        let most = (levels * (nu + 3) * (nv + 3) * spec.w_nodes.max(1) * 16) as u64;
         if let Some(cached) = packed::load(dir, key, (nu, nv), most, setup.report) {
             let mut gpu = TableGpu::from_packed(kind, dev, &spec, &cached, layout, start)?;
             let built = crate::render::table_build::Built::Cached.to_string();
@@ -387,6 +393,9 @@ fn packed_key(
         d.axes.iter().flatten().for_each(|a| h.u64(a.to_bits()));
     }
     h.bytes(format!("{kind} {layout:?} smoothed {smoothed}").as_bytes());
+    if setup.table.levels > 1 {
+        h.bytes(format!("levels {}", setup.table.levels).as_bytes());
+    }
     let (format, _) = filterable_format(dev, setup.table.format)?;
     h.bytes(format!("{format:?}").as_bytes());
     Ok(Some(h.finish()))
@@ -417,6 +426,8 @@ struct TableGpu {
     model: Option<TableModel>,
     left_out: Option<LeftOut>,
     terms: u32,
+    /// Levels of its table pre-filtered for a pixel's footprint (1: none).
+    levels: usize,
     info: Buffer,
     sampler: Sampler,
     image: Image,
@@ -447,6 +458,7 @@ impl TableGpu {
             planes: planes.len(),
             layers: fp.layers,
             fetches: fp.fetches,
+            levels: table.footprint_levels(),
             format,
             region: *table.region(),
             bytes: texel_bytes_of(planes, layout, fp.layers, format),
@@ -510,6 +522,9 @@ impl TableGpu {
         )?;
         let r = p.region;
         let e = r.extent();
+        // The levels pre-filtered for a pixel's footprint, where the planes hold them.
+        let level_count = p.levels.max(1);
+        let levels = Levelled::layout_of(p.nu, p.nv, level_count);
         let ubo = TableInfoUbo {
             lo: [r.lo[0] as f32, r.lo[1] as f32, r.lo[2] as f32, 0.0],
             inv_extent: [
@@ -519,6 +534,10 @@ impl TableGpu {
                 0.0,
             ],
             nodes: [p.nu as f32, p.nv as f32, p.planes as f32, 0.0],
+            atlas: [p.pu as f32, p.pv as f32, level_count as f32, 0.0],
+            levels: std::array::from_fn(|i| {
+                levels.get(i).map_or([0.0; 4], |l| l.map(|x| x as f32))
+            }),
         };
         let info = Buffer::with_data(
             dev,
@@ -531,8 +550,16 @@ impl TableGpu {
             left_out: None,
             stats: VariantStats {
                 name: format!(
-                    "{kind} K={} {}×{} texel {:.4} dλ={} {format:?}",
-                    p.planes, p.nu, p.nv, spec.texel_uv, spec.step_nm
+                    "{kind} K={} {}×{} texel {:.4} dλ={} {format:?}{}",
+                    p.planes,
+                    p.nu,
+                    p.nv,
+                    spec.texel_uv,
+                    spec.step_nm,
+                    match level_count {
+                        1 => String::new(),
+                        n => format!(" {n} levels for the pixel footprint"),
+                    }
                 ),
                 build_ms: start.elapsed().as_secs_f64() * 1e3,
                 gpu_bytes: p.bytes.len(),
@@ -541,6 +568,7 @@ impl TableGpu {
                 disc_prefiltered: false,
             },
             terms: p.planes as u32,
+            levels: level_count,
             info,
             sampler: Sampler::new(
                 dev,
@@ -650,6 +678,7 @@ impl PreparedVariant for TableGpu {
 
     fn specialise(&self, spec: &mut Specialisation) {
         spec[SpecConstant::TableTerms] = self.terms;
+        spec[SpecConstant::FootprintLevels] = (self.levels > 1) as u32;
         spec[SpecConstant::DiscPrefiltered] = self.stats.disc_prefiltered as u32;
     }
 
