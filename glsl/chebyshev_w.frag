@@ -14,41 +14,17 @@ layout(set = 0, binding = 1) uniform sampler2DArray gCoefficients;
 // below; false compiles the lookup at the pixel's centre alone.
 layout(constant_id = 11) const bool FOOTPRINT_LEVELS = false;
 
-// Most lookups a pixel's footprint is read with along its longer axis.
-const int MAX_FOOTPRINT_TAPS = 4;
-
-// How a pixel's footprint is read (brdf::table::levels): the footprint's covariance in
-// texels of the finest level, (J Jᵀ)/12 for the pixel's box (J: ∂(u, v)/∂(x, y)); the level
-// whose kernel (variance h²(4^L − 1)/6) matches its shorter axis, fractional; and taps
-// along its longer axis that make up the rest of that axis's variance. level < 0: a point.
-void footprint(out float level, out vec2 step, out int taps) {
-    level = -1.0;
-    step = vec2(0.0);
-    taps = 1;
+// The level of the table for the pixel's footprint (brdf::table::levels): the footprint's
+// covariance in texels of the finest level is (J Jᵀ)/12 for the pixel's box (J: ∂(u, v)/
+// ∂(x, y)); the level whose kernel (variance h²(4^L − 1)/6) matches its mean over
+// directions, the nearest. 0 for a point (a map, the compute stages).
+int footprintLevel() {
     int count = int(tableInfo.atlas.z);
-    if (count <= 1 || gUvFootprint == vec4(0.0)) {
-        return;
-    }
     vec2 h = 1.0 / (tableInfo.invExtent.xy * (tableInfo.nodes.xy - 1.0));
     vec2 dx = gUvFootprint.xy / h;
     vec2 dy = gUvFootprint.zw / h;
-    float a = (dx.x * dx.x + dy.x * dy.x) / 12.0;
-    float c = (dx.y * dx.y + dy.y * dy.y) / 12.0;
-    float b = (dx.x * dx.y + dy.x * dy.y) / 12.0;
-    float mid = 0.5 * (a + c);
-    float r = sqrt(max(0.25 * (a - c) * (a - c) + b * b, 0.0));
-    float major = mid + r;
-    float minor = max(mid - r, 0.0);
-    level = clamp(0.5 * log2(1.0 + 6.0 * minor), 0.0, float(count - 1));
-    vec2 axis = abs(b) > 1e-12 ? normalize(vec2(major - c, b))
-                               : (a >= c ? vec2(1.0, 0.0) : vec2(0.0, 1.0));
-    float rest = major - minor;
-    taps = clamp(int(ceil(sqrt(rest / max(minor, 1e-6)))), 1, MAX_FOOTPRINT_TAPS);
-    if (taps > 1) {
-        // Evenly spaced taps of variance d²(n² − 1)/12 make up the rest; in fractions.
-        float d = sqrt(12.0 * rest / float(taps * taps - 1));
-        step = d * axis / (tableInfo.nodes.xy - 1.0);
-    }
+    float mean = (dot(dx, dx) + dot(dy, dy)) / 24.0;
+    return clamp(int(floor(0.5 * log2(1.0 + 6.0 * mean) + 0.5)), 0, count - 1);
 }
 
 // Fetch positions and pair weights of the cubic B-spline at fraction f on the n nodes of a
@@ -111,41 +87,13 @@ vec3 seriesAt(vec3 f, int level) {
     return coefficient(packed, 0) + x * b1 - b2;
 }
 
-// G at fraction f between two levels, blended.
-vec3 levelsAt(vec3 f, float level) {
-    int below = int(floor(level));
-    float t = level - float(below);
-    vec3 g = seriesAt(f, below);
-    if (t > 0.0) {
-        g = mix(g, seriesAt(f, below + 1), t);
-    }
-    return g;
-}
-
 vec3 diffractionXyz(vec3 wi, vec3 wr) {
     float gainC = gainFactor(wi, wr);
     vec3 f;
     if (gainC == 0.0 || !tableFraction(-wi - wr, f)) {
         return vec3(0.0);
     }
-    float level = -1.0;
-    vec2 step;
-    int taps;
-    if (FOOTPRINT_LEVELS) {
-        footprint(level, step, taps);
-    }
-    vec3 g;
-    if (level < 0.0) {
-        g = seriesAt(f, 0);
-    } else {
-        // The footprint's taps along its longer axis, each at the shorter axis's level.
-        g = vec3(0.0);
-        for (int k = 0; k < taps; ++k) {
-            vec3 fk = f + vec3((float(k) - 0.5 * float(taps - 1)) * step, 0.0);
-            g += levelsAt(clamp(fk, vec3(0.0), vec3(1.0)), level);
-        }
-        g /= float(taps);
-    }
+    vec3 g = seriesAt(f, FOOTPRINT_LEVELS ? footprintLevel() : 0);
     // G ≥ 0: the splines and the series in w may overshoot below zero; light cannot.
     return gainC * max(g, vec3(0.0));
 }

@@ -83,6 +83,9 @@ fn render(dir: &Path, scene: &Path, variant: &str, nodes: usize) -> std::process
         .arg(scene)
         .args(["--variant", variant, "--table-step-nm", "10"])
         .args(["--table-w-nodes", &nodes.to_string()])
+        // The representations compared at the pixels' centres, chebyshev-w's levels for
+        // the pixel footprint left out.
+        .args(["--table-levels", "1"])
         .arg("-o")
         .arg(&out)
         .env("DIFFRACT_CACHE", dir.join("cache"))

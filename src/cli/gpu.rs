@@ -42,8 +42,8 @@ pub struct TableArgs {
     pub table_build: TableBuild,
     /// chebyshev-w: levels of its table pre-filtered for a pixel's footprint, each twice as
     /// coarse as the one before; a pixel reads the level its footprint in (u, v) spans
-    /// (1: the table alone, read at the pixel's centre) [default: 1].
-    #[arg(long, default_value_t = 1)]
+    /// (1: the table alone, read at the pixel's centre).
+    #[arg(long, default_value_t = TableOptions::RENDER.levels)]
     pub table_levels: usize,
 }
 

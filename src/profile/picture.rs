@@ -199,7 +199,11 @@ pub fn run(
     let inputs = SceneInputs::load(scene, true)?;
     let prepared = prepare(base, cache_dir)?;
     r.set_variant(VariantKind::DEFAULT);
-    r.set_table_options(TableOptions::RENDER);
+    // Unfiltered: at that rate the samples themselves average each pixel's footprint.
+    r.set_table_options(TableOptions {
+        levels: 1,
+        ..TableOptions::RENDER
+    });
     r.set_leave_out(true);
     eprintln!(
         "profile: picture reference: {} at {}×{} samples a pixel",
@@ -245,11 +249,12 @@ pub fn run(
             }
         };
         // Each mode as asked; a table that can be filtered to the pixel's footprint also
-        // filtered, at the two smallest modes.
+        // the other way, at the two smallest modes.
         let mut modes: Vec<(u32, usize)> =
             setup.aa.iter().map(|&a| (a, row.table.levels)).collect();
-        if row.kind.resolve() == VariantKind::ChebyshevW && row.table.levels == 1 {
-            modes.extend(setup.aa.iter().take(2).map(|&a| (a, MAX_LEVELS)));
+        if row.kind.resolve() == VariantKind::ChebyshevW {
+            let other = if row.table.levels > 1 { 1 } else { MAX_LEVELS };
+            modes.extend(setup.aa.iter().take(2).map(|&a| (a, other)));
         }
         for (aa, levels) in modes {
             r.set_table_options(TableOptions {
@@ -258,9 +263,11 @@ pub fn run(
                 levels,
                 ..TableOptions::RENDER
             });
-            let name = match levels {
-                1 => format!("{} {aa}×{aa}", row.name),
-                _ => format!("{} filtered {aa}×{aa}", row.name),
+            let filtered = row.kind.resolve() == VariantKind::ChebyshevW && levels > 1;
+            let name = match (filtered, row.table.levels > 1) {
+                (true, false) => format!("{} filtered {aa}×{aa}", row.name),
+                (false, true) => format!("{} unfiltered {aa}×{aa}", row.name),
+                _ => format!("{} {aa}×{aa}", row.name),
             };
             eprintln!("profile: picture {name}");
             let drawn = match draw(r, scene, &inputs, &prepared, aa, frames.max(1)) {

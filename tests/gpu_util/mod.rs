@@ -238,7 +238,7 @@ struct RenderDefaults {
 }
 
 /// Sets up `r` and prepares `material` exactly as `diffract render` does with no options
-/// (its variant, storage, table options, leaving out, the material flags' defaults), with
+/// (its variant, storage, table options but one level, leaving out, the material flags' defaults), with
 /// the tables cached in `target/test-output/<cache>` so a rerun skips their build.
 pub fn as_render_defaults(r: &mut Renderer, material: &Material, cache: &str) -> PreparedMaterial {
     use clap::Parser;
@@ -253,7 +253,12 @@ pub fn as_render_defaults(r: &mut Renderer, material: &Material, cache: &str) ->
         .expect("default material");
     r.set_storage_format(args.gpu.storage);
     r.set_variant(args.gpu.variant);
-    r.set_table_options(args.gpu.table.options());
+    // One level: the tests compare pixels with the f64 reference at their centres, not
+    // over their footprints.
+    r.set_table_options(diffract::render::TableOptions {
+        levels: 1,
+        ..args.gpu.table.options()
+    });
     r.set_leave_out(!args.keep_all);
     let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
         .join("target/test-output")

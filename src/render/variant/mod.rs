@@ -419,8 +419,10 @@ impl Default for TableOptions {
 
 impl TableOptions {
     /// What `render`, `view` and `profile` build tables with unless told otherwise: the
-    /// defaults in float16 (`TableOptions::default()` keeps float32 for tests that compare
-    /// with the f64 model at float32's rounding).
+    /// defaults in float16, `chebyshev-w` with its levels for a pixel's footprint (measured
+    /// nearer the converged picture, and faster, than the table read at the pixel's centre:
+    /// docs/results/whole-picture.md). `TableOptions::default()` keeps float32 and one level
+    /// for tests that compare with the f64 model point by point.
     pub const RENDER: TableOptions = TableOptions {
         texel_uv: None,
         w_nodes: None,
@@ -429,7 +431,7 @@ impl TableOptions {
         format: TableFormat::Rgba16f,
         build: crate::render::table_build::TableBuild::Auto,
         response: crate::brdf::table::Response::Relative,
-        levels: 1,
+        levels: crate::brdf::table::MAX_LEVELS,
     };
 
     /// The step of a table that holds no disc, unless another is asked for: a line of the
