@@ -117,7 +117,8 @@ pub struct ProfileArgs {
     /// Samples a pixel per side of the picture rows' reference [default: 16].
     #[arg(long)]
     pub picture_reference_ss: Option<u32>,
-    /// Write each picture row's ꟻLIP error map (magma, PNG) into this directory.
+    /// Write each picture row's ꟻLIP error map (magma) and picture, and the reference, as
+    /// PNG into this directory.
     #[arg(long, value_name = "DIR")]
     pub picture_maps: Option<PathBuf>,
     #[command(flatten)]

@@ -38,7 +38,8 @@ pub struct PictureSetup {
     pub aa: Vec<u32>,
     /// Samples a pixel per side of the reference.
     pub reference_ss: u32,
-    /// Where each row's ꟻLIP error map is written (magma, as PNG), when asked.
+    /// Where each row's ꟻLIP error map (magma) and picture, and the reference, are written
+    /// as PNG, when asked.
     pub error_maps: Option<PathBuf>,
 }
 
@@ -227,6 +228,10 @@ pub fn run(
         .map(|p| (0..3).any(|c| (p[c] - bg[c]).abs() > 1e-6))
         .collect();
     let (convergence, _) = score(&reference, &half, &mask, (w, h));
+    if let Some(dir) = &setup.error_maps {
+        let file = dir.join("reference.png");
+        crate::image_io::write_png_rgb8(&file, w, h, reference.srgb.clone())?;
+    }
     let mut out = PictureRun {
         width: w,
         height: h,
@@ -279,9 +284,11 @@ pub fn run(
             };
             let (error, map) = score(&reference, &drawn, &mask, (w, h));
             if let Some(dir) = &setup.error_maps {
-                let file = dir.join(format!("flip {name}.png").replace([' ', '×'], "_"));
+                let file =
+                    |what: &str| dir.join(format!("{what} {name}.png").replace([' ', '×'], "_"));
                 let rgb = map.apply_color_lut(&nv_flip::magma_lut()).to_vec();
-                crate::image_io::write_png_rgb8(&file, w, h, rgb)?;
+                crate::image_io::write_png_rgb8(&file("flip"), w, h, rgb)?;
+                crate::image_io::write_png_rgb8(&file("picture"), w, h, drawn.srgb.clone())?;
             }
             out.rows.push(PictureRow {
                 name,
