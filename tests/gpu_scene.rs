@@ -394,6 +394,19 @@ fn render_command_resolves_supersampling_and_exposure() {
         .output()
         .expect("run diffract");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // The expected aliasing error of what it wrote, from its 2×2 samples' spread.
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let line = stdout
+        .lines()
+        .find(|l| l.starts_with("aliasing: expected rel-L2 "))
+        .unwrap_or_else(|| panic!("no aliasing line: {stdout}"));
+    let e: f64 = line["aliasing: expected rel-L2 ".len()..]
+        .split_whitespace()
+        .next()
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| panic!("{line}"));
+    assert!(e > 0.0 && e.is_finite(), "{line}");
+    assert!(line.contains("2×2 samples"), "{line}");
     let (w, h, px) = image_io::read_png_rgb8(&out).unwrap();
     assert_eq!((w, h), (24, 16));
     let scene = Scene::default_scene();

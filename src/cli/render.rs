@@ -239,6 +239,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let render_s = crate::report::process_wall_s().unwrap_or(frame.wall_ms * 1e-3);
     let model_check = model_check.finish(std::time::Duration::from_secs_f64(0.1 * render_s));
     print_result(args, &scene, renderer.device_name(), &frame, &what, &timing);
+    if let Some(e) = frame.aliasing {
+        let ss = scene.output.supersample;
+        println!(
+            "aliasing: expected rel-L2 {e:.2} from the converged picture (the standard error of each pixel's {ss}×{ss} samples; profile --picture measures it)"
+        );
+    }
     let n = renderer.validation_messages();
     if n > 0 {
         return Err(Error::Validation(n));
@@ -662,6 +668,7 @@ mod tests {
             gpu_ms: None,
             wall_ms: 0.0,
             variant: Default::default(),
+            aliasing: None,
         };
         let out = std::path::Path::new("x.png");
         assert!(all_finite(&frame, out).is_ok());
