@@ -323,6 +323,20 @@ impl Material {
         Ok(prepared)
     }
 
+    /// `heightfield` prepared for every direction a draw can reach (`Reach::ALL`) at float32's
+    /// rounding, its terms computed when a variant first reads them
+    /// ([`prepare_planned_deferred`](Self::prepare_planned_deferred)); the planner's words go
+    /// to `report`.
+    pub fn prepare_anywhere(
+        &self,
+        heightfield: HeightField,
+        cache_dir: Option<&std::path::Path>,
+        report: &dyn Report,
+    ) -> Result<PreparedMaterial> {
+        let plan = self.plan_loaded(&heightfield, &Reach::ALL, Precision::F32, report)?;
+        self.prepare_planned_deferred(heightfield, plan, cache_dir)
+    }
+
     /// [`prepare_planned`](Self::prepare_planned) without computing the DFT terms: the
     /// first [`PreparedMaterial::load_terms`] does (through the cache in `cache_dir`). For
     /// draws whose variant may not read them: a table variant builds from the height field.

@@ -461,13 +461,7 @@ pub fn env_variant(
     renderer.set_table_options(table.options());
     let dir = cache.dir();
     renderer.set_cache_dir(dir.clone());
-    let plan = material.plan_loaded(
-        hf,
-        &crate::brdf::truncation::Reach::ALL,
-        crate::brdf::truncation::Precision::F32,
-        &crate::report::Stderr,
-    )?;
-    let prepared = material.prepare_planned_deferred(hf.clone(), plan, dir.as_deref())?;
+    let prepared = material.prepare_anywhere(hf.clone(), dir.as_deref(), &crate::report::Stderr)?;
     let brdf = renderer.env_brdf(&prepared, lighting, &material.shading())?;
     let name = renderer
         .prepared_stats()

@@ -195,13 +195,7 @@ fn prepared_for(
     if variants.iter().all(|&k| k == VariantKind::ChebyshevW) {
         return Ok(None);
     }
-    let plan = base.plan_loaded(
-        hf,
-        &crate::brdf::truncation::Reach::ALL,
-        crate::brdf::truncation::Precision::F32,
-        &crate::report::Stderr,
-    )?;
-    base.prepare_planned_deferred(hf.clone(), plan, None)
+    base.prepare_anywhere(hf.clone(), None, &crate::report::Stderr)
         .map(Some)
 }
 

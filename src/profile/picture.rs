@@ -176,13 +176,7 @@ fn score(
 /// `material` prepared as the profile's rows prepare it (the planner's words on stderr).
 fn prepare(material: &Material, cache_dir: Option<&Path>) -> Result<PreparedMaterial> {
     let hf = material.load_heightfield(&crate::report::Stderr)?;
-    let plan = material.plan_loaded(
-        &hf,
-        &crate::brdf::truncation::Reach::ALL,
-        crate::brdf::truncation::Precision::F32,
-        &crate::report::Stderr,
-    )?;
-    material.prepare_planned_deferred(hf, plan, cache_dir)
+    material.prepare_anywhere(hf, cache_dir, &crate::report::Stderr)
 }
 
 /// Draws and scores the picture rows of `rows` (each at every mode of `setup.aa`) on `r`;

@@ -139,13 +139,7 @@ pub fn run(r: &mut Renderer) -> Result<Vec<LightingCell>> {
         coherence_um: coherence,
         ..crate::material::Material::default()
     };
-    let plan = material.plan_loaded(
-        &hf,
-        &crate::brdf::truncation::Reach::ALL,
-        crate::brdf::truncation::Precision::F32,
-        &crate::report::Stderr,
-    )?;
-    let prepared = material.prepare_planned_deferred(hf.clone(), plan, None)?;
+    let prepared = material.prepare_anywhere(hf.clone(), None, &crate::report::Stderr)?;
     // A variant that refuses the flat patch (nmm and pq find no period in it) is a
     // refused cell per case, with its reason.
     let mut brdfs = Vec::new();

@@ -227,15 +227,9 @@ mod tests {
             lambda_step_nm: 20,
             ..Default::default()
         };
-        let plan = material
-            .plan_loaded(
-                &hf,
-                &crate::brdf::truncation::Reach::ALL,
-                crate::brdf::truncation::Precision::F32,
-                &crate::report::Stderr,
-            )
+        let prepared = material
+            .prepare_anywhere(hf, None, &crate::report::Stderr)
             .unwrap();
-        let prepared = material.prepare_planned_deferred(hf, plan, None).unwrap();
         let sky =
             crate::light::env::EnvMap::load(&crate::light::env::EnvSource::Sky, 1.0, 0.0).unwrap();
         let mut draw = |k: VariantKind| {
