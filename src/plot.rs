@@ -161,20 +161,33 @@ pub struct SideCurve {
 /// and its points filled, every point labelled. Non-positive values are clamped to the
 /// smallest positive one (log axes).
 pub fn error_vs_time(path: &Path, title: &str, y_label: &str, points: &[Point]) -> Result<()> {
-    error_vs_time_with(path, title, y_label, points, None)
+    error_vs_time_with(path, title, y_label, points, &[])
 }
 
-/// [`error_vs_time`] with a `curve` drawn beside the front (green, joined in its order).
+/// [`error_vs_time`] with `curves` drawn beside the front (green, then blue, then violet,
+/// each joined in its order).
 pub fn error_vs_time_with(
     path: &Path,
     title: &str,
     y_label: &str,
     points: &[Point],
-    curve: Option<&SideCurve>,
+    curves: &[SideCurve],
 ) -> Result<()> {
     register_font();
-    let curve_points: &[Point] = curve.map_or(&[], |c| &c.points);
+    let curve_points = curves.iter().flat_map(|c| &c.points);
     let all: Vec<Point> = points.iter().chain(curve_points).cloned().collect();
+    let palette = [
+        RGBColor(0, 140, 60),
+        RGBColor(30, 90, 200),
+        RGBColor(140, 60, 170),
+    ];
+    // Each curve's points in its colour, in the order of `all`.
+    let curve_colours: Vec<RGBColor> = curves
+        .iter()
+        .filter(|c| !c.points.is_empty())
+        .zip(palette.iter().cycle())
+        .flat_map(|(c, &colour)| std::iter::repeat_n(colour, c.points.len()))
+        .collect();
     if all.is_empty() {
         return Err(Error::invalid("plot", "no points"));
     }
@@ -239,17 +252,21 @@ pub fn error_vs_time_with(
                 .label("Pareto front")
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
         }
-        let green = RGBColor(0, 140, 60);
-        if let Some(c) = curve.filter(|c| !c.points.is_empty()) {
+        for (c, colour) in curves
+            .iter()
+            .filter(|c| !c.points.is_empty())
+            .zip(palette.iter().cycle())
+        {
+            let colour = *colour;
             chart
                 .draw_series(LineSeries::new(
                     c.points.iter().map(at_of),
-                    green.stroke_width(2),
+                    colour.stroke_width(2),
                 ))
                 .map_err(plot_error)?
                 .label(c.label.clone())
                 .legend(move |(x, y)| {
-                    PathElement::new(vec![(x, y), (x + 20, y)], green.stroke_width(2))
+                    PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
                 });
         }
         // Each point's intervals: the error's (vertical) and the time's (horizontal).
@@ -288,7 +305,7 @@ pub fn error_vs_time_with(
         let at: Vec<(f64, f64)> = all.iter().map(at_of).collect();
         for (k, &at) in at.iter().enumerate() {
             let style = if k >= points.len() {
-                green.filled()
+                curve_colours[k - points.len()].filled()
             } else if front.iter().any(|f| std::ptr::eq(*f, &points[k])) {
                 RED.filled()
             } else {
@@ -1424,14 +1441,14 @@ mod heat_tests {
                 point("256", 200.0, 0.05),
             ],
         };
-        error_vs_time_with(&p, "title", "error", &front, Some(&curve)).unwrap();
+        error_vs_time_with(&p, "title", "error", &front, std::slice::from_ref(&curve)).unwrap();
         assert!(
             green(&image::open(&p).unwrap().to_rgb8()) > 500,
             "the curve"
         );
         // The curve alone is a plot too.
-        error_vs_time_with(&p, "title", "error", &[], Some(&curve)).unwrap();
-        assert!(error_vs_time_with(&p, "title", "error", &[], None).is_err());
+        error_vs_time_with(&p, "title", "error", &[], std::slice::from_ref(&curve)).unwrap();
+        assert!(error_vs_time_with(&p, "title", "error", &[], &[]).is_err());
     }
 
     #[test]

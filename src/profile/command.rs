@@ -208,8 +208,7 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
         crate::fsutil::write_atomic(path, format_csv(&run).as_bytes())?;
     }
     if let Some(path) = &args.plot {
-        let env = run.env.as_ref();
-        write_plot(path, &setup, &run.reports, env, renderer.device_name())?;
+        write_plot(path, &setup, &run, renderer.device_name())?;
     }
     let n = renderer.validation_messages();
     if n > 0 {

@@ -477,13 +477,14 @@ fn env_csv(e: &EnvRun) -> String {
 pub(super) fn write_plot(
     path: &std::path::Path,
     setup: &ProfileSetup,
-    reports: &[VariantReport],
-    env: Option<&EnvRun>,
+    run: &ProfileRun,
     device: &str,
 ) -> Result<()> {
+    let (reports, env) = (&run.reports[..], run.env.as_ref());
     // A dark reference's relative errors are noise: such rows are not plotted, and a map
     // that is dark for every row gives no plot at all.
-    let env_points = env.map_or(0, |e| e.rows.len());
+    let env_points =
+        env.map_or(0, |e| e.rows.len()) + run.picture.as_ref().map_or(0, |p| p.rows.len());
     if env_points == 0 && reports.iter().all(|r| r.reference_dark) {
         return Err(Error::invalid(
             "plot",
@@ -521,23 +522,53 @@ pub(super) fn write_plot(
     }));
     // The environment rows' errors are against their own reference: a curve of their
     // own beside the variants' Pareto front.
-    let curve = env.map(|e| crate::plot::SideCurve {
-        label: format!(
-            "under {} (vs f64 quadrature), by samples per pixel",
-            e.source
-        ),
-        points: e
-            .rows
-            .iter()
-            .map(|r| crate::plot::Point {
-                label: r.name(),
-                time_ms: r.gpu_ms,
-                error: r.vs_reference.rel_l2,
-                error_range: Some((r.intervals.rel_l2.lo, r.intervals.rel_l2.hi)),
-                time_range: r.spread_ms,
-            })
-            .collect(),
-    });
+    let mut curves: Vec<crate::plot::SideCurve> = env
+        .map(|e| crate::plot::SideCurve {
+            label: format!(
+                "under {} (vs f64 quadrature), by samples per pixel",
+                e.source
+            ),
+            points: e
+                .rows
+                .iter()
+                .map(|r| crate::plot::Point {
+                    label: r.name(),
+                    time_ms: r.gpu_ms,
+                    error: r.vs_reference.rel_l2,
+                    error_range: Some((r.intervals.rel_l2.lo, r.intervals.rel_l2.hi)),
+                    time_range: r.spread_ms,
+                })
+                .collect(),
+        })
+        .into_iter()
+        .collect();
+    // The whole-picture rows: their error is the picture's against itself supersampled, a
+    // curve for each row (its modes joined from the fewest samples a pixel to the most).
+    if let Some(p) = &run.picture {
+        let mut groups: Vec<(String, Vec<crate::plot::Point>)> = Vec::new();
+        for r in p.rows.iter().filter(|r| r.gpu_ms.is_some()) {
+            let key = r.name.rsplit_once(' ').map_or(r.name.as_str(), |(k, _)| k);
+            let point = crate::plot::Point {
+                label: r.name.clone(),
+                time_ms: r.gpu_ms.unwrap_or(f64::NAN),
+                error: r.error.rel_l2,
+                ..Default::default()
+            };
+            match groups.iter_mut().find(|(k, _)| k == key) {
+                Some((_, points)) => points.push(point),
+                None => groups.push((key.to_string(), vec![point])),
+            }
+        }
+        for (key, points) in groups {
+            curves.push(crate::plot::SideCurve {
+                label: format!(
+                    "{key}: whole picture {}×{} vs itself at {}×{} samples a pixel",
+                    p.width, p.height, p.reference_ss, p.reference_ss
+                ),
+                points,
+            });
+        }
+    }
     let (lit, y_label) = match (env, points.is_empty()) {
         (Some(e), true) => (
             format!("under {}", e.source),
@@ -561,6 +592,6 @@ pub(super) fn write_plot(
         ),
         y_label,
         &points,
-        curve.as_ref(),
+        &curves,
     )
 }

@@ -262,8 +262,9 @@ pub fn run(
                 levels,
                 ..TableOptions::RENDER
             });
-            let filtered = row.kind.resolve() == VariantKind::ChebyshevW && levels > 1;
-            let name = match (filtered, row.table.levels > 1) {
+            let filters = row.kind.resolve() == VariantKind::ChebyshevW;
+            let (filtered, by_default) = (filters && levels > 1, filters && row.table.levels > 1);
+            let name = match (filtered, by_default) {
                 (true, false) => format!("{} filtered {aa}×{aa}", row.name),
                 (false, true) => format!("{} unfiltered {aa}×{aa}", row.name),
                 _ => format!("{} {aa}×{aa}", row.name),
