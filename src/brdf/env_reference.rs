@@ -27,7 +27,7 @@
 //!
 //! With Fresnel on, `ρ` carries `R/R0` (it is normalised to a mirror at normal incidence),
 //! so `f_r = R0·A_λ·ρ` and the mirror reflects `R(θ)`, Schlick's reflectance. Both factors
-//! are in [`absolute_factor`]. `A_λ` depends on the wavelength: a shorter wavelength has a
+//! are in [`Response::absolute`](super::table::Response::absolute). `A_λ` depends on the wavelength: a shorter wavelength has a
 //! narrower lobe of the same energy, so its peak `f_r` is higher; the factor must therefore
 //! enter the spectral sum of `G`, not the finished colour.
 //!
@@ -51,19 +51,7 @@ use crate::Result;
 
 use super::table::{sample_g_lines_in, ChebyshevW, Sampled, Slices, TableSpec};
 use super::truncation::Precision;
-use super::{gain, schlick_r0, Shading};
-
-/// `A_λ = k²σs²/π` times `R0` when Fresnel is on: `f_r = absolute_factor · ρ` (module notes).
-pub fn absolute_factor(lambda_nm: f64, coherence_um: f64, shading: &Shading) -> f64 {
-    let k = 2.0 * std::f64::consts::PI / (lambda_nm * 1e-3);
-    let sigma = coherence_um / 4.0;
-    let fresnel = if shading.fresnel {
-        schlick_r0(shading.ior)
-    } else {
-        1.0
-    };
-    k * k * sigma * sigma / std::f64::consts::PI * fresnel
-}
+use super::{gain, Shading};
 
 /// D65's white in the colour table's units: `Σ_λ w_λ` (`Y = 1`).
 pub fn white(table: &ColourTable) -> [f64; 3] {
@@ -74,18 +62,11 @@ pub fn white(table: &ColourTable) -> [f64; 3] {
 }
 
 /// Per wavelength line of `table`, the factor its `G` contribution is scaled by for
-/// radiance: `absolute_factor(λ)/W_c` per channel. A `G` summed with these weights gives
-/// `L_o,c = ∫∫ L_c·C·G_c du dv` (module notes).
+/// radiance: `f_r/ρ = A_λ·R0` over D65's white in each channel
+/// ([`Response::absolute`](super::table::Response::absolute)). A `G` summed with these
+/// weights gives `L_o,c = ∫∫ L_c·C·G_c du dv` (module notes).
 pub fn radiance_scale(table: &ColourTable, coherence_um: f64, shading: &Shading) -> Vec<[f64; 3]> {
-    let w = white(table);
-    table
-        .lambdas_nm
-        .iter()
-        .map(|&l| {
-            let a = absolute_factor(l, coherence_um, shading);
-            [a / w[0], a / w[1], a / w[2]]
-        })
-        .collect()
+    super::table::Response::absolute(coherence_um, shading).line_factors(table)
 }
 
 /// The radiance-weighted `G` of a flat surface, in closed form:
@@ -337,7 +318,7 @@ pub fn disc_radiance(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::brdf::{direction, reference};
+    use crate::brdf::{direction, reference, schlick_r0};
     use crate::light::env::EnvSource;
     use crate::light::sun_disk_samples;
 

@@ -131,16 +131,8 @@ impl Response {
     /// exposure means what it means for the relative reflectance. One scale for every
     /// light: the sun-lit pass and the environment-lit stages write the same units.
     pub fn radiance(coherence_um: f64, shading: &crate::brdf::Shading) -> Response {
-        let r0 = if shading.fresnel {
-            crate::brdf::schlick_r0(shading.ior)
-        } else {
-            1.0
-        };
-        let unscaled = Response::Radiance {
-            coherence_um,
-            r0,
-            scale: 1.0,
-        };
+        let r0 = Self::r0(shading);
+        let unscaled = Self::absolute(coherence_um, shading);
         let colour = ColourTable::new(1).expect("1 nm divides the visible range");
         let factors = unscaled.line_factors(&colour);
         let y: f64 = colour
@@ -153,6 +145,26 @@ impl Response {
             coherence_um,
             r0,
             scale: y,
+        }
+    }
+
+    /// Radiance on the scale 1: each line's factor is the absolute BRDF over the relative
+    /// reflectance, `f_r/ρ = A_λ·r0` with `A_λ = k²σs²/π` (σs a quarter of the coherence
+    /// length; `brdf::env_reference` derives it), over D65's white in its channel.
+    pub fn absolute(coherence_um: f64, shading: &crate::brdf::Shading) -> Response {
+        Response::Radiance {
+            coherence_um,
+            r0: Self::r0(shading),
+            scale: 1.0,
+        }
+    }
+
+    /// Schlick's `R0` with Fresnel on (`f_r` carries it), 1 without.
+    fn r0(shading: &crate::brdf::Shading) -> f64 {
+        if shading.fresnel {
+            crate::brdf::schlick_r0(shading.ior)
+        } else {
+            1.0
         }
     }
 
