@@ -66,13 +66,16 @@ pub fn resample_plane(
     out
 }
 
+/// The nodes of the level coarser than one of `nu × nv` nodes: about half the spacing's
+/// count along each side, both ends kept; `None` once a side has fewer than 4 nodes.
+fn coarser_nodes(nu: usize, nv: usize) -> Option<(usize, usize)> {
+    (nu >= 4 && nv >= 4).then(|| ((nu - 1).div_ceil(2) + 1, (nv - 1).div_ceil(2) + 1))
+}
+
 impl ChebyshevW {
     /// The next coarser level (module notes); `None` once a side has fewer than 4 nodes.
     pub fn coarser(&self) -> Option<ChebyshevW> {
-        if self.nu < 4 || self.nv < 4 {
-            return None;
-        }
-        let (mu, mv) = ((self.nu - 1).div_ceil(2) + 1, (self.nv - 1).div_ceil(2) + 1);
+        let (mu, mv) = coarser_nodes(self.nu, self.nv)?;
         let coeffs: Vec<Vec<[f64; 3]>> = self
             .coeffs
             .par_iter()
@@ -113,12 +116,15 @@ pub struct Levelled {
 impl Levelled {
     /// `base` and up to `count − 1` coarser levels (fewer where the table is small).
     pub fn new(base: ChebyshevW, count: usize) -> Self {
-        let levels = Self::layout_of(base.nu, base.nv, count);
         let mut all = vec![base];
-        while all.len() < levels.len() {
-            let next = all.last().and_then(ChebyshevW::coarser);
-            all.push(next.expect("layout_of counts the levels coarser() makes"));
+        while all.len() < count.clamp(1, MAX_LEVELS) {
+            match all.last().and_then(ChebyshevW::coarser) {
+                Some(next) => all.push(next),
+                None => break,
+            }
         }
+        // The same rule of nodes as `coarser`'s: the layout a cached table is read back by.
+        let levels = Self::layout_of(all[0].nu, all[0].nv, all.len());
         let (width, height) = Self::dims(&levels);
         let planes = (0..all[0].splines.len())
             .map(|j| {
@@ -149,8 +155,11 @@ impl Levelled {
     pub fn layout_of(nu: usize, nv: usize, count: usize) -> Vec<[usize; 4]> {
         let mut levels = vec![[nu, nv, 0, 0]];
         let (mut u, mut v, mut y) = (nu, nv, 0);
-        while levels.len() < count.clamp(1, MAX_LEVELS) && u >= 4 && v >= 4 {
-            (u, v) = ((u - 1).div_ceil(2) + 1, (v - 1).div_ceil(2) + 1);
+        while levels.len() < count.clamp(1, MAX_LEVELS) {
+            let Some(next) = coarser_nodes(u, v) else {
+                break;
+            };
+            (u, v) = next;
             levels.push([u, v, nu + 2, y]);
             y += v + 2;
         }
