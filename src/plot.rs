@@ -174,39 +174,19 @@ pub fn error_vs_time_with(
     curves: &[SideCurve],
 ) -> Result<()> {
     register_font();
-    let curve_points = curves.iter().flat_map(|c| &c.points);
+    let curves = coloured(curves);
+    let curve_points = curves.iter().flat_map(|(c, _)| &c.points);
     let all: Vec<Point> = points.iter().chain(curve_points).cloned().collect();
-    let palette = [
-        RGBColor(0, 140, 60),
-        RGBColor(30, 90, 200),
-        RGBColor(140, 60, 170),
-    ];
     // Each curve's points in its colour, in the order of `all`.
     let curve_colours: Vec<RGBColor> = curves
         .iter()
-        .filter(|c| !c.points.is_empty())
-        .zip(palette.iter().cycle())
-        .flat_map(|(c, &colour)| std::iter::repeat_n(colour, c.points.len()))
+        .flat_map(|&(c, colour)| std::iter::repeat_n(colour, c.points.len()))
         .collect();
     if all.is_empty() {
         return Err(Error::invalid("plot", "no points"));
     }
-    let positive = |f: fn(&Point) -> f64| {
-        let min = all
-            .iter()
-            .map(f)
-            .filter(|v| v.is_finite() && *v > 0.0)
-            .fold(f64::INFINITY, f64::min);
-        let min = if min.is_finite() { min } else { 1e-9 };
-        let max = all
-            .iter()
-            .map(f)
-            .filter(|v| v.is_finite())
-            .fold(min, f64::max);
-        (min, max)
-    };
-    let (t0, t1) = positive(|p| p.time_ms);
-    let (e0, e1) = positive(|p| p.error);
+    let (t0, t1) = positive_range(&all, |p| p.time_ms);
+    let (e0, e1) = positive_range(&all, |p| p.error);
     let clamp = |v: f64, lo: f64| if v.is_finite() && v > 0.0 { v } else { lo };
     let at_of = |p: &Point| (clamp(p.time_ms, t0), clamp(p.error, e0));
     let (width, height) = (1000u32, 700u32);
@@ -252,12 +232,7 @@ pub fn error_vs_time_with(
                 .label("Pareto front")
                 .legend(|(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], RED.stroke_width(2)));
         }
-        for (c, colour) in curves
-            .iter()
-            .filter(|c| !c.points.is_empty())
-            .zip(palette.iter().cycle())
-        {
-            let colour = *colour;
+        for &(c, colour) in &curves {
             chart
                 .draw_series(LineSeries::new(
                     c.points.iter().map(at_of),
@@ -331,6 +306,37 @@ pub fn error_vs_time_with(
         root.present().map_err(plot_error)?;
     }
     write_png(path, &buf, width, height)
+}
+
+/// The side curves that have points, each with its colour: green, blue, violet, then again.
+fn coloured(curves: &[SideCurve]) -> Vec<(&SideCurve, RGBColor)> {
+    let palette = [
+        RGBColor(0, 140, 60),
+        RGBColor(30, 90, 200),
+        RGBColor(140, 60, 170),
+    ];
+    curves
+        .iter()
+        .filter(|c| !c.points.is_empty())
+        .zip(palette.into_iter().cycle())
+        .collect()
+}
+
+/// The smallest positive and the largest finite value of `f` over `points` (a log axis's
+/// range; 1e-9 where none is positive).
+fn positive_range(points: &[Point], f: fn(&Point) -> f64) -> (f64, f64) {
+    let min = points
+        .iter()
+        .map(f)
+        .filter(|v| v.is_finite() && *v > 0.0)
+        .fold(f64::INFINITY, f64::min);
+    let min = if min.is_finite() { min } else { 1e-9 };
+    let max = points
+        .iter()
+        .map(f)
+        .filter(|v| v.is_finite())
+        .fold(min, f64::max);
+    (min, max)
 }
 
 /// The points' labels where they overlap neither another label nor a point; one moved

@@ -199,15 +199,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let mut chosen_exposure = None;
     let what = if inputs.is_some() {
         crate::image_io::write_image(&args.out, frame.width, frame.height, &frame.rgb, 1.0)?;
-        let s = crate::brdf::table::Response::radiance(
-            prepared.material.coherence_um,
-            &prepared.shading,
-        )
-        .scale();
-        format!(
-            "scene of radiance (× exposure {} / S = {s:.0})",
-            scene.output.exposure
-        )
+        scene_units(&scene, &prepared)
     } else {
         if let Some(Exposure::Auto(e)) = write_map(args, &frame)? {
             chosen_exposure = Some(e);
@@ -239,12 +231,6 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     let render_s = crate::report::process_wall_s().unwrap_or(frame.wall_ms * 1e-3);
     let model_check = model_check.finish(std::time::Duration::from_secs_f64(0.1 * render_s));
     print_result(args, &scene, renderer.device_name(), &frame, &what, &timing);
-    if let Some(e) = frame.aliasing {
-        let ss = scene.output.supersample;
-        println!(
-            "aliasing: expected rel-L2 {e:.2} from the converged picture (the standard error of each pixel's {ss}×{ss} samples; profile --picture measures it)"
-        );
-    }
     let n = renderer.validation_messages();
     if n > 0 {
         return Err(Error::Validation(n));
@@ -354,9 +340,20 @@ fn run_env_map(args: &RenderArgs, scene: &Scene, env: &crate::light::env::EnvMap
     Ok(())
 }
 
+/// What a scene's picture holds, for its report line: radiance over the scale `S` that
+/// every picture of a scene shares, times the exposure.
+fn scene_units(scene: &Scene, prepared: &crate::material::PreparedMaterial) -> String {
+    let m = &prepared.material;
+    let s = crate::brdf::table::Response::radiance(m.coherence_um, &prepared.shading).scale();
+    format!(
+        "scene of radiance (× exposure {} / S = {s:.0})",
+        scene.output.exposure
+    )
+}
+
 /// The render's lines on stdout: where the table was built (table variants), then the
 /// device, what was drawn, the output, the variant, GPU and wall time, and the fetches a
-/// pixel costs.
+/// pixel costs; for a supersampled scene, its expected aliasing error.
 fn print_result(
     args: &RenderArgs,
     scene: &Scene,
@@ -416,6 +413,12 @@ fn print_result(
         crate::report::process_wall_s()
             .map_or(String::new(), |s| format!(", wall {s:.2} s (the whole process)")),
     );
+    if let Some(e) = frame.aliasing {
+        let ss = scene.output.supersample;
+        println!(
+            "aliasing: expected rel-L2 {e:.2} from the converged picture (the standard error of each pixel's {ss}×{ss} samples; profile --picture measures it)"
+        );
+    }
 }
 
 /// Writes a BRDF map: an EXR holds the raw channels (XYZ or ρ); a PNG shows XYZ as sRGB
