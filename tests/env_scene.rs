@@ -125,24 +125,8 @@ fn the_sun_as_a_map_renders_the_sun_lit_picture() {
         .expect("the default scene has a skin");
     let tex = spec.load().expect("skin");
     let draw = |env: Option<&EnvMap>, lights: &Lights, samples: u32, skin: bool| {
-        let frame = render_env_scene(
-            &dev,
-            l,
-            &EnvScene {
-                scene: &scene,
-                mesh: &mesh,
-                texture: skin.then_some(&tex),
-                env,
-                lights,
-                shading: scene.material.shading(),
-                samples,
-                seed: 0,
-                noise: None,
-                brdf: None,
-            },
-        )
-        .expect("env scene");
-        scene.output.resolve(&frame.rgb).expect("resolve")
+        let inputs = (&mesh, skin.then_some(&tex));
+        env_picture(&dev, l, &scene, inputs, env, lights, samples)
     };
     // The same disc as the sun (direction, angular size, irradiance, D65 white) in a
     // 2048×1024 map (0.18° pixels; the disc is 0.53° across), nothing else.
@@ -200,6 +184,40 @@ fn fine_lighting() -> EnvLighting {
     l
 }
 
+/// A scene's texture as loaded: width, height and sRGB bytes.
+type Skin = (u32, u32, Vec<[u8; 3]>);
+
+/// `scene` (its mesh and, where given, its skin) drawn by the compute stages with `l`'s own
+/// table, every pixel taking `samples`, resolved as `render` writes it.
+fn env_picture(
+    dev: &Arc<Device>,
+    l: &EnvLighting,
+    scene: &Scene,
+    (mesh, texture): (&diffract::mesh::Mesh, Option<&Skin>),
+    env: Option<&EnvMap>,
+    lights: &Lights,
+    samples: u32,
+) -> Vec<[f32; 3]> {
+    let frame = render_env_scene(
+        dev,
+        l,
+        &EnvScene {
+            scene,
+            mesh,
+            texture,
+            env,
+            lights,
+            shading: scene.material.shading(),
+            samples,
+            seed: 0,
+            noise: None,
+            brdf: None,
+        },
+    )
+    .expect("env scene");
+    scene.output.resolve(&frame.rgb).expect("resolve")
+}
+
 /// ΔE2000 mean and 99th percentile of `a` against `b` over `px`.
 fn mean_p99(a: &[[f32; 3]], b: &[[f32; 3]], px: &[u32]) -> (f64, f64) {
     let mut de = delta_e(a, b, px);
@@ -234,24 +252,7 @@ fn a_sun_is_a_sun_however_its_light_is_described() {
         .unwrap()
         .expect("the default scene has an ambient sky");
     let draw = |scene: &Scene, env: &EnvMap, lights: &Lights| {
-        let frame = render_env_scene(
-            &dev,
-            l,
-            &EnvScene {
-                scene,
-                mesh: &mesh,
-                texture: Some(&tex),
-                env: Some(env),
-                lights,
-                shading: scene.material.shading(),
-                samples: 1024,
-                seed: 0,
-                noise: None,
-                brdf: None,
-            },
-        )
-        .expect("env scene");
-        scene.output.resolve(&frame.rgb).expect("resolve")
+        env_picture(&dev, l, scene, (&mesh, Some(&tex)), Some(env), lights, 1024)
     };
     let towards = scene.light.towards_light().to_array().map(f64::from);
     let radius = f64::from(scene.light.angular_diameter_deg).to_radians() / 2.0;

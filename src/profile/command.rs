@@ -242,13 +242,7 @@ fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>
     };
     let t = &args.table;
     let spec = t.env_spec(base.coherence_um)?;
-    let mut samples = if args.env_spp.is_empty() {
-        DEFAULT_ENV_SPP.to_vec()
-    } else {
-        args.env_spp.clone()
-    };
-    samples.sort_unstable();
-    samples.dedup();
+    let samples = ascending(&args.env_spp, &DEFAULT_ENV_SPP);
     Ok(Some(EnvProfile {
         map,
         samples,
@@ -256,6 +250,14 @@ fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>
         pixels: args.env_pixels.unwrap_or(DEFAULT_ENV_PIXELS),
         variants: env_variants(args)?,
     }))
+}
+
+/// The values a list flag gave, or `default` without any: ascending, each once.
+fn ascending(given: &[u32], default: &[u32]) -> Vec<u32> {
+    let mut v = if given.is_empty() { default } else { given }.to_vec();
+    v.sort_unstable();
+    v.dedup();
+    v
 }
 
 /// The picture rows' set-up, when `--picture` (or `--full`, or any `--picture-*` flag)
@@ -286,13 +288,7 @@ fn picture_setup(args: &ProfileArgs) -> Result<Option<super::picture::PictureSet
     }
     scene.output.width = size;
     scene.output.height = size;
-    let mut aa = if args.picture_aa.is_empty() {
-        DEFAULT_AA.to_vec()
-    } else {
-        args.picture_aa.clone()
-    };
-    aa.sort_unstable();
-    aa.dedup();
+    let aa = ascending(&args.picture_aa, &DEFAULT_AA);
     let reference_ss = args.picture_reference_ss.unwrap_or(REFERENCE_SS);
     if aa.iter().any(|&n| !(1..=8).contains(&n)) {
         return Err(Error::invalid(
