@@ -164,9 +164,11 @@ pub fn sample_g_lines_in(
         Some(band) if band.fast.is_some() => Precision::F32,
         _ => Precision::F64,
     };
+    // The lookups and their window taps depend on the wavelength, not on `w`.
+    let looks = spectrum.all_lookups(&u, &v, samples);
     let data: Vec<Vec<[f64; 3]>> = w_nodes
         .iter()
-        .map(|&w| spectrum.slice(&u, &v, w, samples, used, progress))
+        .map(|&w| spectrum.slice(&looks, w, samples, used, progress))
         .collect();
     let probe = (used == Precision::F32 && !w_nodes.is_empty()).then(|| {
         let k = w_nodes.len() / 2;
@@ -184,7 +186,8 @@ pub fn sample_g_lines_in(
             .saturating_sub(PROBE_ROWS / 2)
             .min(nv.saturating_sub(PROBE_ROWS));
         let j1 = (j0 + PROBE_ROWS).min(nv);
-        let exact = spectrum.slice(&u, &v[j0..j1], w_nodes[k], samples, Precision::F64, &|| {});
+        let rows = spectrum.all_lookups(&u, &v[j0..j1], samples);
+        let exact = spectrum.slice(&rows, w_nodes[k], samples, Precision::F64, &|| {});
         let fast = &data[k][j0 * nu..j1 * nu];
         let peak = exact.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         let diff = exact
@@ -498,6 +501,14 @@ impl PhaseSpectrum {
         vec![Complex64::new(0.0, 0.0); len]
     }
 
+    /// The lookups of every wavelength of `samples` (nm) over the node grid `u × v`.
+    fn all_lookups(&self, u: &[f64], v: &[f64], samples: &[(f64, [f64; 3])]) -> Vec<Lookups> {
+        samples
+            .par_iter()
+            .map(|&(l, _)| self.lookups(u, v, l * 1e-3))
+            .collect()
+    }
+
     /// The lookups of one wavelength over the node grid `u × v`.
     fn lookups(&self, u: &[f64], v: &[f64], lambda_um: f64) -> Lookups {
         let (nx, ny) = (self.nx, self.ny);
@@ -515,8 +526,24 @@ impl PhaseSpectrum {
         let cx1 = qx[qx.len() - 1].floor() as i64 + rx;
         let cy0 = qy[0].floor() as i64 - ry;
         let cy1 = qy[qy.len() - 1].floor() as i64 + ry;
+        // Each lookup's window: its first texel (from the reach's first) and its weights.
+        let taps = |q: &[f64], r: i64, c0: i64, sigma: f64| {
+            let mut first = Vec::with_capacity(q.len());
+            let mut weights = Vec::with_capacity(q.len() * (2 * r + 1) as usize);
+            for &q in q {
+                let a = q.floor() as i64;
+                first.push((a - r - c0) as usize);
+                for t in a - r..=a + r {
+                    let d = t as f64 - q;
+                    weights.push((-d * d / (2.0 * sigma * sigma)).exp());
+                }
+            }
+            Taps { first, weights }
+        };
         Lookups {
             lambda_um,
+            x: taps(&qx, rx, cx0, self.sigma[0]),
+            y: taps(&qy, ry, cy0, self.sigma[1]),
             qx,
             qy,
             t0: [cx0, cy0],
@@ -532,31 +559,32 @@ impl PhaseSpectrum {
     /// own phase field. The Gaussian window then runs per wavelength, in parallel.
     fn slice(
         &self,
-        u: &[f64],
-        v: &[f64],
+        looks: &[Lookups],
         w: f64,
         samples: &[(f64, [f64; 3])],
         precision: Precision,
         progress: &(dyn Fn() + Sync),
     ) -> Vec<[f64; 3]> {
-        // Accumulators are planar (X, then Y, then Z), each column-major over the nodes
-        // (`i·nv + j`); the slice is row-major (`j·nu + i`).
-        let (nu, nv) = (u.len(), v.len());
+        // Accumulators are bands of `band_rows` node rows, each planar (X, then Y, then Z)
+        // and column-major over its nodes (`i·h + j`, `h` the band's rows); the slice is
+        // row-major (`j·nu + i`).
+        let (nu, nv) = looks.first().map_or((0, 0), |g| (g.qx.len(), g.qy.len()));
         let n = nu * nv;
         let zero = || vec![0.0f64; 3 * n];
-        let interleave = |acc: Vec<f64>| -> Vec<[f64; 3]> {
+        let interleave = |acc: Vec<f64>, band_rows: usize| -> Vec<[f64; 3]> {
             (0..n)
+                .into_par_iter()
                 .map(|p| {
-                    let at = (p % nu) * nv + p / nu;
-                    [acc[at], acc[n + at], acc[2 * n + at]]
+                    let (i, j) = (p % nu, p / nu);
+                    let j0 = j / band_rows * band_rows;
+                    let h = band_rows.min(nv - j0);
+                    let at = 3 * nu * j0 + i * h + (j - j0);
+                    let plane = nu * h;
+                    [acc[at], acc[plane + at], acc[2 * plane + at]]
                 })
                 .collect()
         };
         let s_of = |lambda_um: f64| phase_scale(w, lambda_um);
-        let looks: Vec<Lookups> = samples
-            .iter()
-            .map(|&(l, _)| self.lookups(u, v, l * 1e-3))
-            .collect();
         let band = self
             .terms
             .as_ref()
@@ -569,26 +597,29 @@ impl PhaseSpectrum {
                     .fold(zero, |mut acc, (g, &(_, weight))| {
                         let mut spectrum = vec![Complex64::new(0.0, 0.0); g.len()];
                         self.transform(s_of(g.lambda_um), g.t0, g.size, &mut spectrum);
-                        self.window::<f64>(&[(g, &spectrum, weight)], &mut acc);
+                        self.window::<f64>(&[(g, &spectrum, weight)], 0..nv, &mut acc);
                         progress();
                         acc
                     })
                     .reduce(zero, add_planes),
+                nv,
             );
         };
         let acc = match (&band.fast, precision) {
             (Some(fast), Precision::F32) => {
-                self.band_slice(band, fast, &looks, samples, w, progress)
+                self.band_slice(band, fast, looks, samples, w, progress)
             }
-            _ => self.band_slice(band, &band.spectra, &looks, samples, w, progress),
+            _ => self.band_slice(band, &band.spectra, looks, samples, w, progress),
         };
-        interleave(acc)
+        interleave(acc, WINDOW_ROWS)
     }
 
-    /// The planar accumulators of [`Self::slice`] from the shared band, its terms and sums
-    /// in `T`. Wavelengths go in groups whose inputs together stay within
-    /// [`TERM_GROUP_SAMPLES`]; within a group the inputs are summed band row by band row
-    /// ([`TermBand::sum`]), then windowed per wavelength in parallel.
+    /// The accumulators of [`Self::slice`] (in bands of [`WINDOW_ROWS`] node rows) from the
+    /// shared band, its terms and sums in `T`. Wavelengths go in groups whose inputs
+    /// together stay within [`TERM_GROUP_SAMPLES`]; within a group the inputs are summed
+    /// band row by band row ([`TermBand::sum`]), then windowed band of node rows by band of
+    /// node rows in parallel: each thread writes its own rows, for every wavelength of the
+    /// group, so nothing is reduced and the threads stay busy to the group's end.
     fn band_slice<T: Real>(
         &self,
         band: &TermBand,
@@ -598,9 +629,9 @@ impl PhaseSpectrum {
         w: f64,
         progress: &(dyn Fn() + Sync),
     ) -> Vec<f64> {
-        let n = looks.first().map_or(0, |g| g.qx.len() * g.qy.len());
-        let zero = || vec![0.0f64; 3 * n];
-        let mut acc = zero();
+        let (nu, nv) = looks.first().map_or((0, 0), |g| (g.qx.len(), g.qy.len()));
+        let mut acc = vec![0.0f64; 3 * nu * nv];
+        let mut inputs = Vec::new();
         let mut first = 0;
         while first < looks.len() {
             let mut last = first + 1;
@@ -611,29 +642,23 @@ impl PhaseSpectrum {
             }
             let group = &looks[first..last];
             let s: Vec<f64> = group.iter().map(|g| phase_scale(w, g.lambda_um)).collect();
-            let inputs = band.sum(terms, &s, group);
-            // One accumulator per thread's share of the group (not one per split).
-            let share = group.len().div_ceil(rayon::current_num_threads().max(1));
-            let part = group
-                .par_chunks(share)
-                .zip(inputs.par_chunks(share))
-                .zip(samples[first..last].par_chunks(share))
-                .map(|((gs, spectra), weights)| {
-                    let mut acc = zero();
-                    let jobs: Vec<kernels::WindowJob<'_, T>> = gs
-                        .iter()
-                        .zip(spectra)
-                        .zip(weights)
-                        .map(|((g, spectrum), &(_, weight))| (g, spectrum.as_slice(), weight))
-                        .collect();
+            band.sum(terms, &s, group, &mut inputs);
+            let jobs: Vec<kernels::WindowJob<'_, T>> = group
+                .iter()
+                .zip(&inputs)
+                .zip(&samples[first..last])
+                .map(|((g, spectrum), &(_, weight))| (g, spectrum.as_slice(), weight))
+                .collect();
+            acc.par_chunks_mut(3 * nu * WINDOW_ROWS)
+                .enumerate()
+                .for_each(|(b, out)| {
+                    let j0 = b * WINDOW_ROWS;
+                    let rows = j0..(j0 + WINDOW_ROWS).min(nv);
                     for block in jobs.chunks(kernels::WINDOW_BLOCK) {
-                        self.window(block, &mut acc);
-                        block.iter().for_each(|_| progress());
+                        self.window(block, rows.clone(), out);
                     }
-                    acc
-                })
-                .reduce(zero, add_planes);
-            acc = add_planes(acc, part);
+                });
+            group.iter().for_each(|_| progress());
             first = last;
         }
         acc
@@ -713,6 +738,16 @@ struct Lookups {
     /// First shifted texel (x, y) of the windows' reach, and its width and height.
     t0: [i64; 2],
     size: [usize; 2],
+    /// The Gaussian window's taps of each lookup along x and along y.
+    x: Taps,
+    y: Taps,
+}
+
+/// The taps of a window along one axis, for each lookup: the first texel it reads (from
+/// the lookups' first, `t0`) and its `2·reach + 1` weights, lookup after lookup.
+struct Taps {
+    first: Vec<usize>,
+    weights: Vec<f64>,
 }
 
 impl Lookups {
@@ -734,19 +769,25 @@ impl Lookups {
 /// Most complex samples of windowed-spectrum inputs a group of wavelengths holds at once.
 const TERM_GROUP_SAMPLES: usize = 8_000_000;
 
+/// Node rows one task windows for every wavelength of a group: a multiple of the kernel's
+/// register block of rows, small enough that a task's accumulators and transposed rows
+/// stay in a core's cache.
+const WINDOW_ROWS: usize = 64;
+
 /// Band rows one task sums for every wavelength of a group.
 const TERM_ROWS_PER_TASK: usize = 4;
 
 impl TermBand {
-    /// The windowed-spectrum inputs of `group` (phase scales `s`): for each wavelength,
-    /// `Σ_n ε_n iⁿ J_n(s·A) DFT[T_n]` over its texels, row-major. Band rows are the unit of
-    /// work, so a row of every term is read once for the whole group.
+    /// The windowed-spectrum inputs of `group` (phase scales `s`) into `inputs`: for each
+    /// wavelength, `Σ_n ε_n iⁿ J_n(s·A) DFT[T_n]` over its texels, row-major. Band rows are
+    /// the unit of work, so a row of every term is read once for the whole group.
     fn sum<T: Real>(
         &self,
         spectra: &[Vec<Complex<T>>],
         s: &[f64],
         group: &[Lookups],
-    ) -> Vec<Vec<Complex<T>>> {
+        inputs: &mut Vec<Vec<Complex<T>>>,
+    ) {
         let terms = spectra.len();
         // ε_n iⁿ J_n: real weights for the even terms, imaginary for the odd ones.
         let weights: Vec<Vec<T>> = s
@@ -770,7 +811,15 @@ impl TermBand {
             .unwrap_or(0)
             - self.t0[1];
         let zero = Complex::new(T::default(), T::default());
-        let mut inputs: Vec<Vec<Complex<T>>> = group.iter().map(|g| vec![zero; g.len()]).collect();
+        // The buffers of the last group, reused: each task zeroes the rows it sums, so the
+        // calling thread neither allocates nor clears tens of megabytes while the others wait.
+        inputs.resize_with(group.len(), Vec::new);
+        for (buf, g) in inputs.iter_mut().zip(group) {
+            if buf.len() < g.len() {
+                buf.resize(g.len(), zero);
+            }
+            buf.truncate(g.len());
+        }
         // Every wavelength's rows, handed to the task of the band rows they read.
         let tasks = ((hi - lo).max(0) as usize).div_ceil(TERM_ROWS_PER_TASK);
         // (wavelength, first band sample it reads, its row of the output)
@@ -791,6 +840,7 @@ impl TermBand {
         rows_of.into_par_iter().for_each(|rows| {
             let mut odd = Vec::new();
             for (l, at, row) in rows {
+                row.fill(zero);
                 odd.clear();
                 odd.resize(row.len(), zero);
                 Self::sum_row(spectra, at, &weights[l], row, &mut odd);
@@ -800,7 +850,6 @@ impl TermBand {
                 }
             }
         });
-        inputs
     }
 }
 
@@ -843,8 +892,9 @@ mod tests {
             Precision::F64,
         );
         assert!(shared.terms.is_some(), "the band must fit");
-        let a = direct.slice(&u, &v, w, &samples, Precision::F64, &|| {});
-        let b = shared.slice(&u, &v, w, &samples, Precision::F64, &|| {});
+        let looks = direct.all_lookups(&u, &v, &samples);
+        let a = direct.slice(&looks, w, &samples, Precision::F64, &|| {});
+        let b = shared.slice(&looks, w, &samples, Precision::F64, &|| {});
         let peak = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         assert!(peak > 0.0);
         for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {

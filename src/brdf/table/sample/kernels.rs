@@ -5,7 +5,7 @@
 //! same operations in the same order (Rust never fuses a multiply and an add), so they give
 //! the same numbers and the choice is speed only.
 
-use std::ops::{Add, AddAssign, Mul, Sub};
+use std::ops::{Add, AddAssign, Mul, Range, Sub};
 
 use crate::spectrum::num_complex::Complex;
 
@@ -55,41 +55,53 @@ pub(super) const WINDOW_BLOCK: usize = 8;
 /// input over the lookups' texels (row-major) and its XYZ weight.
 pub(super) type WindowJob<'a, T> = (&'a Lookups, &'a [Complex<T>], [f64; 3]);
 
-/// The window's weight at distance `d` (texels) for a std `sigma`.
-#[inline(always)]
-fn gauss<T: Real>(d: f64, sigma: f64) -> T {
-    T::of((-d * d / (2.0 * sigma * sigma)).exp())
-}
-
 impl PhaseSpectrum {
-    /// The Gaussian window at the lookups of every node for each wavelength of `block`,
-    /// `|P̂|²·weight` added to `acc`: planar (X, Y, Z planes), each node column-major
-    /// (`i·nv + j` for node `(u_i, v_j)`), in f64. The window's sums run in `T`.
-    pub(super) fn window<T: Real>(&self, block: &[WindowJob<'_, T>], acc: &mut [f64]) {
+    /// The Gaussian window at the lookups of the nodes of rows `rows` (`v_j`, every `u_i`)
+    /// for each wavelength of `block`, `|P̂|²·weight` added to `acc`: planar (X, Y, Z
+    /// planes), each node column-major within the rows (`i·h + (j − rows.start)` for node
+    /// `(u_i, v_j)`, `h = rows.len()`), in f64. The window's sums run in `T`. Each node's
+    /// sums are the same whatever rows are asked with it, so a slice can be windowed as
+    /// bands of rows on separate threads.
+    pub(super) fn window<T: Real>(
+        &self,
+        block: &[WindowJob<'_, T>],
+        rows: Range<usize>,
+        acc: &mut [f64],
+    ) {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx512f") {
                 // SAFETY: the CPU has AVX-512F (checked above).
-                return unsafe { self.window_avx512(block, acc) };
+                return unsafe { self.window_avx512(block, rows, acc) };
             }
             if std::arch::is_x86_feature_detected!("avx2") {
                 // SAFETY: the CPU has AVX2 (checked above).
-                return unsafe { self.window_avx2(block, acc) };
+                return unsafe { self.window_avx2(block, rows, acc) };
             }
         }
-        self.window_kernel(block, acc);
+        self.window_kernel(block, rows, acc);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f")]
-    unsafe fn window_avx512<T: Real>(&self, block: &[WindowJob<'_, T>], acc: &mut [f64]) {
-        self.window_kernel(block, acc);
+    unsafe fn window_avx512<T: Real>(
+        &self,
+        block: &[WindowJob<'_, T>],
+        rows: Range<usize>,
+        acc: &mut [f64],
+    ) {
+        self.window_kernel(block, rows, acc);
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2")]
-    unsafe fn window_avx2<T: Real>(&self, block: &[WindowJob<'_, T>], acc: &mut [f64]) {
-        self.window_kernel(block, acc);
+    unsafe fn window_avx2<T: Real>(
+        &self,
+        block: &[WindowJob<'_, T>],
+        rows: Range<usize>,
+        acc: &mut [f64],
+    ) {
+        self.window_kernel(block, rows, acc);
     }
 
     /// The separable window, `y` first: per wavelength, each node row's sum over the taps
@@ -97,29 +109,35 @@ impl PhaseSpectrum {
     /// transposed; then, node column by node column, the sum over the `x` taps of whole
     /// transposed rows, its `|P̂|²` weighted into the column of `acc`.
     #[inline(always)]
-    fn window_kernel<T: Real>(&self, block: &[WindowJob<'_, T>], acc: &mut [f64]) {
+    fn window_kernel<T: Real>(
+        &self,
+        block: &[WindowJob<'_, T>],
+        rows: Range<usize>,
+        acc: &mut [f64],
+    ) {
         let Some(&(first, _, _)) = block.first() else {
             return;
         };
-        let (nu, nv) = (first.qx.len(), first.qy.len());
+        let nu = first.qx.len();
+        // The rows' height: the transposed rows and the accumulators hold only these.
+        let nv = rows.len();
         let n = nu * nv;
-        let (rx, ry) = (self.reach(0), self.reach(1));
-        let taps = (2 * rx + 1) as usize;
-        struct Pass<T> {
+        let taps = (2 * self.reach(0) + 1) as usize;
+        let y_taps = (2 * self.reach(1) + 1) as usize;
+        struct Pass<'a, T> {
             /// `ycols[c·2nv + j]` and `ycols[c·2nv + nv + j]`: re and im of the y pass at band
             /// column `c`, node row `j`.
             ycols: Vec<T>,
             /// Per node column: the first band column its x taps read, and their weights.
-            starts: Vec<usize>,
+            starts: &'a [usize],
             gx: Vec<T>,
             weight: [f64; 3],
         }
         // Plain loops, not closures: a closure would be compiled without this function's
         // target features.
-        let mut passes: Vec<Pass<T>> = Vec::with_capacity(block.len());
+        let mut passes: Vec<Pass<'_, T>> = Vec::with_capacity(block.len());
         let mut line = Vec::new();
         for &(g, spectrum, weight) in block {
-            let [cx0, cy0] = g.t0;
             let cols = g.size[0];
             let mut ycols = vec![T::default(); cols * 2 * nv];
             // A tile of node rows at a time, written transposed a cache line per column.
@@ -129,12 +147,12 @@ impl PhaseSpectrum {
             for j0 in (0..nv).step_by(TILE) {
                 let j1 = (j0 + TILE).min(nv);
                 for (j, tile_row) in (j0..j1).zip(line.chunks_exact_mut(cols)) {
-                    let q = g.qy[j];
-                    let a = q.floor() as i64;
+                    let node = rows.start + j;
+                    let gy = &g.y.weights[node * y_taps..(node + 1) * y_taps];
                     tile_row.fill(Complex::new(T::default(), T::default()));
-                    for t in a - ry..=a + ry {
-                        let gk: T = gauss(t as f64 - q, self.sigma[1]);
-                        let r = (t - cy0) as usize;
+                    for (k, &gk) in gy.iter().enumerate() {
+                        let gk = T::of(gk);
+                        let r = g.y.first[node] + k;
                         for (l, x) in tile_row.iter_mut().zip(&spectrum[r * cols..(r + 1) * cols]) {
                             l.re += x.re * gk;
                             l.im += x.im * gk;
@@ -150,19 +168,10 @@ impl PhaseSpectrum {
                     }
                 }
             }
-            let mut starts = Vec::with_capacity(nu);
-            let mut gx = Vec::with_capacity(nu * taps);
-            for &q in &g.qx {
-                let a = q.floor() as i64;
-                starts.push((a - rx - cx0) as usize);
-                for t in a - rx..=a + rx {
-                    gx.push(gauss(t as f64 - q, self.sigma[0]));
-                }
-            }
             passes.push(Pass {
                 ycols,
-                starts,
-                gx,
+                starts: &g.x.first,
+                gx: g.x.weights.iter().map(|&x| T::of(x)).collect(),
                 weight,
             });
         }
