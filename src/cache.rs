@@ -142,6 +142,104 @@ impl CacheDir<'_> {
     }
 }
 
+/// Whether [`CacheDir::write_behind`] writes on a thread of its own (the command line's
+/// choice, [`write_behind_from_now`]) or at once (a library caller's default, so a file is
+/// there when the call returns).
+static BEHIND: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// The writes still running behind the command, and the warnings of those that ended.
+static PENDING: std::sync::Mutex<(Vec<std::thread::JoinHandle<()>>, Vec<String>)> =
+    std::sync::Mutex::new((Vec::new(), Vec::new()));
+
+/// From now on, large cache files are written behind the work that made them: the command
+/// goes on drawing while the file is encoded and written. [`finish_writes`] waits for them.
+pub fn write_behind_from_now() {
+    BEHIND.store(true, std::sync::atomic::Ordering::Relaxed);
+}
+
+/// Waits for every cache file still being written behind the work and reports the
+/// warnings of those that failed. A command calls it before its last line, so its wall
+/// time counts the writes, and a file is whole (or absent) when the process ends.
+pub fn finish_writes(report: &dyn Report) {
+    let handles = match PENDING.lock() {
+        Ok(mut p) => std::mem::take(&mut p.0),
+        Err(_) => return,
+    };
+    for h in handles {
+        let _ = h.join();
+    }
+    let warnings = PENDING
+        .lock()
+        .map(|mut p| std::mem::take(&mut p.1))
+        .unwrap_or_default();
+    for w in warnings {
+        report.warn(&w);
+    }
+}
+
+impl CacheDir<'_> {
+    /// Stores the bytes `make` encodes at `path`, as [`Self::write`] does, behind the
+    /// caller's work once [`write_behind_from_now`] was called: `make` and the write run on
+    /// a thread of their own and a failure is reported by [`finish_writes`]. Otherwise at
+    /// once. `size` is the encoded length: a file over the cap is not made at all.
+    pub fn write_behind(
+        &self,
+        path: PathBuf,
+        size: u64,
+        what: &'static str,
+        make: impl FnOnce() -> Vec<u8> + Send + 'static,
+        report: &dyn Report,
+    ) {
+        if size > self.max {
+            report.warn(&format!(
+                "the {what} takes {} MiB, more than the cache cap of {} MiB (DIFFRACT_CACHE_MAX); not cached",
+                size >> 20,
+                self.max >> 20
+            ));
+            return;
+        }
+        if !BEHIND.load(std::sync::atomic::Ordering::Relaxed) {
+            self.write(&path, &make(), what, report);
+            return;
+        }
+        let (dir, max) = (self.dir.to_path_buf(), self.max);
+        let handle = std::thread::spawn(move || {
+            let bytes = make();
+            let cache = CacheDir { dir: &dir, max };
+            let failed = std::sync::Mutex::new(None);
+            cache.write(&path, &bytes, what, &Failure(&failed));
+            if let Some(w) = failed.into_inner().ok().flatten() {
+                if let Ok(mut p) = PENDING.lock() {
+                    p.1.push(w);
+                }
+            }
+        });
+        match PENDING.lock() {
+            Ok(mut p) => p.0.push(handle),
+            Err(_) => {
+                let _ = handle.join();
+            }
+        }
+    }
+}
+
+/// A report that keeps the one warning of a write behind the work, for [`finish_writes`].
+struct Failure<'a>(&'a std::sync::Mutex<Option<String>>);
+
+impl Report for Failure<'_> {
+    fn warn(&self, line: &str) {
+        if let Ok(mut w) = self.0.lock() {
+            *w = Some(line.to_string());
+        }
+    }
+
+    fn note(&self, _: &str) {}
+
+    fn progress(&self, bar: indicatif::ProgressBar) -> indicatif::ProgressBar {
+        bar
+    }
+}
+
 /// Marks a cache file as just used: last use is the mtime, which eviction reads.
 pub fn mark_used(path: &Path) {
     let _ = std::fs::File::options()

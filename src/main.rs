@@ -246,6 +246,8 @@ fn main() -> ExitCode {
     diffract::fsutil::remove_temps_on_interrupt();
     // A refused command prints one error line: the notes of its checks wait for the work.
     diffract::report::hold_notes();
+    // Large cache files are written while the command goes on, and waited for at its end.
+    diffract::cache::write_behind_from_now();
     // The environment is an input like the flags: a bad cache cap is refused before any
     // work, by every command that may write the cache.
     if !matches!(
@@ -278,6 +280,7 @@ fn main() -> ExitCode {
         Command::Stability(a) => diffract::stability::run(a),
         Command::Validity(a) => diffract::cli::validity::run(a),
     };
+    diffract::cache::finish_writes(&diffract::report::Stderr);
     match result {
         Ok(()) => {
             diffract::report::work_begins();

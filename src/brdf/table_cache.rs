@@ -57,7 +57,13 @@ pub fn key(hf: &HeightField, coherence_um: f64, spec: &TableSpec, w_nodes: &[f64
     h.finish()
 }
 
+#[cfg(test)]
 fn encode(s: &Slices, key: u64) -> Vec<u8> {
+    seal(unsealed(s, key))
+}
+
+/// A table file's bytes but its checksum: what needs the slices.
+fn unsealed(s: &Slices, key: u64) -> Vec<u8> {
     let mut out = Vec::with_capacity(44 + s.w.len() * 8 + s.nu * s.nv * s.w.len() * 12 + 8);
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&FORMAT_VERSION.to_le_bytes());
@@ -74,6 +80,11 @@ fn encode(s: &Slices, key: u64) -> Vec<u8> {
             }
         }
     }
+    out
+}
+
+/// `out` with its checksum appended: a whole table file.
+fn seal(mut out: Vec<u8>) -> Vec<u8> {
     let mut h = Fnv1a::new();
     h.bytes(&out);
     out.extend_from_slice(&h.finish().to_le_bytes());
@@ -247,16 +258,14 @@ pub fn sample_g_cached_by(
         }
     }
     let s = build()?;
-    let bytes = encode(&s, key);
-    if bytes.len() as u64 > cache.max_bytes() {
-        report.warn(&format!(
-            "the table takes {} MiB, more than the cache cap of {} MiB (DIFFRACT_CACHE_MAX); not cached",
-            bytes.len() >> 20,
-            cache.max_bytes() >> 20
-        ));
-        return Ok((s, false));
-    }
-    cache.write(&path, &bytes, "table cache", report);
+    let body = (expected <= cache.max_bytes()).then(|| unsealed(&s, key));
+    cache.write_behind(
+        path,
+        expected,
+        "table cache",
+        move || seal(body.unwrap_or_default()),
+        report,
+    );
     Ok((s, false))
 }
 

@@ -154,13 +154,15 @@ pub fn load(
 /// Stores `packed` under `key` in `dir` (replacing, never writing into, what is there); a
 /// failure is a warning, never an error of the draw. A table over the cache's cap is not
 /// stored.
-pub fn store(dir: &Path, key: u64, packed: &Packed, report: &dyn Report) {
+pub fn store(dir: &Path, key: u64, packed: Packed, report: &dyn Report) {
     match CacheDir::open(dir) {
         Ok(cache) => {
-            let bytes = packed.encode(key);
-            if bytes.len() as u64 <= cache.max_bytes() {
+            let size = (HEADER + packed.bytes.len() + 8) as u64;
+            // Over the cap it is silently not stored: the sampled table's line says so.
+            if size <= cache.max_bytes() {
                 let path = cache.file(PACKED_FILES, key);
-                cache.write(&path, &bytes, "packed table cache", report);
+                let make = move || packed.encode(key);
+                cache.write_behind(path, size, "packed table cache", make, report);
             }
         }
         Err(e) => report.warn(&format!("could not write the packed table cache: {e}")),
@@ -210,7 +212,7 @@ mod tests {
         let dir = std::env::temp_dir().join(format!("diffract-packed-{}", std::process::id()));
         let report = crate::report::Collect::default();
         assert_eq!(load(&dir, 1, (3, 2), 1 << 20, &report), None);
-        store(&dir, 1, &packed(), &report);
+        store(&dir, 1, packed(), &report);
         assert_eq!(load(&dir, 1, (3, 2), 1 << 20, &report), Some(packed()));
         assert_eq!(load(&dir, 1, (4, 2), 1 << 20, &report), None, "other nodes");
         let _ = std::fs::remove_dir_all(dir);

@@ -299,9 +299,8 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let (mut gpu, texels) =
         TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
     if let (Some(key), Some(dir)) = (packed_key, setup.cache_dir) {
-        packed::store(dir, key, &texels, setup.report);
+        packed::store(dir, key, texels, setup.report);
     }
-    drop(texels);
     finish_stats(&mut gpu, built.to_string(), setup, wavelengths);
     if setup.keep_model {
         gpu.model = Some(TableModel(Box::new(table)));
@@ -613,21 +612,33 @@ fn texel_bytes_of(
     layers: usize,
     format: TableFormat,
 ) -> Vec<u8> {
+    use rayon::prelude::*;
     let texels = planes.first().map_or(0, Vec::len);
-    let mut bytes = Vec::with_capacity(texels * layers * format.texel_bytes());
-    for layer in 0..layers {
-        for t in 0..texels {
-            let rgba = layer_texel(planes, layout, layer, t);
-            match format {
-                TableFormat::Rgba32f => rgba
-                    .iter()
-                    .for_each(|c| bytes.extend_from_slice(&c.to_le_bytes())),
-                TableFormat::Rgba16f => rgba
-                    .iter()
-                    .for_each(|c| bytes.extend_from_slice(&f32_to_f16(*c).to_le_bytes())),
+    let size = format.texel_bytes();
+    let mut bytes = vec![0u8; texels * layers * size];
+    // Runs of texels in parallel: the packing is the last step before the upload.
+    const RUN: usize = 4096;
+    bytes
+        .par_chunks_mut(RUN * size)
+        .enumerate()
+        .for_each(|(k, out)| {
+            for (i, texel) in out.chunks_exact_mut(size).enumerate() {
+                let at = k * RUN + i;
+                let rgba = layer_texel(planes, layout, at / texels, at % texels);
+                match format {
+                    TableFormat::Rgba32f => {
+                        for (o, c) in texel.chunks_exact_mut(4).zip(rgba) {
+                            o.copy_from_slice(&c.to_le_bytes());
+                        }
+                    }
+                    TableFormat::Rgba16f => {
+                        for (o, c) in texel.chunks_exact_mut(2).zip(rgba) {
+                            o.copy_from_slice(&f32_to_f16(c).to_le_bytes());
+                        }
+                    }
+                }
             }
-        }
-    }
+        });
     bytes
 }
 
