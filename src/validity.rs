@@ -788,7 +788,7 @@ pub fn expected_error_line(
 
 fn summary(material: &Material, thetas_deg: &[f64], cache_dir: Option<&Path>) -> Result<String> {
     let hf = material.load_heightfield(&crate::report::Collect::default())?;
-    summary_of(material, &hf, thetas_deg, cache_dir)
+    summary_of(material, &hf, thetas_deg, cache_dir, &CheckPace::default())
 }
 
 /// The fewest whole periods the field must hold across its peak's direction for the peak
@@ -800,6 +800,59 @@ pub const SUMMARY_MIN_PERIODS: f64 = 3.0;
 /// ([`ModelCheck::start`]) and bounded by it ([`ModelCheck::finish`]).
 pub struct ModelCheck {
     line: std::sync::mpsc::Receiver<String>,
+    pace: std::sync::Arc<CheckPace>,
+}
+
+/// How far a running check is: the rigorous cells it has left and the CPU time its
+/// finished cells took, so that the command it annotates waits for it only when it can end
+/// within the wait. The cells run on one thread; CPU time, not wall, since that thread runs
+/// only on cores the command leaves idle.
+#[derive(Default)]
+struct CheckPace {
+    /// Cells still to solve; `u32::MAX` until the check knows (before its first cell).
+    left: std::sync::atomic::AtomicU32,
+    /// Cells solved in this run, and their CPU time (ns).
+    solved: std::sync::atomic::AtomicU32,
+    cpu_ns: std::sync::atomic::AtomicU64,
+}
+
+impl CheckPace {
+    fn new() -> Self {
+        Self {
+            left: u32::MAX.into(),
+            ..Self::default()
+        }
+    }
+
+    /// The CPU time (s) the cells left will take at the pace of those solved; `None` while
+    /// unknown (before the cells, or before the first one ends).
+    fn left_s(&self) -> Option<f64> {
+        use std::sync::atomic::Ordering::Relaxed;
+        let left = self.left.load(Relaxed);
+        let solved = self.solved.load(Relaxed);
+        match (left, solved) {
+            (0, _) => Some(0.0),
+            (u32::MAX, _) | (_, 0) => None,
+            _ => {
+                Some(f64::from(left) * self.cpu_ns.load(Relaxed) as f64 * 1e-9 / f64::from(solved))
+            }
+        }
+    }
+}
+
+/// The calling thread's CPU time (s); 0 where it cannot be read.
+fn thread_cpu_s() -> f64 {
+    let mut t = libc::timespec {
+        tv_sec: 0,
+        tv_nsec: 0,
+    };
+    // SAFETY: clock_gettime writes the one timespec it is given, which lives across the call.
+    let ok = unsafe { libc::clock_gettime(libc::CLOCK_THREAD_CPUTIME_ID, &mut t) } == 0;
+    if ok {
+        t.tv_sec as f64 + t.tv_nsec as f64 * 1e-9
+    } else {
+        0.0
+    }
 }
 
 impl ModelCheck {
@@ -813,12 +866,15 @@ impl ModelCheck {
         cache_dir: Option<std::path::PathBuf>,
     ) -> Self {
         let (tx, rx) = std::sync::mpsc::channel();
+        let pace = std::sync::Arc::new(CheckPace::new());
+        let shared = pace.clone();
         std::thread::spawn(move || {
             background_priority();
-            let check = || match summary_of(&material, &hf, &thetas_deg, cache_dir.as_deref()) {
-                Ok(line) => line,
-                Err(e) => format!("model check: not available ({e}); see diffract validity"),
-            };
+            let check =
+                || match summary_of(&material, &hf, &thetas_deg, cache_dir.as_deref(), &shared) {
+                    Ok(line) => line,
+                    Err(e) => format!("model check: not available ({e}); see diffract validity"),
+                };
             // Its parallel loops run on a pool of its own (the caller's table build keeps
             // the global one), on this one low-priority thread.
             let line = match rayon::ThreadPoolBuilder::new()
@@ -832,31 +888,54 @@ impl ModelCheck {
             };
             let _ = tx.send(line);
         });
-        Self { line: rx }
+        Self { line: rx, pace }
     }
 
-    /// The check's line, waiting at most `wait` for it: a check that has not ended by then
-    /// says so (its finished cells are cached for the next run) rather than hold the command.
+    /// The check's line, waiting at most `wait` for it, and not at all when the pace of its
+    /// cells says it cannot end within `wait`: a check that has not ended says so (its
+    /// finished cells are cached for the next run) rather than hold the command.
     pub fn finish(self, wait: std::time::Duration) -> String {
-        self.line.recv_timeout(wait).unwrap_or_else(|_| {
+        let left_s = self.pace.left_s().filter(|&s| s > wait.as_secs_f64());
+        let line = match left_s {
+            Some(_) => self.line.try_recv().ok(),
+            None => self.line.recv_timeout(wait).ok(),
+        };
+        line.unwrap_or_else(|| {
+            let how_long = match left_s {
+                Some(s) => format!(
+                    "its rigorous cells need about {s:.1} s more of a core, past the {:.1} s (a \
+                     tenth of the render it annotates) it may take",
+                    wait.as_secs_f64()
+                ),
+                None => format!(
+                    "not finished within {:.1} s, a tenth of the render it annotates",
+                    wait.as_secs_f64()
+                ),
+            };
             format!(
-                "model check: not finished within {:.1} s, a tenth of the render it annotates \
-                 (its finished cells are cached for the next run); see diffract validity",
-                wait.as_secs_f64()
+                "model check: {how_long} (its finished cells are cached for the next run); see \
+                 diffract validity"
             )
         })
     }
 }
 
-/// Lowers the calling thread's scheduling priority to the lowest (nice 19, Linux), so a
-/// check beside a render takes only the CPU the render leaves idle. Best effort.
+/// Lowers the calling thread's scheduling priority to the lowest (Linux's `SCHED_IDLE`,
+/// else nice 19), so a check beside a render takes only the CPU the render leaves idle.
+/// `SCHED_IDLE` matters: a render's threads wake and sleep thousands of times (each group
+/// of a table build), and the scheduler gives a waking thread the core of an idle-policy
+/// thread at once, where a nice-19 thread may first run out its slice (the check cost the
+/// cold render 0.45 s at nice 19 on 2 cores). Best effort.
 fn background_priority() {
     #[cfg(target_os = "linux")]
-    // SAFETY: gettid and setpriority take no pointers; on Linux PRIO_PROCESS with a thread
-    // id sets that thread's nice value only.
+    // SAFETY: gettid takes no pointer; sched_setscheduler reads the one `sched_param` it is
+    // given, which lives across the call; on Linux both act on this thread only.
     unsafe {
-        let tid = libc::syscall(libc::SYS_gettid) as libc::id_t;
-        libc::setpriority(libc::PRIO_PROCESS, tid, 19);
+        let tid = libc::syscall(libc::SYS_gettid) as libc::pid_t;
+        let param = libc::sched_param { sched_priority: 0 };
+        if libc::sched_setscheduler(tid, libc::SCHED_IDLE, &param) != 0 {
+            libc::setpriority(libc::PRIO_PROCESS, tid as libc::id_t, 19);
+        }
     }
 }
 
@@ -867,6 +946,7 @@ fn summary_of(
     hf: &crate::heightfield::HeightField,
     thetas_deg: &[f64],
     cache_dir: Option<&Path>,
+    pace: &CheckPace,
 ) -> Result<String> {
     let line_path = cache_dir.map(|d| {
         d.join(crate::cache::file_name(
@@ -877,7 +957,7 @@ fn summary_of(
     if let Some(line) = line_path.as_deref().and_then(read_line) {
         return Ok(line);
     }
-    let line = summary_uncached(material, hf, thetas_deg, cache_dir)?;
+    let line = summary_uncached(material, hf, thetas_deg, cache_dir, pace)?;
     if let Some(p) = &line_path {
         // A cache that cannot be written only costs the next run the check again.
         let _ = write_line(p, &line);
@@ -890,6 +970,7 @@ fn summary_uncached(
     hf: &crate::heightfield::HeightField,
     thetas_deg: &[f64],
     cache_dir: Option<&Path>,
+    pace: &CheckPace,
 ) -> Result<String> {
     let profile = extract_profile(hf)?;
     let (lx, ly) = hf.extent_um();
@@ -930,12 +1011,20 @@ fn summary_uncached(
         .collect();
     // The largest estimated error of a solve that stopped short of the tolerance.
     let short = std::sync::Mutex::new(None::<f64>);
+    let left = u32::try_from(missing.len()).unwrap_or(u32::MAX - 1);
+    pace.left.store(left, std::sync::atomic::Ordering::Relaxed);
     if !missing.is_empty() {
         // Each cell is cached as it ends: a run stopped before the last one (a command
         // that does not wait for its check) leaves the next run less to do.
         let done = std::sync::Mutex::new(cells);
         missing.par_iter().try_for_each(|&(t, l)| {
+            use std::sync::atomic::Ordering::Relaxed;
+            let cpu = thread_cpu_s();
             let c = check(&profile, &model, l, t, Solve::Converge(MAP_TOLERANCE))?;
+            pace.cpu_ns
+                .fetch_add(((thread_cpu_s() - cpu).max(0.0) * 1e9) as u64, Relaxed);
+            pace.solved.fetch_add(1, Relaxed);
+            pace.left.fetch_sub(1, Relaxed);
             if let (Some(e), Ok(mut s)) = (c.unconverged(MAP_TOLERANCE), short.lock()) {
                 *s = Some(s.map_or(e, |m| m.max(e)));
             }
@@ -1082,4 +1171,35 @@ fn write_cells(path: &Path, cells: &[(f64, f64, f64)]) -> Result<()> {
             .map_err(|e| Error::invalid("validity cache", e.to_string()))?;
     }
     crate::fsutil::write_atomic(path, text.as_bytes())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_check_s_pace_is_its_cells_left_at_the_cpu_time_of_those_solved() {
+        use std::sync::atomic::Ordering::Relaxed;
+        let pace = CheckPace::new();
+        assert_eq!(pace.left_s(), None, "before the cells");
+        pace.left.store(4, Relaxed);
+        assert_eq!(pace.left_s(), None, "before the first cell ends");
+        pace.solved.store(2, Relaxed);
+        pace.cpu_ns.store(1_000_000_000, Relaxed);
+        pace.left.store(3, Relaxed);
+        assert_eq!(pace.left_s(), Some(1.5));
+        pace.left.store(0, Relaxed);
+        assert_eq!(pace.left_s(), Some(0.0), "every cell solved");
+    }
+
+    #[test]
+    fn a_thread_s_cpu_time_advances_with_its_work() {
+        let t0 = thread_cpu_s();
+        let mut x = 0u64;
+        for i in 0..20_000_000u64 {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(i);
+        }
+        std::hint::black_box(x);
+        assert!(thread_cpu_s() > t0, "{t0}");
+    }
 }
