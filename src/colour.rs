@@ -195,7 +195,62 @@ pub fn srgb_encode(linear: f64) -> f64 {
 
 /// Linear sRGB → 8-bit sRGB after multiplying by `exposure`.
 pub fn linear_to_srgb8(rgb: [f64; 3], exposure: f64) -> [u8; 3] {
-    rgb.map(|c| (srgb_encode(c * exposure) * 255.0 + 0.5).floor() as u8)
+    let codes = Srgb8::get();
+    rgb.map(|c| codes.code(c * exposure))
+}
+
+/// The 8-bit sRGB code of a linear value by the formula: `⌊255·encode(x) + ½⌋`.
+fn srgb8_by_formula(x: f64) -> u8 {
+    (srgb_encode(x) * 255.0 + 0.5).floor() as u8
+}
+
+/// [`srgb8_by_formula`] without a power per value: the code of the cell of a fine grid the
+/// value falls in, then up past the code edges below it. Exact: the edges are found once by
+/// bisection on the formula itself, and the formula never decreases.
+struct Srgb8 {
+    /// `edges[b]`: the least linear value whose code is `b + 1` or more.
+    edges: [f64; 255],
+    /// `start[i]`: the code of `i / CELLS`, a lower bound for the cell's values.
+    start: [u8; Srgb8::CELLS + 1],
+}
+
+impl Srgb8 {
+    const CELLS: usize = 4096;
+
+    fn get() -> &'static Srgb8 {
+        static CODES: std::sync::OnceLock<Srgb8> = std::sync::OnceLock::new();
+        CODES.get_or_init(|| Srgb8 {
+            edges: std::array::from_fn(|k| {
+                let code = k as u8 + 1;
+                // Non-negative doubles order as their bits: bisect on the bits of [0, 1].
+                let (mut lo, mut hi) = (0u64, 1f64.to_bits());
+                while lo < hi {
+                    let mid = lo + (hi - lo) / 2;
+                    if srgb8_by_formula(f64::from_bits(mid)) >= code {
+                        hi = mid;
+                    } else {
+                        lo = mid + 1;
+                    }
+                }
+                f64::from_bits(lo)
+            }),
+            start: std::array::from_fn(|i| srgb8_by_formula(i as f64 / Self::CELLS as f64)),
+        })
+    }
+
+    fn code(&self, x: f64) -> u8 {
+        if x.is_nan() || x <= 0.0 {
+            return 0;
+        }
+        if x >= 1.0 {
+            return 255;
+        }
+        let mut c = self.start[(x * Self::CELLS as f64) as usize];
+        while c < 255 && x >= self.edges[usize::from(c)] {
+            c += 1;
+        }
+        c
+    }
 }
 
 /// CIELAB of an XYZ colour relative to the D65 white (`Y_n = 1`).
@@ -290,6 +345,39 @@ pub fn delta_e2000(lab1: [f64; 3], lab2: [f64; 3]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_searched_srgb_codes_are_the_formula_s() {
+        for &e in &Srgb8::get().edges {
+            let below = f64::from_bits(e.to_bits() - 1);
+            for x in [e, below, f64::from_bits(e.to_bits() + 1)] {
+                assert_eq!(
+                    linear_to_srgb8([x; 3], 1.0)[0],
+                    srgb8_by_formula(x),
+                    "{x:e}"
+                );
+            }
+        }
+        let mut z = 0x2545_f491_4f6c_dd1du64;
+        for _ in 0..200_000 {
+            z ^= z << 13;
+            z ^= z >> 7;
+            z ^= z << 17;
+            let x = (z >> 11) as f64 / (1u64 << 53) as f64 * 1.2 - 0.1;
+            assert_eq!(
+                linear_to_srgb8([x; 3], 1.0)[0],
+                srgb8_by_formula(x),
+                "{x:e}"
+            );
+        }
+        for x in [f64::NAN, f64::INFINITY, f64::NEG_INFINITY, -0.0, 1e-300] {
+            assert_eq!(
+                linear_to_srgb8([x; 3], 1.0)[0],
+                srgb8_by_formula(x),
+                "{x:e}"
+            );
+        }
+    }
 
     #[test]
     fn tables_cover_the_visible_range_without_gaps() {
