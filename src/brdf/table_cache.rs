@@ -57,11 +57,6 @@ pub fn key(hf: &HeightField, coherence_um: f64, spec: &TableSpec, w_nodes: &[f64
     h.finish()
 }
 
-#[cfg(test)]
-fn encode(s: &Slices, key: u64) -> Vec<u8> {
-    seal(unsealed(s, key))
-}
-
 /// A table file's bytes but its checksum: what needs the slices.
 fn unsealed(s: &Slices, key: u64) -> Vec<u8> {
     let mut out = Vec::with_capacity(44 + s.w.len() * 8 + s.nu * s.nv * s.w.len() * 12 + 8);
