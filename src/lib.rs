@@ -9,6 +9,7 @@
 #![warn(unsafe_op_in_unsafe_fn)]
 
 pub mod brdf;
+pub mod budget;
 pub mod cache;
 pub mod cachedir;
 pub mod cli;

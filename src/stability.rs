@@ -22,6 +22,7 @@ use rayon::prelude::*;
 use crate::brdf::table::{Region, TableSpec};
 use crate::brdf::truncation::{Precision, Reach, TermPlan, Terms};
 use crate::brdf::{direction, gain, reference};
+use crate::budget::{Fits, Keeper};
 use crate::heightfield::{generate, GratingKind, GratingSpec, HeightField};
 use crate::material::Material;
 use crate::render::variant::{Mirrored, SpectralModel, Stability, TableMirror};
@@ -380,22 +381,23 @@ pub fn run_matrix(
         Some(_) => round_robin(&all),
         None => (0..all.len()).collect(),
     };
-    let start = Instant::now();
-    let mut costs = CellCosts::default();
+    // A cell's cost: the mean of its variant and evaluator's cells; for a pair not run
+    // yet, the mean first cell of the pairs with its evaluator (what a first cell costs,
+    // its set-up included), else of every pair.
+    let mut keeper = Keeper::new(Instant::now(), spec.budget_s);
     let mut cells: Vec<Option<Cell>> = vec![None; all.len()];
     for i in order {
         let p = &all[i];
         let key = (p.variant, p.evaluator);
-        let cell = match spec
-            .budget_s
-            .map(|b| (b - start.elapsed().as_secs_f64(), costs.estimate(key)))
-        {
-            Some((left, Some(est))) if est > left => skipped_cell(spec, p, est),
-            Some((left, None)) if left <= 0.0 => skipped_cell(spec, p, 0.0),
-            _ => {
+        let estimate = keeper
+            .estimate_like(&key, 1.0, |k| k.1 == key.1)
+            .or_else(|| keeper.estimate_like(&key, 1.0, |_| true));
+        let cell = match keeper.fits(estimate) {
+            Fits::No { estimated_s, .. } => skipped_cell(spec, p, estimated_s),
+            Fits::Yes => {
                 let t = Instant::now();
                 let c = run_cell(spec, p, &fields[p.h], renderer.as_deref_mut(), &shading)?;
-                costs.add(key, t.elapsed().as_secs_f64());
+                keeper.learn(&key, 1.0, t.elapsed().as_secs_f64());
                 c
             }
         };
@@ -450,43 +452,6 @@ fn round_robin(points: &[Point]) -> Vec<usize> {
     (0..longest)
         .flat_map(|k| lanes.iter().filter_map(move |(_, l)| l.get(k).copied()))
         .collect()
-}
-
-/// Measured cell costs (s) per variant and evaluator: the sum, the count and the first
-/// cell's cost (a variant's first GPU cell also builds its pipelines).
-#[derive(Default)]
-struct CellCosts {
-    by_key: Vec<((VariantKind, Evaluator), f64, usize, f64)>,
-}
-
-impl CellCosts {
-    fn add(&mut self, key: (VariantKind, Evaluator), secs: f64) {
-        match self.by_key.iter_mut().find(|(k, ..)| *k == key) {
-            Some((_, sum, n, _)) => {
-                *sum += secs;
-                *n += 1;
-            }
-            None => self.by_key.push((key, secs, 1, secs)),
-        }
-    }
-
-    /// The mean cost of `key`'s cells; for a key not run yet, the mean first cell of the
-    /// keys with its evaluator (what a first cell costs, setup included), else of every
-    /// key; `None` before any cell.
-    fn estimate(&self, key: (VariantKind, Evaluator)) -> Option<f64> {
-        if let Some((_, sum, n, _)) = self.by_key.iter().find(|(k, ..)| *k == key) {
-            return Some(sum / *n as f64);
-        }
-        let first = |same: &dyn Fn(&(VariantKind, Evaluator)) -> bool| {
-            let (sum, n) = self
-                .by_key
-                .iter()
-                .filter(|(k, ..)| same(k))
-                .fold((0.0, 0), |(s, c), (.., first)| (s + first, c + 1));
-            (n > 0).then(|| sum / n as f64)
-        };
-        first(&|k| k.1 == key.1).or_else(|| first(&|_| true))
-    }
 }
 
 /// A cell the budget left out, with its estimated cost.
@@ -732,9 +697,12 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
     stability_args(args)?;
     let start = Instant::now();
     let beat = heartbeat::Heartbeat::start(start);
-    let mut steps = Steps::default();
     beat.step("loading the height field");
     let mut spec = matrix_spec(args)?;
+    let mut steps = Steps {
+        keeper: Keeper::new(start, spec.budget_s),
+        last: 0.0,
+    };
     steps.done("loading the height field", &beat);
     beat.step("opening the device");
     let mut renderer = if args.no_gpu {
@@ -794,7 +762,7 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
         beat.step(format!("the spectral matrix, {done}/{total} cells"));
         report_cell(c, done, total, matrix_start, matrix.budget_s, &beat);
     })?;
-    steps.done("the spectral matrix", &beat);
+    steps.done_within("the spectral matrix", matrix.budget_s, &beat);
     if let Some(r) = &renderer {
         if r.validation_messages() > 0 {
             return Err(Error::Validation(r.validation_messages()));
@@ -810,15 +778,8 @@ pub fn run(args: &StabilityArgs) -> Result<()> {
         steps.done("the model axis", &beat);
         cells
     };
-    if let Some(b) = budget {
-        let secs = beat.elapsed_s();
-        if secs > 1.2 * b {
-            let (name, took) = steps.longest();
-            eprintln!(
-                "warning: stability took {secs:.0} s of its {b} s budget: {name} took {took:.1} s, \
-                 and the budget can only leave out whole cells"
-            );
-        }
+    if let Some(line) = steps.keeper.broken("stability", beat.elapsed_s()) {
+        eprintln!("warning: {line}");
     }
     drop(beat);
     let secs = start.elapsed().as_secs_f64();
@@ -940,27 +901,23 @@ fn matrix_spec(args: &StabilityArgs) -> Result<MatrixSpec> {
 }
 
 /// How long each step of a run took, for the explanation of an overrun.
-#[derive(Default)]
+/// The run's steps, timed against the budget (which leaves out whole cells only).
 struct Steps {
-    took: Vec<(&'static str, f64)>,
+    keeper: Keeper<()>,
     last: f64,
 }
 
 impl Steps {
     /// Records `name` as ending now.
     fn done(&mut self, name: &'static str, beat: &heartbeat::Heartbeat) {
-        let now = beat.elapsed_s();
-        self.took.push((name, now - self.last));
-        self.last = now;
+        self.done_within(name, None, beat);
     }
 
-    /// The step that took longest.
-    fn longest(&self) -> (&'static str, f64) {
-        self.took
-            .iter()
-            .copied()
-            .max_by(|a, b| a.1.total_cmp(&b.1))
-            .unwrap_or(("the run", self.last))
+    /// Records `name`, given `budget_s` of its own, as ending now.
+    fn done_within(&mut self, name: &str, budget_s: Option<f64>, beat: &heartbeat::Heartbeat) {
+        let now = beat.elapsed_s();
+        self.keeper.timed(name, budget_s, now - self.last);
+        self.last = now;
     }
 }
 

@@ -6,6 +6,8 @@ use std::time::Instant;
 
 use indicatif::ProgressBar;
 
+use crate::budget::{Cost, Keeper};
+
 /// The times of a row's timed frames (ms): GPU timestamps where the queue has them, else
 /// wall time.
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -188,59 +190,52 @@ impl crate::report::Report for Deadline {
     }
 }
 
-/// What the rows measured so far say about the cost of the next ones.
-#[derive(Debug, Clone, Copy)]
-pub(super) struct Pace {
-    /// Map frame time per fetch and pixel (ms).
-    ms_per_fetch: f64,
-    /// Frame time that does not scale with fetches: draw set-up and readback (ms).
-    frame_overhead_ms: f64,
-    /// A warm-up's preparation beyond its frame (loading terms, pipelines) (ms).
-    pub(super) prepare_ms: f64,
-    /// A table build's time per sampled `(w, λ)` plane, from a build this profile made or
-    /// stopped (ms); `None` until then (a table may be in the cache: it is tried).
-    pub(super) table_ms_per_plane: Option<f64>,
+/// The kinds of a profile row's cost that its budget keeper ([`crate::budget::Keeper`])
+/// learns from the rows measured.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum RowCost {
+    /// A map frame: a fixed part (draw set-up and readback) and a part per fetch and pixel
+    /// ([`RowCost::frame_units`]).
+    Frame,
+    /// A warm-up's preparation beyond its frame and its table build (loading terms,
+    /// pipelines).
+    Prepare,
+    /// A table build, per sampled `(w, λ)` plane: from a build this profile made or
+    /// stopped (none until then: a table may be in the cache, so it is tried).
+    TablePlanes,
 }
 
-impl Pace {
-    /// Before any row: lavapipe's pace on 2 cores (FLSS at 5 nm, 128² map: 1.7 s a frame
-    /// for 48 825 fetches a pixel), so a fast GPU is overestimated only until its first
-    /// row is measured.
-    pub(super) const PRIOR: Pace = Pace {
-        ms_per_fetch: 3e-6,
-        frame_overhead_ms: 20.0,
-        prepare_ms: 300.0,
-        table_ms_per_plane: None,
-    };
-
+impl RowCost {
     /// A plane's build time assumed only to order the rows before any table was built.
     pub(super) const PRIOR_TABLE_MS_PER_PLANE: f64 = 5.0;
 
-    /// Estimated map frame time of `fetches` a pixel on a `size`² map (ms).
-    pub(super) fn frame_ms(&self, fetches: usize, size: u32) -> f64 {
-        let pixels = std::f64::consts::FRAC_PI_4 * (size * size) as f64;
-        self.frame_overhead_ms + self.ms_per_fetch * fetches as f64 * pixels
+    /// The keeper of a profile's budget (`None`: no budget), with lavapipe's pace on 2
+    /// cores as its prior (FLSS at 5 nm, 128² map: 1.7 s a frame for 48 825 fetches a
+    /// pixel; 0.3 s of preparation), so a fast GPU is overestimated only until its first
+    /// row is measured.
+    pub(super) fn keeper(start: Instant, total_s: Option<f64>) -> Keeper<RowCost> {
+        let mut k = Keeper::new(start, total_s);
+        k.prior(
+            &RowCost::Frame,
+            Cost {
+                fixed_s: 0.020,
+                per_unit_s: 3e-9,
+            },
+        );
+        k.prior(
+            &RowCost::Prepare,
+            Cost {
+                fixed_s: 0.3,
+                per_unit_s: 0.0,
+            },
+        );
+        k
     }
 
-    /// Learns from a measured row: `frame_ms` a frame for `fetches` a pixel, `warm_ms` for
-    /// its warm-up (preparation included), `built_ms` of that spent building tables.
-    pub(super) fn learn(
-        &mut self,
-        fetches: usize,
-        size: u32,
-        frame_ms: f64,
-        warm_ms: f64,
-        built_ms: f64,
-    ) {
-        let pixels = std::f64::consts::FRAC_PI_4 * (size * size) as f64;
-        if fetches >= 100 {
-            self.ms_per_fetch = ((frame_ms - self.frame_overhead_ms).max(0.0)
-                / (fetches as f64 * pixels))
-                .max(1e-12);
-        } else {
-            self.frame_overhead_ms = frame_ms;
-        }
-        self.prepare_ms = (warm_ms - frame_ms - built_ms).max(0.0);
+    /// The units of a map frame of `fetches` a pixel on a `size`² map: fetches times the
+    /// pixels of its disc.
+    pub(super) fn frame_units(fetches: usize, size: u32) -> f64 {
+        std::f64::consts::FRAC_PI_4 * f64::from(size) * f64::from(size) * fetches as f64
     }
 }
 

@@ -15,6 +15,7 @@ use super::score::pick_pixels;
 use super::stats::{bootstrap, error_stats};
 use crate::brdf::env_reference::{env_radiance, Frame, Quadrature};
 use crate::brdf::table::GTable;
+use crate::budget::{Cost, Fits, Keeper};
 use crate::heightfield::HeightField;
 use crate::material::Material;
 use crate::render::env::{render_env_brdf_map, EnvLighting, EnvMapRequest, EnvPicture};
@@ -28,15 +29,12 @@ const REFERENCE_MIN_PIXELS: usize = 4;
 /// Share of the environment rows' time the reference may take (at least its fewest pixels).
 const REFERENCE_SHARE: f64 = 0.4;
 
-/// The pace of the environment rows: a map costs `overhead + samples · per_sample` (ms).
-struct EnvPace {
-    overhead_ms: f64,
-    per_sample_ms: f64,
-}
-
-impl EnvPace {
-    fn estimate_s(&self, samples: u32) -> f64 {
-        (self.overhead_ms + f64::from(samples) * self.per_sample_ms) / 1e3
+/// A variant's environment map costs `overhead + samples · per_sample`: the overhead its
+/// wall time beyond its dispatches, the rest its GPU time per sample.
+fn map_cost(wall_ms: f64, gpu_ms: f64, samples: u32) -> Cost {
+    Cost {
+        fixed_s: (wall_ms - gpu_ms).max(0.0) / 1e3,
+        per_unit_s: gpu_ms / f64::from(samples.max(1)) / 1e3,
     }
 }
 
@@ -105,6 +103,11 @@ pub(super) fn env_rows(
     };
     let pixels = &pixels[..reference.xyz.len()];
     let rows_in_all = env.variants.len() * env.samples.len();
+    let now = Instant::now();
+    let mut keeper = Keeper::new(
+        now,
+        end.map(|e| e.saturating_duration_since(now).as_secs_f64()),
+    );
     // A material the planner refuses refuses every variant but chebyshev-w, whose table
     // is the environment table itself.
     let prepared = prepared_for(base, hf, &env.variants).map_err(|e| e.to_string());
@@ -139,19 +142,18 @@ pub(super) fn env_rows(
             }
         };
         let (pic, wall) = draw(brdf.as_ref(), 1)?;
-        let mut pace = EnvPace {
-            overhead_ms: (wall - pic.gpu_ms).max(0.0),
-            per_sample_ms: pic.gpu_ms,
-        };
+        keeper.split(&kind, map_cost(wall, pic.gpu_ms, 1));
         for (k, &samples) in env.samples.iter().enumerate() {
-            let left_s = end.map(|e| e.saturating_duration_since(Instant::now()).as_secs_f64());
-            let est = pace.estimate_s(samples);
-            if let Some(l) = left_s.filter(|&l| est > l && (k > 0 || v > 0)) {
-                let reason = format!("estimated {est:.1} s, over the {l:.1} s left of the budget");
+            let est = keeper.estimate_s(&kind, f64::from(samples)).unwrap_or(0.0);
+            // The default variant's first row is measured whatever its estimate.
+            if let (Fits::No { left_s, .. }, false) = (keeper.fits(Some(est)), k == 0 && v == 0) {
+                let reason =
+                    format!("estimated {est:.1} s, over the {left_s:.1} s left of the budget");
                 eprintln!("profile: {}: skipped, {reason}", row_name(&name, samples));
                 run.skipped.push(skipped(k, reason, est));
                 continue;
             }
+            let left_s = keeper.left_s();
             let rows_left = (rows_in_all - v * env.samples.len() - k) as f64;
             let row_end = left_s.map(|l| Instant::now() + Duration::from_secs_f64(l / rows_left));
             let (times, walls, last) =
@@ -165,10 +167,7 @@ pub(super) fn env_rows(
                 &times,
                 &walls,
             );
-            pace = EnvPace {
-                overhead_ms: (row.wall_ms - row.gpu_ms).max(0.0),
-                per_sample_ms: row.gpu_ms / f64::from(samples),
-            };
+            keeper.split(&kind, map_cost(row.wall_ms, row.gpu_ms, samples));
             eprintln!(
                 "profile: {}: {} frames, median {:.2} ms (wall {:.2} ms), rel L2 {:.2e} [{:.2e}, {:.2e}]",
                 row.name(),

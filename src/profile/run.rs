@@ -3,7 +3,7 @@
 
 use std::time::{Duration, Instant};
 
-use super::budget::{Budget, Deadline, FrameTimes, Frames, OverBudget, Pace};
+use super::budget::{Budget, Deadline, FrameTimes, Frames, OverBudget, RowCost};
 use super::env::env_rows;
 use super::output::{ProfileRun, Skipped, VariantReport};
 use super::plan::{EnvProfile, ProfileSetup, Variant};
@@ -11,6 +11,7 @@ use super::progress::{row_line, skipped_line, Progress};
 use super::score::{mesh_error, mesh_reference, reference_samples, score_map, Samples, Scores};
 use super::stats::ErrorStats;
 use crate::brdf::direction;
+use crate::budget::{Fits, Keeper};
 use crate::colour::ColourTable;
 use crate::material::{Material, PreparedMaterial};
 use crate::render::variant::VariantKind;
@@ -22,7 +23,8 @@ use crate::{Error, Result};
 struct Run<'a> {
     setup: &'a ProfileSetup,
     start: Instant,
-    pace: Pace,
+    /// The budget and what the rows measured so far say about the cost of the next ones.
+    keeper: Keeper<RowCost>,
     samples: Option<Samples>,
     table_1nm: ColourTable,
     /// The mesh view by the reference variant at 1 nm, for `--per-vertex`.
@@ -121,13 +123,17 @@ fn variant_rows(
     heightfield: crate::heightfield::HeightField,
     start: Instant,
 ) -> Result<ProfileRun> {
+    let total_s = match setup.frames {
+        Frames::Budget(b) => Some(b.total_s),
+        Frames::Fixed(_) => None,
+    };
     let mut run = Run {
         setup,
         start,
         heightfield,
         measured: false,
         sampled: Vec::new(),
-        pace: Pace::PRIOR,
+        keeper: RowCost::keeper(start, total_s),
         samples: None,
         table_1nm: ColourTable::new(1)?,
         mesh_reference: None,
@@ -141,6 +147,9 @@ fn variant_rows(
     renderer.set_leave_out(false);
     renderer.set_report(std::sync::Arc::new(crate::report::Stderr));
     result?;
+    if let Some(line) = run.keeper.broken("profile", start.elapsed().as_secs_f64()) {
+        eprintln!("warning: {line}");
+    }
     let mut out = ProfileRun::default();
     for row in run.done.into_iter().flatten() {
         match row {
@@ -179,7 +188,7 @@ impl Run<'_> {
                 RowOutcome::Skipped(s) => skipped_line(s),
             };
             self.done[i] = Some(outcome);
-            let left = self.budget().map(|b| self.left_s(&b));
+            let left = self.keeper.left_s();
             self.progress.finished(&line, left);
         }
         Ok(())
@@ -190,11 +199,6 @@ impl Run<'_> {
             Frames::Budget(b) => Some(b),
             Frames::Fixed(_) => None,
         }
-    }
-
-    /// Budget left (s).
-    fn left_s(&self, budget: &Budget) -> f64 {
-        (budget.total_s - self.start.elapsed().as_secs_f64()).max(0.0)
     }
 
     /// The order rows are measured in: as given, or, with a budget, the default variant's
@@ -210,7 +214,7 @@ impl Run<'_> {
                 .iter()
                 .map(|v| {
                     let (ms, planes) = self.estimate(v);
-                    ms + planes as f64 * Pace::PRIOR_TABLE_MS_PER_PLANE
+                    ms + planes as f64 * RowCost::PRIOR_TABLE_MS_PER_PLANE
                 })
                 .collect();
             let default = |i: usize| {
@@ -253,11 +257,16 @@ impl Run<'_> {
             Some(Ok(f)) if !read => f.planes * (400 / step as usize + 1),
             _ => 0,
         };
-        let build = planes as f64 * self.pace.table_ms_per_plane.unwrap_or(0.0);
-        (
-            self.pace.prepare_ms + 2.0 * self.pace.frame_ms(fetches, self.setup.size) + build,
-            planes,
-        )
+        let k = &self.keeper;
+        let build = match planes {
+            0 => 0.0,
+            p => k.estimate_s(&RowCost::TablePlanes, p as f64).unwrap_or(0.0),
+        };
+        let frame = RowCost::frame_units(fetches, self.setup.size);
+        let s = k.estimate_s(&RowCost::Prepare, 0.0).unwrap_or(0.0)
+            + 2.0 * k.estimate_s(&RowCost::Frame, frame).unwrap_or(0.0)
+            + build;
+        (1e3 * s, planes)
     }
 
     fn estimate_ms(&self, row: &Variant) -> f64 {
@@ -291,20 +300,22 @@ impl Run<'_> {
             reason,
         };
         let row_start = Instant::now();
-        let (deadline, frames_end) = match self.budget() {
+        let estimate = self.estimate_ms(row) / 1e3;
+        let (deadline, frames_end) = match self.keeper.left_s() {
             None => (None, None),
-            Some(b) => {
-                // Greedy: in that order, each row while its estimate fits what is left.
-                let allowance = self.left_s(&b);
-                let est = self.estimate_ms(row) / 1e3;
-                if est > allowance && self.measured {
+            Some(allowance) => {
+                // Greedy: in that order, each row while its estimate fits what is left (the
+                // first row whatever its estimate: the prior's pace is only a guess).
+                if let (Fits::No { left_s, .. }, true) =
+                    (self.keeper.fits(Some(estimate)), self.measured)
+                {
                     let why = format!(
-                        "estimated {est:.1} s, over the {allowance:.1} s left of the budget"
+                        "estimated {estimate:.1} s, over the {left_s:.1} s left of the budget"
                     );
-                    return Ok(RowOutcome::Skipped(skipped(Some(est), why)));
+                    return Ok(RowOutcome::Skipped(skipped(Some(estimate), why)));
                 }
                 let rows_left = self.done.iter().filter(|d| d.is_none()).count().max(1);
-                let fair = self.left_s(&b) / rows_left as f64;
+                let fair = allowance / rows_left as f64;
                 let at = |s: f64| row_start + std::time::Duration::from_secs_f64(s);
                 (Some(at(allowance)), Some(at(fair.min(allowance))))
             }
@@ -347,7 +358,10 @@ impl Run<'_> {
             }
             Err(Warm::OverBudget(over)) => {
                 let est = over.projected_s;
-                self.pace.table_ms_per_plane = Some(1e3 * est / over.steps.max(1) as f64);
+                let steps = over.steps.max(1) as f64;
+                self.keeper.learn(&RowCost::TablePlanes, steps, est);
+                let took = row_start.elapsed().as_secs_f64();
+                self.keeper.timed(&row.name, Some(estimate), took);
                 let why = format!(
                     "its table build would take about {est:.0} s, over the time left of the budget (a table built once, by a larger --budget-s or --full, is read from the cache after)"
                 );
@@ -366,25 +380,27 @@ impl Run<'_> {
         };
         let planes = self.estimate(row).1;
         if built_ms > 0.0 && planes > 0 {
-            self.pace.table_ms_per_plane = Some(built_ms / planes as f64);
+            let k = &mut self.keeper;
+            k.learn(&RowCost::TablePlanes, planes as f64, built_ms / 1e3);
         }
         let frame_ms = crate::render::median(timed.wall.clone()).unwrap_or(warm.wall_ms);
-        self.pace.learn(
-            warm.variant.fetches,
-            setup.size,
-            frame_ms,
-            warm_ms,
-            built_ms,
-        );
+        let frame = RowCost::frame_units(warm.variant.fetches, setup.size);
+        self.keeper.learn(&RowCost::Frame, frame, frame_ms / 1e3);
+        let prepare_ms = (warm_ms - frame_ms - built_ms).max(0.0);
+        self.keeper.learn(&RowCost::Prepare, 0.0, prepare_ms / 1e3);
         self.measured = true;
         let scores = self.score(renderer, &prepared, &material, &timed.last)?;
-        self.reports(renderer, row, &prepared, timed, scores)
+        let outcome = self
+            .reports(renderer, row, &prepared, timed, scores)
             .map(|mut reports| {
                 for r in &mut reports {
                     r.warm_up_ms = warm_ms;
                 }
                 RowOutcome::Measured(reports)
-            })
+            });
+        let took = row_start.elapsed().as_secs_f64();
+        self.keeper.timed(&row.name, Some(estimate), took);
+        outcome
     }
 
     /// The warm-up frame, which builds (or uploads) the row's resources; with a deadline,
