@@ -385,4 +385,10 @@ impl Renderer {
     pub fn building(&self) -> bool {
         self.background.is_some()
     }
+
+    /// Whether the running build waits for the next poll to go on: its coarse stand-in
+    /// arrived and the real build starts once a frame has been drawn with it.
+    pub fn build_waits_for_a_frame(&self) -> bool {
+        self.background.as_ref().is_some_and(|b| b.released)
+    }
 }

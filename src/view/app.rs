@@ -127,6 +127,10 @@ struct App {
     error: Option<Error>,
 }
 
+/// The time between frames while a table builds and the view is still
+/// ([`Viewer::next_frame_at`]).
+const BUILDING_FRAME_INTERVAL: Duration = Duration::from_millis(1000);
+
 impl ApplicationHandler for App {
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
         let Some((prepared, loader, env)) = self.start.take() else {
@@ -159,6 +163,9 @@ impl ApplicationHandler for App {
 
     fn window_event(&mut self, event_loop: &ActiveEventLoop, _id: WindowId, event: WindowEvent) {
         let Some(v) = &mut self.viewer else { return };
+        if !matches!(event, WindowEvent::RedrawRequested) {
+            v.touched = true;
+        }
         let result = match event {
             WindowEvent::CloseRequested => {
                 event_loop.exit();
@@ -220,9 +227,16 @@ impl ApplicationHandler for App {
         }
     }
 
-    fn about_to_wait(&mut self, _event_loop: &ActiveEventLoop) {
-        if let Some(v) = &self.viewer {
-            v.window.request_redraw();
+    fn about_to_wait(&mut self, event_loop: &ActiveEventLoop) {
+        let Some(v) = &self.viewer else { return };
+        match v.next_frame_at() {
+            Some(at) if Instant::now() < at => {
+                event_loop.set_control_flow(ControlFlow::WaitUntil(at));
+            }
+            _ => {
+                event_loop.set_control_flow(ControlFlow::Poll);
+                v.window.request_redraw();
+            }
         }
     }
 }
@@ -251,6 +265,9 @@ struct Viewer {
     presented: u32,
     /// When the command started.
     opened: Instant,
+    /// When the last frame was presented, and whether an input event came since.
+    last_presented: Instant,
+    touched: bool,
     needs_recreate: bool,
     last_reload_check: Instant,
     window: Arc<Window>,
@@ -316,6 +333,8 @@ impl Viewer {
             frames_done: 0,
             presented: 0,
             opened: settings.started,
+            last_presented: Instant::now(),
+            touched: false,
             needs_recreate: false,
             last_reload_check: Instant::now(),
             window,
@@ -504,8 +523,25 @@ impl Viewer {
         Ok(last)
     }
 
+    /// When the next frame is due; `None`: at once. While a table builds and the view is
+    /// still (no input since the last frame, no environment-lit picture accumulating, the
+    /// build not waiting for a frame with its coarse stand-in), a frame would show the same
+    /// picture with a new percentage in the title: frames then come
+    /// [`BUILDING_FRAME_INTERVAL`] apart, and a CPU device gives the build its cores. Any
+    /// input draws at once.
+    fn next_frame_at(&self) -> Option<Instant> {
+        let still = self.draw.building()
+            && !self.draw.build_waits_for_a_frame()
+            && !self.draw.env_drawing()
+            && !self.touched
+            && self.presented > 0;
+        still.then(|| self.last_presented + BUILDING_FRAME_INTERVAL)
+    }
+
     /// A frame was presented (`settled`: while nothing was building or loading).
     fn count_presented(&mut self, settled: bool) {
+        self.last_presented = Instant::now();
+        self.touched = false;
         if self.presented == 0 {
             println!(
                 "first frame presented {:.0} ms after start",

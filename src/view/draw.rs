@@ -227,6 +227,17 @@ impl Draw {
         self.renderer.building()
     }
 
+    /// Whether a background build waits for the next frame to go on.
+    pub fn build_waits_for_a_frame(&self) -> bool {
+        self.renderer.build_waits_for_a_frame()
+    }
+
+    /// Whether the frames draw the environment-lit picture (which accumulates frame by
+    /// frame).
+    pub fn env_drawing(&self) -> bool {
+        self.env.drawing()
+    }
+
     /// What changes the picture without a new pass: the camera, the light, the exposure,
     /// the window's size.
     pub fn view_changed(&mut self) {
