@@ -166,10 +166,31 @@ pub fn sample_g_lines_in(
     };
     // The lookups and their window taps depend on the wavelength, not on `w`.
     let looks = spectrum.all_lookups(&u, &v, samples);
+    // The w nodes' slices run side by side, so that while one slice's thread prepares its
+    // next group of wavelengths the other threads work on another's. The term inputs'
+    // buffers go back to a pool after each slice, for the next one.
+    let pool = std::sync::Mutex::new(Vec::<Inputs>::new());
     let data: Vec<Vec<[f64; 3]>> = w_nodes
-        .iter()
-        .map(|&w| spectrum.slice(&looks, w, samples, used, progress))
+        .par_iter()
+        .with_max_len(1)
+        .map(|&w| {
+            let mut inputs = pool
+                .lock()
+                .ok()
+                .and_then(|mut p| p.pop())
+                .unwrap_or_default();
+            let slice = spectrum.slice(&looks, w, samples, used, progress, &mut inputs);
+            if let Ok(mut p) = pool.lock() {
+                p.push(inputs);
+            }
+            slice
+        })
         .collect();
+    let mut inputs = pool
+        .into_inner()
+        .ok()
+        .and_then(|mut p| p.pop())
+        .unwrap_or_default();
     let probe = (used == Precision::F32 && !w_nodes.is_empty()).then(|| {
         let k = w_nodes.len() / 2;
         let brightest = (0..nv)
@@ -187,7 +208,14 @@ pub fn sample_g_lines_in(
             .min(nv.saturating_sub(PROBE_ROWS));
         let j1 = (j0 + PROBE_ROWS).min(nv);
         let rows = spectrum.all_lookups(&u, &v[j0..j1], samples);
-        let exact = spectrum.slice(&rows, w_nodes[k], samples, Precision::F64, &|| {});
+        let exact = spectrum.slice(
+            &rows,
+            w_nodes[k],
+            samples,
+            Precision::F64,
+            &|| {},
+            &mut inputs,
+        );
         let fast = &data[k][j0 * nu..j1 * nu];
         let peak = exact.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         let diff = exact
@@ -564,6 +592,7 @@ impl PhaseSpectrum {
         samples: &[(f64, [f64; 3])],
         precision: Precision,
         progress: &(dyn Fn() + Sync),
+        inputs: &mut Inputs,
     ) -> Vec<[f64; 3]> {
         // Accumulators are bands of `band_rows` node rows, each planar (X, then Y, then Z)
         // and column-major over its nodes (`i·h + j`, `h` the band's rows); the slice is
@@ -607,9 +636,17 @@ impl PhaseSpectrum {
         };
         let acc = match (&band.fast, precision) {
             (Some(fast), Precision::F32) => {
-                self.band_slice(band, fast, looks, samples, w, progress)
+                self.band_slice(band, fast, looks, samples, w, progress, &mut inputs.f32)
             }
-            _ => self.band_slice(band, &band.spectra, looks, samples, w, progress),
+            _ => self.band_slice(
+                band,
+                &band.spectra,
+                looks,
+                samples,
+                w,
+                progress,
+                &mut inputs.f64,
+            ),
         };
         interleave(acc, WINDOW_ROWS)
     }
@@ -628,10 +665,10 @@ impl PhaseSpectrum {
         samples: &[(f64, [f64; 3])],
         w: f64,
         progress: &(dyn Fn() + Sync),
+        inputs: &mut Vec<Vec<Complex<T>>>,
     ) -> Vec<f64> {
         let (nu, nv) = looks.first().map_or((0, 0), |g| (g.qx.len(), g.qy.len()));
         let mut acc = vec![0.0f64; 3 * nu * nv];
-        let mut inputs = Vec::new();
         let mut first = 0;
         while first < looks.len() {
             let mut last = first + 1;
@@ -642,10 +679,10 @@ impl PhaseSpectrum {
             }
             let group = &looks[first..last];
             let s: Vec<f64> = group.iter().map(|g| phase_scale(w, g.lambda_um)).collect();
-            band.sum(terms, &s, group, &mut inputs);
+            band.sum(terms, &s, group, inputs);
             let jobs: Vec<kernels::WindowJob<'_, T>> = group
                 .iter()
-                .zip(&inputs)
+                .zip(inputs.iter())
                 .zip(&samples[first..last])
                 .map(|((g, spectrum), &(_, weight))| (g, spectrum.as_slice(), weight))
                 .collect();
@@ -768,6 +805,14 @@ impl Lookups {
 
 /// Most complex samples of windowed-spectrum inputs a group of wavelengths holds at once.
 const TERM_GROUP_SAMPLES: usize = 8_000_000;
+
+/// The windowed-spectrum inputs of a group of wavelengths, kept from group to group and
+/// from `w` node to `w` node (tens of megabytes: allocated and zeroed once).
+#[derive(Default)]
+struct Inputs {
+    f32: Vec<Vec<Complex<f32>>>,
+    f64: Vec<Vec<Complex<f64>>>,
+}
 
 /// Node rows one task windows for every wavelength of a group: a multiple of the kernel's
 /// register block of rows, small enough that a task's accumulators and transposed rows
@@ -893,8 +938,9 @@ mod tests {
         );
         assert!(shared.terms.is_some(), "the band must fit");
         let looks = direct.all_lookups(&u, &v, &samples);
-        let a = direct.slice(&looks, w, &samples, Precision::F64, &|| {});
-        let b = shared.slice(&looks, w, &samples, Precision::F64, &|| {});
+        let mut inputs = Inputs::default();
+        let a = direct.slice(&looks, w, &samples, Precision::F64, &|| {}, &mut inputs);
+        let b = shared.slice(&looks, w, &samples, Precision::F64, &|| {}, &mut inputs);
         let peak = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         assert!(peak > 0.0);
         for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
