@@ -959,8 +959,8 @@ fn variant_switch_and_resize_in_flight_make_no_idle_wait() {
 }
 
 /// `X` (heights ×1.25) pressed on the second settled frame of the default variant (a
-/// table): the material loads and its table builds on worker threads while the window keeps
-/// presenting frames (the viewer counts them); the first frame came from a coarse table
+/// table): the material loads and its table builds on worker threads while the window goes
+/// on presenting frames (the viewer counts them); the first frame came from a coarse table
 /// before the real one. The screenshot after the edit equals the offscreen render of the
 /// scene with every height ×1.25, and differs from the unedited render by more.
 #[test]
@@ -1007,8 +1007,10 @@ fn material_edit_rebuilds_in_the_background_while_frames_go_on() {
         })
         .collect();
     assert_eq!(meanwhile.len(), 2, "two builds:\n{stdout}");
+    // The window is not held by the build: the key press draws its frame at once, with the
+    // old table (a still view then draws one a second until the build arrives).
     assert!(
-        meanwhile[1] >= 2,
+        meanwhile[1] >= 1,
         "frames presented while the edited table built: {}\n{stdout}",
         meanwhile[1]
     );

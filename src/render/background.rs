@@ -96,6 +96,8 @@ struct Progress {
     inner: Arc<dyn Report>,
     bar: Mutex<Option<ProgressBar>>,
     cancel: AtomicBool,
+    /// The worker sent a stage (or stopped) that no poll has taken yet.
+    news: AtomicBool,
 }
 
 /// The unwinding payload of a cancelled build.
@@ -257,6 +259,7 @@ impl Renderer {
             inner: Arc::clone(&self.report),
             bar: Mutex::new(None),
             cancel: AtomicBool::new(false),
+            news: AtomicBool::new(false),
         });
         let (tx, rx) = mpsc::channel();
         // After the stand-in, the worker waits for the next poll (the first frame with it
@@ -273,7 +276,9 @@ impl Renderer {
                 let work = || {
                     if let Some(c) = coarse {
                         let built = variant.prepare(&dev, &c.setup(m, &*report));
-                        if tx.send(Stage::Coarse(built)).is_err() || go_rx.recv().is_err() {
+                        let sent = tx.send(Stage::Coarse(built));
+                        report.news.store(true, Ordering::Relaxed);
+                        if sent.is_err() || go_rx.recv().is_err() {
                             return;
                         }
                         if let Ok(mut b) = report.bar.lock() {
@@ -283,7 +288,9 @@ impl Renderer {
                     let built = variant.prepare(&dev, &options.setup(m, &*report));
                     let _ = tx.send(Stage::Final(built));
                 };
-                if let Err(payload) = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work)) {
+                let ended = std::panic::catch_unwind(std::panic::AssertUnwindSafe(work));
+                report.news.store(true, Ordering::Relaxed);
+                if let Err(payload) = ended {
                     if !payload.is::<Cancelled>() {
                         std::panic::resume_unwind(payload);
                     }
@@ -339,6 +346,7 @@ impl Renderer {
                 let _ = go.send(());
             }
         }
+        bg.progress.news.store(false, Ordering::Relaxed);
         let (built, coarse) = match bg.rx.try_recv() {
             Ok(Stage::Coarse(b)) => (b, true),
             Ok(Stage::Final(b)) => (b, false),
@@ -386,9 +394,12 @@ impl Renderer {
         self.background.is_some()
     }
 
-    /// Whether the running build waits for the next poll to go on: its coarse stand-in
-    /// arrived and the real build starts once a frame has been drawn with it.
+    /// Whether the running build waits for the next poll: its coarse stand-in arrived
+    /// (and the real build starts once a frame has been drawn with it), or it sent what no
+    /// poll has taken yet.
     pub fn build_waits_for_a_frame(&self) -> bool {
-        self.background.as_ref().is_some_and(|b| b.released)
+        self.background
+            .as_ref()
+            .is_some_and(|b| b.released || b.progress.news.load(Ordering::Relaxed))
     }
 }

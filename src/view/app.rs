@@ -131,6 +131,9 @@ struct App {
 /// ([`Viewer::next_frame_at`]).
 const BUILDING_FRAME_INTERVAL: Duration = Duration::from_millis(1000);
 
+/// How often a still view looks whether its build has sent what the next frame installs.
+const BUILD_WATCH_INTERVAL: Duration = Duration::from_millis(20);
+
 impl ApplicationHandler for App {
     fn resumed(&mut self, event_loop: &ActiveEventLoop) {
         let Some((prepared, loader, env)) = self.start.take() else {
@@ -231,7 +234,9 @@ impl ApplicationHandler for App {
         let Some(v) = &self.viewer else { return };
         match v.next_frame_at() {
             Some(at) if Instant::now() < at => {
-                event_loop.set_control_flow(ControlFlow::WaitUntil(at));
+                // Awake often enough to see a build's arrival (a flag, no drawing).
+                let soon = Instant::now() + BUILD_WATCH_INTERVAL;
+                event_loop.set_control_flow(ControlFlow::WaitUntil(at.min(soon)));
             }
             _ => {
                 event_loop.set_control_flow(ControlFlow::Poll);

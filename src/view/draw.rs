@@ -227,7 +227,8 @@ impl Draw {
         self.renderer.building()
     }
 
-    /// Whether a background build waits for the next frame to go on.
+    /// Whether a background build waits for the next frame: to go on after its stand-in,
+    /// or to have what it sent installed.
     pub fn build_waits_for_a_frame(&self) -> bool {
         self.renderer.build_waits_for_a_frame()
     }
