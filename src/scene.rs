@@ -375,11 +375,13 @@ impl TextureSpec {
     }
 
     /// Reads the texture: `(width, height, sRGB-encoded RGB bytes)`, top row first.
-    /// `builtin:elaphe-skin` is the procedural corn-snake skin ([`crate::skin`]).
+    /// `builtin:elaphe-skin` is the procedural corn-snake skin ([`crate::skin`]), made once
+    /// a process (the viewer loads it for the scene and again for each pass).
     pub fn load(&self) -> Result<(u32, u32, Vec<[u8; 3]>)> {
         if self.is_builtin() {
+            static SKIN: std::sync::OnceLock<Vec<[u8; 3]>> = std::sync::OnceLock::new();
             let (w, h) = ELAPHE_SKIN_SIZE;
-            return Ok((w, h, elaphe_skin(w, h)));
+            return Ok((w, h, SKIN.get_or_init(|| elaphe_skin(w, h)).clone()));
         }
         crate::image_io::read_png_rgb8(&self.path)
     }
