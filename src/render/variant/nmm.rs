@@ -83,7 +83,7 @@ impl Variant for Nmm {
     }
 
     fn fetch_formula(&self) -> &'static str {
-        "13·orders·(T+1)·(2R+1)² (every kept λ where the region holds specular)"
+        "9·orders·(T+1)·(2R+1)² (every kept λ where the region holds specular)"
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
