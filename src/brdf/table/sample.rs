@@ -179,7 +179,12 @@ pub fn sample_g_lines_in(
                 .ok()
                 .and_then(|mut p| p.pop())
                 .unwrap_or_default();
-            let slice = spectrum.slice(&looks, w, samples, used, progress, &mut inputs);
+            let at = SliceAt {
+                looks: &looks,
+                samples,
+                w,
+            };
+            let slice = spectrum.slice(at, used, progress, &mut inputs);
             if let Ok(mut p) = pool.lock() {
                 p.push(inputs);
             }
@@ -208,14 +213,12 @@ pub fn sample_g_lines_in(
             .min(nv.saturating_sub(PROBE_ROWS));
         let j1 = (j0 + PROBE_ROWS).min(nv);
         let rows = spectrum.all_lookups(&u, &v[j0..j1], samples);
-        let exact = spectrum.slice(
-            &rows,
-            w_nodes[k],
+        let at = SliceAt {
+            looks: &rows,
             samples,
-            Precision::F64,
-            &|| {},
-            &mut inputs,
-        );
+            w: w_nodes[k],
+        };
+        let exact = spectrum.slice(at, Precision::F64, &|| {}, &mut inputs);
         let fast = &data[k][j0 * nu..j1 * nu];
         let peak = exact.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         let diff = exact
@@ -587,13 +590,12 @@ impl PhaseSpectrum {
     /// own phase field. The Gaussian window then runs per wavelength, in parallel.
     fn slice(
         &self,
-        looks: &[Lookups],
-        w: f64,
-        samples: &[(f64, [f64; 3])],
+        at: SliceAt<'_>,
         precision: Precision,
         progress: &(dyn Fn() + Sync),
         inputs: &mut Inputs,
     ) -> Vec<[f64; 3]> {
+        let SliceAt { looks, samples, w } = at;
         // Accumulators are bands of `band_rows` node rows, each planar (X, then Y, then Z)
         // and column-major over its nodes (`i·h + j`, `h` the band's rows); the slice is
         // row-major (`j·nu + i`).
@@ -636,17 +638,9 @@ impl PhaseSpectrum {
         };
         let acc = match (&band.fast, precision) {
             (Some(fast), Precision::F32) => {
-                self.band_slice(band, fast, looks, samples, w, progress, &mut inputs.f32)
+                self.band_slice(band, fast, at, progress, &mut inputs.f32)
             }
-            _ => self.band_slice(
-                band,
-                &band.spectra,
-                looks,
-                samples,
-                w,
-                progress,
-                &mut inputs.f64,
-            ),
+            _ => self.band_slice(band, &band.spectra, at, progress, &mut inputs.f64),
         };
         interleave(acc, WINDOW_ROWS)
     }
@@ -661,12 +655,11 @@ impl PhaseSpectrum {
         &self,
         band: &TermBand,
         terms: &[Vec<Complex<T>>],
-        looks: &[Lookups],
-        samples: &[(f64, [f64; 3])],
-        w: f64,
+        at: SliceAt<'_>,
         progress: &(dyn Fn() + Sync),
         inputs: &mut Vec<Vec<Complex<T>>>,
     ) -> Vec<f64> {
+        let SliceAt { looks, samples, w } = at;
         let (nu, nv) = looks.first().map_or((0, 0), |g| (g.qx.len(), g.qy.len()));
         let mut acc = vec![0.0f64; 3 * nu * nv];
         let mut first = 0;
@@ -806,6 +799,15 @@ impl Lookups {
 /// Most complex samples of windowed-spectrum inputs a group of wavelengths holds at once.
 const TERM_GROUP_SAMPLES: usize = 8_000_000;
 
+/// One `w` node's slice to sample: the lookups of its wavelengths, the wavelengths (nm) with
+/// their XYZ weights, and `w`.
+#[derive(Clone, Copy)]
+struct SliceAt<'a> {
+    looks: &'a [Lookups],
+    samples: &'a [(f64, [f64; 3])],
+    w: f64,
+}
+
 /// The windowed-spectrum inputs of a group of wavelengths, kept from group to group and
 /// from `w` node to `w` node (tens of megabytes: allocated and zeroed once).
 #[derive(Default)]
@@ -939,8 +941,13 @@ mod tests {
         assert!(shared.terms.is_some(), "the band must fit");
         let looks = direct.all_lookups(&u, &v, &samples);
         let mut inputs = Inputs::default();
-        let a = direct.slice(&looks, w, &samples, Precision::F64, &|| {}, &mut inputs);
-        let b = shared.slice(&looks, w, &samples, Precision::F64, &|| {}, &mut inputs);
+        let at = SliceAt {
+            looks: &looks,
+            samples: &samples,
+            w,
+        };
+        let a = direct.slice(at, Precision::F64, &|| {}, &mut inputs);
+        let b = shared.slice(at, Precision::F64, &|| {}, &mut inputs);
         let peak = a.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
         assert!(peak > 0.0);
         for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
