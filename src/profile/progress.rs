@@ -22,7 +22,7 @@ impl Progress {
         let bar = std::io::stderr().is_terminal().then(|| {
             let b = ProgressBar::new(rows as u64);
             b.set_style(
-                ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} {eta} left")
+                crate::progress::style("{msg} [{bar:30}] {pos}/{len} {left} left")
                     .unwrap_or_else(|_| ProgressStyle::default_bar()),
             );
             b

@@ -261,7 +261,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let bar = ProgressBar::new(spec.w_nodes as u64 * lambdas).with_message(format!("{kind} table"));
     let bar = setup.report.progress(bar);
     bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} (w, λ) planes, {eta} left")
+        crate::progress::style("{msg} [{bar:30}] {pos}/{len} (w, λ) planes, {left} left")
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let (mut samples, built) = crate::render::table_build::sample_g_built(
