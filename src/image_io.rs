@@ -114,17 +114,64 @@ fn write_bytes(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// Writes linear RGB as a float32 OpenEXR file (no curve, no clamping; NaN/±Inf become 0).
-pub fn write_exr(path: &Path, width: u32, height: u32, rgb: &[[f32; 3]]) -> Result<()> {
+/// An EXR's numbers have no fixed meaning, so `units` says what they are (a scene's
+/// radiance on its scale, a BRDF map's relative reflectance, which channel holds what): it
+/// is the file's standard `comments` attribute and a `units` attribute of its own.
+pub fn write_exr(
+    path: &Path,
+    width: u32,
+    height: u32,
+    rgb: &[[f32; 3]],
+    units: &str,
+) -> Result<()> {
+    use exr::prelude::{Encoding, Image, Layer, LayerAttributes, SpecificChannels, WritableImage};
     check_size(path, width, height, rgb.len())?;
-    let floats: Vec<f32> = rgb.iter().flat_map(|p| p.map(finite_or_zero)).collect();
-    let img = image::Rgb32FImage::from_raw(width, height, floats)
-        .ok_or_else(|| image_err(path, "pixel buffer does not match the size"))?;
-    let bytes = encode(
-        path,
-        image::DynamicImage::ImageRgb32F(img),
-        image::ImageFormat::OpenExr,
-    )?;
-    write_bytes(path, &bytes)
+    let w = width as usize;
+    use exr::meta::attribute::{AttributeValue, Text};
+    let mut attributes = LayerAttributes::named("diffract");
+    // An EXR string is bytes: the text goes in as UTF-8 (ρ, ×, § are not Latin-1 all).
+    let text = || Text::from_slice_unchecked(units.as_bytes());
+    attributes.comments = Some(text());
+    attributes
+        .other
+        .insert(Text::from(EXR_UNITS), AttributeValue::Text(text()));
+    let layer = Layer::new(
+        (w, height as usize),
+        attributes,
+        Encoding::FAST_LOSSLESS,
+        SpecificChannels::rgb(|p: exr::math::Vec2<usize>| {
+            let [r, g, b] = rgb[p.y() * w + p.x()].map(finite_or_zero);
+            (r, g, b)
+        }),
+    );
+    let mut bytes = std::io::Cursor::new(Vec::new());
+    Image::from_layer(layer)
+        .write()
+        .non_parallel()
+        .to_buffered(&mut bytes)
+        .map_err(|e| image_err(path, format!("OpenEXR: {e}")))?;
+    write_bytes(path, bytes.get_ref())
+}
+
+/// The name of the attribute in which an EXR diffract writes says what its pixels hold.
+pub const EXR_UNITS: &str = "units";
+
+/// The `units` attribute of an OpenEXR file diffract wrote (`None`: there is none).
+pub fn exr_units(path: &Path) -> Result<Option<String>> {
+    let meta = exr::meta::MetaData::read_from_file(path, false)
+        .map_err(|e| image_err(path, format!("OpenEXR: {e}")))?;
+    Ok(meta.headers.first().and_then(|h| {
+        match h
+            .own_attributes
+            .other
+            .get(&exr::meta::attribute::Text::from(EXR_UNITS))
+        {
+            Some(exr::meta::attribute::AttributeValue::Text(t)) => {
+                Some(String::from_utf8_lossy(t.bytes()).into_owned())
+            }
+            _ => None,
+        }
+    }))
 }
 
 /// Image file formats diffract writes.
@@ -162,20 +209,27 @@ pub fn output_format(path: &Path) -> Result<OutputFormat> {
 }
 
 /// Writes PNG (8-bit sRGB) or EXR (float32 linear, scaled by `exposure` too, so both show
-/// the same picture) chosen by the extension of `path` (case-insensitive).
+/// the same picture; `units` says what its numbers are, see [`write_exr`]) chosen by the
+/// extension of `path` (case-insensitive).
 pub fn write_image(
     path: &Path,
     width: u32,
     height: u32,
     rgb: &[[f32; 3]],
     exposure: f32,
+    units: &str,
 ) -> Result<()> {
     match output_format(path)? {
         OutputFormat::Png => write_png_srgb(path, width, height, rgb, exposure),
         OutputFormat::Exr => {
             check_exposure(exposure)?;
             let scaled: Vec<[f32; 3]> = rgb.iter().map(|p| p.map(|c| c * exposure)).collect();
-            write_exr(path, width, height, &scaled)
+            let units = if exposure == 1.0 {
+                units.to_string()
+            } else {
+                format!("{units}, × exposure {exposure}")
+            };
+            write_exr(path, width, height, &scaled, &units)
         }
     }
 }
@@ -508,7 +562,7 @@ mod tests {
         let p = d.join("a.exr");
         let mut px = gradient(7, 5);
         px[3] = [f32::NAN, f32::INFINITY, 12.5];
-        write_exr(&p, 7, 5, &px).unwrap();
+        write_exr(&p, 7, 5, &px, "test units: X, Y, Z").unwrap();
         let (w, h, back) = read_exr(&p).unwrap();
         assert_eq!((w, h), (7, 5));
         assert_eq!(back[3], [0.0, 0.0, 12.5]);
@@ -517,6 +571,17 @@ mod tests {
                 assert_eq!(a, b);
             }
         }
+        assert_eq!(
+            exr_units(&p).unwrap().as_deref(),
+            Some("test units: X, Y, Z")
+        );
+        // Through write_image, the exposure is part of what the numbers are.
+        write_image(&p, 7, 5, &px, 2.0, "radiance").unwrap();
+        assert_eq!(
+            exr_units(&p).unwrap().as_deref(),
+            Some("radiance, × exposure 2")
+        );
+        assert_eq!(read_exr(&p).unwrap().2[0], px[0].map(|c| 2.0 * c));
         let _ = std::fs::remove_dir_all(d);
     }
 
@@ -550,7 +615,7 @@ mod tests {
         assert!(write_png_srgb(&p, 2, 2, &[[0.0; 3]; 3], 1.0).is_err());
         assert!(write_png_srgb(&p, 0, 0, &[], 1.0).is_err());
         assert!(write_png_srgb(&p, 1, 1, &[[0.0; 3]], 0.0).is_err());
-        assert!(write_image(&d.join("x.jpg"), 1, 1, &[[0.0; 3]], 1.0).is_err());
+        assert!(write_image(&d.join("x.jpg"), 1, 1, &[[0.0; 3]], 1.0, "").is_err());
         assert_eq!(std::fs::read(&p).unwrap(), b"precious");
         // No temporary files are left behind.
         let names: Vec<_> = std::fs::read_dir(&d)

@@ -260,6 +260,10 @@ fn a_small_environment_lit_map_is_drawn() {
     );
     let (w, h, px) = diffract::image_io::read_exr(&out).unwrap();
     assert_eq!((w, h), (8, 8));
+    assert_eq!(
+        diffract::image_io::exr_units(&out).unwrap().as_deref(),
+        Some("linear sRGB of the radiance an environment-lit BRDF map reflects")
+    );
     // Linear sRGB: a saturated diffraction colour may lie outside the gamut (a negative
     // component); every value is finite.
     assert!(px.iter().flatten().all(|c| c.is_finite()));
@@ -320,6 +324,15 @@ fn a_small_scene_under_an_environment_and_a_disc_light_is_drawn() {
     assert_eq!((w, h), (12, 8));
     assert!(px.iter().flatten().all(|c| c.is_finite()));
     assert!(px.iter().any(|p| p[1] > 0.0), "a black picture");
+    // The file says what its numbers are.
+    let units = diffract::image_io::exr_units(&out)
+        .unwrap()
+        .unwrap_or_default();
+    assert!(
+        units.starts_with("linear sRGB of a scene of radiance (× exposure ")
+            && units.contains("/ S = "),
+        "{units}"
+    );
 }
 
 #[test]

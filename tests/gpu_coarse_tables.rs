@@ -44,6 +44,11 @@ fn map_peak(dir: &Path, name: &str, extra: &[&str]) -> Option<(f32, String)> {
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
     assert!(o.status.success(), "{name}: {err}");
     let (_, _, px) = diffract::image_io::read_exr(&out).unwrap();
+    // A sun-lit BRDF map's EXR holds XYZ in its R, G, B, and says so.
+    let units = diffract::image_io::exr_units(&out)
+        .unwrap()
+        .unwrap_or_default();
+    assert!(units.starts_with("CIE X, Y, Z (in R, G, B)"), "{units}");
     let peak = px.iter().flatten().fold(0.0f32, |m, &c| m.max(c));
     Some((peak, err))
 }

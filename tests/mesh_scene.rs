@@ -600,29 +600,34 @@ fn scene_errors_are_clear() {
 fn write_image_picks_the_format_by_extension() {
     let d = tmp_dir("images");
     let px: Vec<[f32; 3]> = (0..12).map(|i| [i as f32 / 12.0, 0.25, 2.0]).collect();
-    image_io::write_image(&d.join("a.EXR"), 4, 3, &px, 0.5).unwrap();
+    image_io::write_image(&d.join("a.EXR"), 4, 3, &px, 0.5, "test radiance").unwrap();
+    assert_eq!(
+        image_io::exr_units(&d.join("a.EXR")).unwrap().as_deref(),
+        Some("test radiance, × exposure 0.5"),
+        "an EXR says what its numbers are"
+    );
     let (w, h, back) = image_io::read_exr(&d.join("a.EXR")).unwrap();
     assert_eq!((w, h), (4, 3));
     for (a, b) in px.iter().zip(&back) {
         assert_eq!(a.map(|c| c * 0.5), *b, "EXR is linear and exposed");
     }
-    image_io::write_image(&d.join("a.png"), 4, 3, &px, 1.0).unwrap();
+    image_io::write_image(&d.join("a.png"), 4, 3, &px, 1.0, "").unwrap();
     let (w, h, back) = image_io::read_png_rgb8(&d.join("a.png")).unwrap();
     assert_eq!((w, h), (4, 3));
     assert_eq!(back[0], [0, 137, 255]);
     // Reading with the wrong reader is an error, not a silent conversion.
     assert!(image_io::read_exr(&d.join("a.png")).is_err());
     assert!(image_io::read_png_rgb8(&d.join("a.EXR")).is_err());
-    let e = err_text(image_io::write_image(&d.join("a.tiff"), 4, 3, &px, 1.0));
+    let e = err_text(image_io::write_image(&d.join("a.tiff"), 4, 3, &px, 1.0, ""));
     assert!(e.contains("a.tiff") && e.contains(".png"), "{e}");
     // An unwritable place is an I/O error naming the path.
     let nowhere = d.join("no/such/dir/x.png");
-    match image_io::write_image(&nowhere, 4, 3, &px, 1.0) {
+    match image_io::write_image(&nowhere, 4, 3, &px, 1.0, "") {
         Err(Error::Io { path, .. }) => assert_eq!(path, nowhere),
         other => panic!("{other:?}"),
     }
     // Overwriting replaces the file completely and leaves no temporaries.
-    image_io::write_image(&d.join("a.png"), 1, 1, &[[1.0; 3]], 1.0).unwrap();
+    image_io::write_image(&d.join("a.png"), 1, 1, &[[1.0; 3]], 1.0, "").unwrap();
     assert_eq!(
         image_io::read_png_rgb8(&d.join("a.png")).unwrap().2,
         vec![[255; 3]]

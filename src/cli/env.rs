@@ -394,7 +394,11 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
             ),
         ));
     }
-    crate::image_io::write_image(args.out, out.width, out.height, &rgb, 1.0)?;
+    let units = format!(
+        "linear sRGB of a scene of radiance (× exposure {} / S = {:.0})",
+        out.exposure, lighting.mirror_scale
+    );
+    crate::image_io::write_image(args.out, out.width, out.height, &rgb, 1.0, &units)?;
     println!("{}", lighting.report_line(!built));
     println!(
         "device: {}; scene {}×{} → {} in radiance units (× exposure {} / {:.0}) under {}, {} disc light(s), sun {}: variant {}: {:.0} samples per pixel on average, {} at most ({}), {} G-buffer pixels of {}² covered; G-buffer {:.0} ms (raster pipeline and readback), GPU {:.1} ms (dispatches), wall {:.2} s (the whole process)",

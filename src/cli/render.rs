@@ -198,8 +198,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     all_finite(&frame, &args.out)?;
     let mut chosen_exposure = None;
     let what = if inputs.is_some() {
-        crate::image_io::write_image(&args.out, frame.width, frame.height, &frame.rgb, 1.0)?;
-        scene_units(&scene, &prepared)
+        let what = scene_units(&scene, &prepared);
+        let units = format!("linear sRGB of a {what}");
+        let (w, h) = (frame.width, frame.height);
+        crate::image_io::write_image(&args.out, w, h, &frame.rgb, 1.0, &units)?;
+        what
     } else {
         if let Some(Exposure::Auto(e)) = write_map(args, &frame)? {
             chosen_exposure = Some(e);
@@ -311,15 +314,16 @@ fn run_env_map(args: &RenderArgs, scene: &Scene, env: &crate::light::env::EnvMap
         ));
     }
     let exposure = args.scene.exposure.unwrap_or(1.0);
+    let units = "linear sRGB of the radiance an environment-lit BRDF map reflects";
     match crate::image_io::output_format(&args.out)? {
         crate::image_io::OutputFormat::Exr => {
-            crate::image_io::write_exr(&args.out, size, size, &out.rgb)?;
+            crate::image_io::write_exr(&args.out, size, size, &out.rgb, units)?;
             if args.png {
                 let png = args.out.with_extension("png");
                 crate::image_io::write_png_srgb(&png, size, size, &out.rgb, exposure)?;
             }
         }
-        _ => crate::image_io::write_image(&args.out, size, size, &out.rgb, exposure)?,
+        _ => crate::image_io::write_image(&args.out, size, size, &out.rgb, exposure, units)?,
     }
     println!("{}", out.table_line);
     println!(
@@ -441,9 +445,14 @@ fn write_map(args: &RenderArgs, frame: &Picture) -> Result<Option<Exposure>> {
                 .collect()
         }
     };
+    // The EXR holds the map as drawn: XYZ (in R, G, B) or one wavelength's ρ.
+    let units = match args.lambda_nm {
+        Some(l) => format!("relative reflectance ρ at {l} nm (MODEL §2) in R, G and B"),
+        None => "CIE X, Y, Z (in R, G, B) of the relative reflectance ρ (MODEL §2)".to_string(),
+    };
     match crate::image_io::output_format(&args.out)? {
         crate::image_io::OutputFormat::Exr => {
-            crate::image_io::write_exr(&args.out, frame.width, frame.height, &frame.rgb)?;
+            crate::image_io::write_exr(&args.out, frame.width, frame.height, &frame.rgb, &units)?;
             if args.png {
                 let png = args.out.with_extension("png");
                 crate::image_io::write_png_srgb(
@@ -463,6 +472,7 @@ fn write_map(args: &RenderArgs, frame: &Picture) -> Result<Option<Exposure>> {
             frame.height,
             &viewable(),
             exposure,
+            "linear sRGB of the relative reflectance ρ (MODEL §2)",
         )
         .map(|()| Some(shown)),
     }
