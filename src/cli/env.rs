@@ -467,9 +467,7 @@ pub fn env_variant(
     renderer.set_cache_dir(dir.clone());
     let prepared = material.prepare_anywhere(hf.clone(), dir.as_deref(), &crate::report::Stderr)?;
     let brdf = renderer.env_brdf(&prepared, lighting, &material.shading())?;
-    let name = renderer
-        .prepared_stats()
-        .map_or_else(|| variant.name().to_string(), |s| s.name);
+    let name = brdf.variant_name();
     Ok(EnvVariant {
         brdf,
         name,

@@ -56,10 +56,15 @@ pub struct EnvBrdf {
     _white: Image,
     _sampler: Sampler,
     /// Last among the resources: the set points at its images and buffers.
-    _variant: Arc<dyn PreparedVariant>,
+    variant: Arc<dyn PreparedVariant>,
 }
 
 impl EnvBrdf {
+    /// What the variant's report calls it (`flss T=12 R=1 dλ=10`, a table's nodes).
+    pub fn variant_name(&self) -> String {
+        self.variant.stats().name
+    }
+
     /// `chebyshev-w` drawn from `table` (radiance units; the environment's sampling table,
     /// so the draw builds no second one), stored in `format` over `spec`.
     pub(crate) fn chebyshev_w(
@@ -156,7 +161,7 @@ impl EnvBrdf {
             _colour: colour,
             _white: white,
             _sampler: sampler,
-            _variant: variant,
+            variant,
         })
     }
 
@@ -244,9 +249,10 @@ impl super::Renderer {
     /// with its table in radiance units ([`Response::radiance`] with `shading`) or its
     /// colour weights carrying them, over the lighting's region and at its `(u, v)`
     /// spacing and wavelength step unless the table options name others. Nothing is left
-    /// out: the stages reach every `(u, v)` of the region.
+    /// out: the stages reach every `(u, v)` of the region. The renderer's own settings and
+    /// the variant it draws with are left as they were.
     pub fn env_brdf(
-        &mut self,
+        &self,
         prepared: &crate::material::PreparedMaterial,
         lighting: &super::env::EnvLighting,
         shading: &Shading,
@@ -256,38 +262,33 @@ impl super::Renderer {
         if kind == VariantKind::ChebyshevW {
             return lighting.brdf(self.device(), shading).map(Arc::new);
         }
-        let table = self.table;
-        let leave_out = self.leave_out;
-        let region = self.table_region;
-        let keep = self.keep_models;
-        // The stages need no f64 model (it would hold the whole region in f64).
-        self.keep_models = false;
-        self.table = super::variant::TableOptions {
-            texel_uv: table.texel_uv.or(Some(lighting.spec.texel_uv)),
-            step_nm: table.step_nm.or(Some(lighting.spec.step_nm)),
+        // Built here with its own options, not through the renderer's prepared variant: the
+        // renderer's settings and the variant it draws with stay as they are. The stages
+        // need no f64 model (it would hold the whole region in f64), and nothing is left
+        // out: they reach every `(u, v)` of the region.
+        self.variant.check_output(super::params::OutputMode::Mesh)?;
+        let table = super::variant::TableOptions {
+            texel_uv: self.table.texel_uv.or(Some(lighting.spec.texel_uv)),
+            step_nm: self.table.step_nm.or(Some(lighting.spec.step_nm)),
             response: Response::radiance(prepared.material.coherence_um, shading),
-            ..table
+            ..self.table
         };
-        self.leave_out = false;
-        self.table_region = Some(lighting.spec.region);
-        let built = self.prepare_variant(
-            prepared,
-            lighting.spec.region,
-            super::params::OutputMode::Mesh,
-            None,
-        );
-        self.table = table;
-        self.leave_out = leave_out;
-        self.table_region = region;
-        self.keep_models = keep;
-        built?;
-        let (key, variant) = self
-            .prepared
-            .as_ref()
-            .ok_or(Error::Internal("no variant prepared"))?;
-        let response = &key.table.response;
-        let weights = super::params::colour_weights(prepared, variant.as_ref(), response);
-        let variant = Arc::clone(variant);
+        let options = super::background::BuildOptions {
+            region: lighting.spec.region,
+            output: super::params::OutputMode::Mesh,
+            storage: self.storage,
+            table,
+            keep_model: false,
+            cache_dir: self.cache_dir.clone(),
+            leave_out: false,
+            disc: None,
+        };
+        let built = self
+            .variant
+            .implementation()
+            .prepare(&self.dev, &options.setup(prepared, self.report.as_ref()))?;
+        let variant: Arc<dyn super::variant::PreparedVariant> = Arc::from(built);
+        let weights = super::params::colour_weights(prepared, variant.as_ref(), &table.response);
         EnvBrdf::new(
             self.device(),
             kind,
