@@ -11,7 +11,7 @@
 //! measured has the same size, from the cost already known (a split measured another way,
 //! [`Keeper::split`], or the prior) scaled to them.
 
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 /// The budget counts as kept while the whole run takes at most this much more than it.
 pub const KEPT_WITHIN: f64 = 0.2;
@@ -113,31 +113,10 @@ impl<K: PartialEq + Clone> Keeper<K> {
         }
     }
 
-    pub fn total_s(&self) -> Option<f64> {
-        self.total_s
-    }
-
     /// Seconds left of the budget (0 once spent); `None` without a budget.
     pub fn left_s(&self) -> Option<f64> {
         self.total_s
             .map(|t| (t - self.start.elapsed().as_secs_f64()).max(0.0))
-    }
-
-    /// When the budget ends; `None` without a budget.
-    pub fn end(&self) -> Option<Instant> {
-        self.total_s
-            .map(|t| self.start + Duration::from_secs_f64(t.max(0.0)))
-    }
-
-    /// A part of what is left (`share` of it, counted from now) as a budget of its own,
-    /// with what this keeper has learned.
-    pub fn share(&self, share: f64) -> Self {
-        Self {
-            start: Instant::now(),
-            total_s: self.left_s().map(|l| l * share),
-            kinds: self.kinds.clone(),
-            timed: Vec::new(),
-        }
     }
 
     fn kind(&mut self, key: &K) -> &mut Kind<K> {
@@ -327,7 +306,8 @@ mod tests {
         assert_eq!(k.fits(Some(5.0)), Fits::Yes);
         assert!(matches!(k.fits(Some(11.0)), Fits::No { .. }));
         assert_eq!(k.fits(None), Fits::Yes);
-        let spent = Keeper::<u8>::new(Instant::now() - Duration::from_secs(20), Some(10.0));
+        let ago = std::time::Duration::from_secs(20);
+        let spent = Keeper::<u8>::new(Instant::now() - ago, Some(10.0));
         assert_eq!(spent.left_s(), Some(0.0));
         assert!(matches!(spent.fits(None), Fits::No { .. }));
         assert_eq!(

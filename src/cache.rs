@@ -181,23 +181,14 @@ impl CacheDir<'_> {
     /// Stores the bytes `make` encodes at `path`, as [`Self::write`] does, behind the
     /// caller's work once [`write_behind_from_now`] was called: `make` and the write run on
     /// a thread of their own and a failure is reported by [`finish_writes`]. Otherwise at
-    /// once. `size` is the encoded length: a file over the cap is not made at all.
+    /// once. As with [`Self::write`], the caller has held the file's size to the cap.
     pub fn write_behind(
         &self,
         path: PathBuf,
-        size: u64,
         what: &'static str,
         make: impl FnOnce() -> Vec<u8> + Send + 'static,
         report: &dyn Report,
     ) {
-        if size > self.max {
-            report.warn(&format!(
-                "the {what} takes {} MiB, more than the cache cap of {} MiB (DIFFRACT_CACHE_MAX); not cached",
-                size >> 20,
-                self.max >> 20
-            ));
-            return;
-        }
         if !BEHIND.load(std::sync::atomic::Ordering::Relaxed) {
             self.write(&path, &make(), what, report);
             return;

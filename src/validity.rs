@@ -788,7 +788,7 @@ pub fn expected_error_line(
 
 fn summary(material: &Material, thetas_deg: &[f64], cache_dir: Option<&Path>) -> Result<String> {
     let hf = material.load_heightfield(&crate::report::Collect::default())?;
-    summary_of(material, &hf, thetas_deg, cache_dir, &CheckPace::default())
+    summary_of(material, &hf, thetas_deg, cache_dir, &CheckPace::new())
 }
 
 /// The fewest whole periods the field must hold across its peak's direction for the peak

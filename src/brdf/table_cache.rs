@@ -253,14 +253,17 @@ pub fn sample_g_cached_by(
         }
     }
     let s = build()?;
-    let body = (expected <= cache.max_bytes()).then(|| unsealed(&s, key));
-    cache.write_behind(
-        path,
-        expected,
-        "table cache",
-        move || seal(body.unwrap_or_default()),
-        report,
-    );
+    if expected > cache.max_bytes() {
+        report.warn(&format!(
+            "the table takes {} MiB, more than the cache cap of {} MiB (DIFFRACT_CACHE_MAX); not cached",
+            expected >> 20,
+            cache.max_bytes() >> 20
+        ));
+        return Ok((s, false));
+    }
+    // The bytes that need the slices here; the checksum and the write behind the work.
+    let body = unsealed(&s, key);
+    cache.write_behind(path, "table cache", move || seal(body), report);
     Ok((s, false))
 }
 

@@ -456,7 +456,6 @@ pub fn env_variant(
                 "chebyshev-w (the environment table, {})",
                 table.table_format.name()
             ),
-            _renderer: None,
         });
     }
     refuse_variant(variant)?;
@@ -466,13 +465,10 @@ pub fn env_variant(
     let dir = cache.dir();
     renderer.set_cache_dir(dir.clone());
     let prepared = material.prepare_anywhere(hf.clone(), dir.as_deref(), &crate::report::Stderr)?;
+    // The stages' variant lives in the binding (it holds the variant), not in the renderer.
     let brdf = renderer.env_brdf(&prepared, lighting, &material.shading())?;
     let name = brdf.variant_name();
-    Ok(EnvVariant {
-        brdf,
-        name,
-        _renderer: Some(renderer),
-    })
+    Ok(EnvVariant { brdf, name })
 }
 
 /// The error of a variant that cannot be lit by an environment (a debug view), before any
@@ -487,7 +483,6 @@ pub struct EnvVariant {
     pub brdf: std::sync::Arc<crate::render::env_brdf::EnvBrdf>,
     /// What the variant's report calls it (`flss T=12 R=1 dλ=10`, a table's nodes).
     pub name: String,
-    _renderer: Option<crate::render::Renderer>,
 }
 
 /// The radiance table of `spec` and its density, through the cache unless `--no-cache`;

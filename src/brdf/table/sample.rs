@@ -575,8 +575,6 @@ impl PhaseSpectrum {
             lambda_um,
             x: taps(&qx, rx, cx0, self.sigma[0]),
             y: taps(&qy, ry, cy0, self.sigma[1]),
-            qx,
-            qy,
             t0: [cx0, cy0],
             size: [(cx1 - cx0 + 1) as usize, (cy1 - cy0 + 1) as usize],
         }
@@ -599,7 +597,7 @@ impl PhaseSpectrum {
         // Accumulators are bands of `band_rows` node rows, each planar (X, then Y, then Z)
         // and column-major over its nodes (`i·h + j`, `h` the band's rows); the slice is
         // row-major (`j·nu + i`).
-        let (nu, nv) = looks.first().map_or((0, 0), |g| (g.qx.len(), g.qy.len()));
+        let (nu, nv) = looks.first().map_or((0, 0), Lookups::nodes);
         let n = nu * nv;
         let zero = || vec![0.0f64; 3 * n];
         let interleave = |acc: Vec<f64>, band_rows: usize| -> Vec<[f64; 3]> {
@@ -660,7 +658,7 @@ impl PhaseSpectrum {
         inputs: &mut Vec<Vec<Complex<T>>>,
     ) -> Vec<f64> {
         let SliceAt { looks, samples, w } = at;
-        let (nu, nv) = looks.first().map_or((0, 0), |g| (g.qx.len(), g.qy.len()));
+        let (nu, nv) = looks.first().map_or((0, 0), Lookups::nodes);
         let mut acc = vec![0.0f64; 3 * nu * nv];
         let mut first = 0;
         while first < looks.len() {
@@ -762,13 +760,11 @@ fn add_planes(mut a: Vec<f64>, b: Vec<f64>) -> Vec<f64> {
 /// The lookups of one wavelength over a node grid, and the texels their windows read.
 struct Lookups {
     lambda_um: f64,
-    /// Lookup positions along x (one per `u` node) and y (one per `v` node), in texels.
-    qx: Vec<f64>,
-    qy: Vec<f64>,
     /// First shifted texel (x, y) of the windows' reach, and its width and height.
     t0: [i64; 2],
     size: [usize; 2],
-    /// The Gaussian window's taps of each lookup along x and along y.
+    /// The Gaussian window's taps of each lookup along x (one per `u` node) and along y
+    /// (one per `v` node).
     x: Taps,
     y: Taps,
 }
@@ -781,6 +777,11 @@ struct Taps {
 }
 
 impl Lookups {
+    /// The node grid's size: the lookups along x (`u` nodes) and along y (`v` nodes).
+    fn nodes(&self) -> (usize, usize) {
+        (self.x.first.len(), self.y.first.len())
+    }
+
     /// Complex samples of its windowed-spectrum input.
     fn len(&self) -> usize {
         self.size[0] * self.size[1]

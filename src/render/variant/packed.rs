@@ -162,7 +162,7 @@ pub fn store(dir: &Path, key: u64, packed: Packed, report: &dyn Report) {
             if size <= cache.max_bytes() {
                 let path = cache.file(PACKED_FILES, key);
                 let make = move || packed.encode(key);
-                cache.write_behind(path, size, "packed table cache", make, report);
+                cache.write_behind(path, "packed table cache", make, report);
             }
         }
         Err(e) => report.warn(&format!("could not write the packed table cache: {e}")),

@@ -118,7 +118,7 @@ impl PhaseSpectrum {
         let Some(&(first, _, _)) = block.first() else {
             return;
         };
-        let nu = first.qx.len();
+        let nu = first.nodes().0;
         // The rows' height: the transposed rows and the accumulators hold only these.
         let nv = rows.len();
         let n = nu * nv;
