@@ -3,7 +3,7 @@
 // stage: per pixel the interpolated frame made orthonormal (N normalised, T orthogonalised
 // against it, B = ±N × T on the side of the interpolated B), ωr towards the eye exactly
 // (eye − position, not interpolated directions) in that frame, and the texture's albedo.
-// A colour target holds four floats, so each draw writes one quarter, `component`:
+// A colour attachment holds four floats, so the sixteen go to four attachments:
 //   0: (T, t_r)   1: (B, t_g)   2: (N, t_b)   3: (ωr, 1: covered)
 // The clear value (0, 0, 0, 0) marks an uncovered pixel.
 
@@ -15,12 +15,14 @@ layout(location = 4) in vec2 inUv;
 
 // The texture's linear albedo, already scaled (a 1×1 black one without a texture).
 layout(set = 0, binding = 0) uniform sampler2D albedo;
-layout(set = 0, binding = 1, std140) uniform Quarter {
-    vec4 eye;        // xyz: the eye in world space
-    ivec4 component; // x: which quarter this draw writes
-} quarter;
+layout(set = 0, binding = 1, std140) uniform Camera {
+    vec4 eye; // xyz: the eye in world space
+} camera;
 
-layout(location = 0) out vec4 outValue;
+layout(location = 0) out vec4 outTangent;
+layout(location = 1) out vec4 outBitangent;
+layout(location = 2) out vec4 outNormal;
+layout(location = 3) out vec4 outToEye;
 
 void main() {
     float ln = length(inNormal);
@@ -31,14 +33,13 @@ void main() {
     vec3 t = lt > 1e-20 ? t0 / lt : anyPerp;
     vec3 c = cross(n, t);
     vec3 b = dot(inBitangent, c) < 0.0 ? -c : c;
-    vec3 e = quarter.eye.xyz - inPosition;
+    vec3 e = camera.eye.xyz - inPosition;
     float le = length(e);
     vec3 toEye = le > 1e-20 ? e / le : n;
     vec3 wr = vec3(dot(toEye, t), dot(toEye, b), dot(toEye, n));
     vec3 tex = texture(albedo, inUv).rgb;
-    int k = quarter.component.x;
-    outValue = k == 0 ? vec4(t, tex.r)
-             : k == 1 ? vec4(b, tex.g)
-             : k == 2 ? vec4(n, tex.b)
-             : vec4(wr, 1.0);
+    outTangent = vec4(t, tex.r);
+    outBitangent = vec4(b, tex.g);
+    outNormal = vec4(n, tex.b);
+    outToEye = vec4(wr, 1.0);
 }

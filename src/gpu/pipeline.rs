@@ -262,6 +262,8 @@ pub struct PipelineDesc<'a> {
     pub layout: &'a PipelineLayout,
     pub render_pass: vk::RenderPass,
     pub depth_test: bool,
+    /// Colour attachments the fragment stage writes (outputs `0..n`), none blended.
+    pub colours: u32,
 }
 
 /// A graphics pipeline (viewport and scissor are dynamic).
@@ -336,8 +338,11 @@ impl Pipeline {
             .depth_test_enable(desc.depth_test)
             .depth_write_enable(desc.depth_test)
             .depth_compare_op(vk::CompareOp::LESS);
-        let attachments = [vk::PipelineColorBlendAttachmentState::default()
-            .color_write_mask(vk::ColorComponentFlags::RGBA)];
+        let attachments = vec![
+            vk::PipelineColorBlendAttachmentState::default()
+                .color_write_mask(vk::ColorComponentFlags::RGBA);
+            desc.colours.max(1) as usize
+        ];
         let blend = vk::PipelineColorBlendStateCreateInfo::default().attachments(&attachments);
         let dynamic_states = [vk::DynamicState::VIEWPORT, vk::DynamicState::SCISSOR];
         let dynamic = vk::PipelineDynamicStateCreateInfo::default().dynamic_states(&dynamic_states);

@@ -31,16 +31,29 @@ impl RenderPass {
         colour_format: vk::Format,
         colour_final: vk::ImageLayout,
     ) -> Result<Self> {
-        let attachments = [
-            vk::AttachmentDescription::default()
-                .format(colour_format)
-                .samples(vk::SampleCountFlags::TYPE_1)
-                .load_op(vk::AttachmentLoadOp::CLEAR)
-                .store_op(vk::AttachmentStoreOp::STORE)
-                .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
-                .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
-                .initial_layout(vk::ImageLayout::UNDEFINED)
-                .final_layout(colour_final),
+        Self::with_colours(dev, name, 1, colour_format, colour_final)
+    }
+
+    /// [`Self::new`] with `colours` colour attachments of one format (attachments
+    /// `0..colours`, fragment outputs `0..colours`), depth after them.
+    pub fn with_colours(
+        dev: &Arc<Device>,
+        name: &str,
+        colours: u32,
+        colour_format: vk::Format,
+        colour_final: vk::ImageLayout,
+    ) -> Result<Self> {
+        let colour = vk::AttachmentDescription::default()
+            .format(colour_format)
+            .samples(vk::SampleCountFlags::TYPE_1)
+            .load_op(vk::AttachmentLoadOp::CLEAR)
+            .store_op(vk::AttachmentStoreOp::STORE)
+            .stencil_load_op(vk::AttachmentLoadOp::DONT_CARE)
+            .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
+            .initial_layout(vk::ImageLayout::UNDEFINED)
+            .final_layout(colour_final);
+        let mut attachments = vec![colour; colours as usize];
+        attachments.push(
             vk::AttachmentDescription::default()
                 .format(DEPTH_FORMAT)
                 .samples(vk::SampleCountFlags::TYPE_1)
@@ -50,13 +63,15 @@ impl RenderPass {
                 .stencil_store_op(vk::AttachmentStoreOp::DONT_CARE)
                 .initial_layout(vk::ImageLayout::UNDEFINED)
                 .final_layout(vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL),
-        ];
-        let colour_ref = [vk::AttachmentReference {
-            attachment: 0,
-            layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
-        }];
+        );
+        let colour_ref: Vec<vk::AttachmentReference> = (0..colours)
+            .map(|attachment| vk::AttachmentReference {
+                attachment,
+                layout: vk::ImageLayout::COLOR_ATTACHMENT_OPTIMAL,
+            })
+            .collect();
         let depth_ref = vk::AttachmentReference {
-            attachment: 1,
+            attachment: colours,
             layout: vk::ImageLayout::DEPTH_STENCIL_ATTACHMENT_OPTIMAL,
         };
         let subpass = [vk::SubpassDescription::default()
@@ -116,16 +131,16 @@ impl RenderPass {
         })
     }
 
-    /// A framebuffer of this pass over `views` (colour, depth) of `extent`.
+    /// A framebuffer of this pass over `views` (the colours, then depth) of `extent`.
     pub fn framebuffer(
         &self,
         name: &str,
-        views: [vk::ImageView; 2],
+        views: &[vk::ImageView],
         extent: vk::Extent2D,
     ) -> Result<vk::Framebuffer> {
         let info = vk::FramebufferCreateInfo::default()
             .render_pass(self.raw)
-            .attachments(&views)
+            .attachments(views)
             .width(extent.width)
             .height(extent.height)
             .layers(1);

@@ -434,7 +434,7 @@ impl Swapchain {
             dev.set_name(view, &format!("swapchain view {i}"));
             let fb = self.render_pass.framebuffer(
                 &format!("swapchain framebuffer {i}"),
-                [view, depth.view],
+                &[view, depth.view],
                 self.extent,
             )?;
             self.framebuffers.push(fb);

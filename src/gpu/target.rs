@@ -104,7 +104,7 @@ impl OffscreenTarget {
         )?;
         let framebuffer = pass.framebuffer(
             "offscreen framebuffer",
-            [colour.view, depth.view],
+            &[colour.view, depth.view],
             vk::Extent2D { width, height },
         )?;
         Ok(OffscreenTarget {

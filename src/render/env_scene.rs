@@ -41,19 +41,23 @@ pub struct Albedo {
 impl Albedo {
     /// `scale` times the linear value of sRGB-encoded `bytes`.
     pub fn from_srgb8(width: u32, height: u32, bytes: &[[u8; 3]], scale: f64) -> Self {
-        let lin = |c: u8| {
-            let x = f64::from(c) / 255.0;
+        // The 256 codes' values once (a texel takes three lookups, not three powers).
+        let lin: [f32; 256] = std::array::from_fn(|c| {
+            let x = c as f64 / 255.0;
             let l = if x <= 0.04045 {
                 x / 12.92
             } else {
                 ((x + 0.055) / 1.055).powf(2.4)
             };
             (l * scale) as f32
-        };
+        });
         Albedo {
             width,
             height,
-            rgb: bytes.iter().map(|p| p.map(lin)).collect(),
+            rgb: bytes
+                .par_iter()
+                .map(|p| p.map(|c| lin[usize::from(c)]))
+                .collect(),
         }
     }
 }

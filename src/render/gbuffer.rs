@@ -2,36 +2,41 @@
 //! (glsl/gbuffer.vert, glsl/gbuffer.frag): the mesh as the sun-lit pass draws it (the
 //! same vertex layout, transforms, depth test and no culling, so the same pixels are
 //! covered), per pixel the frame made orthonormal, `ωr` towards the eye in it and the
-//! texture's albedo. A colour target holds four floats, so the G-buffer's sixteen are
-//! drawn in four passes into one RGBA32F target and read back after each; the host then
-//! keeps the covered pixels ([`GBuffer`]) for the compute stages.
+//! texture's albedo. A colour attachment holds four floats, so the G-buffer's sixteen are
+//! four RGBA32F attachments of one pass, read back in the same submission; the host then
+//! keeps the covered pixels ([`GBuffer`]) for the compute stages. [`GBufferPass`] keeps
+//! the pipeline and the mesh on the device between draws.
 
 use std::sync::Arc;
 
 use ash::vk;
+use gpu_allocator::MemoryLocation;
 
 use super::env_scene::{Albedo, GBuffer};
-use super::record::{mesh_vertex_layout, record_pass, Geometry, Transforms};
+use super::record::{end_pass, mesh_vertex_layout, record_draw, Geometry, Transforms};
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Sampler};
 use crate::gpu::pipeline::{
     Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
 };
-use crate::gpu::target::OffscreenTarget;
+use crate::gpu::render_pass::RenderPass;
+use crate::gpu::target::{colour_copy, OffscreenTarget};
 use crate::gpu::{shaders, Device};
 use crate::mesh::Mesh;
 use crate::scene::Camera;
 use crate::{Error, Result};
 
-/// Mirror of `Quarter` in glsl/gbuffer.frag.
+/// Mirror of `Camera` in glsl/gbuffer.frag.
 #[repr(C)]
 #[derive(Clone, Copy)]
-struct QuarterUbo {
+struct EyeUbo {
     eye: [f32; 4],
-    component: [i32; 4],
 }
 
-// SAFETY: repr(C) of 4-byte scalars in 16-byte groups: no padding.
-unsafe impl crate::gpu::memory::Pod for QuarterUbo {}
+// SAFETY: repr(C) of 4-byte scalars in one 16-byte group: no padding.
+unsafe impl crate::gpu::memory::Pod for EyeUbo {}
+
+/// Colour attachments of the G-buffer: four floats each, sixteen a pixel.
+const QUARTERS: u32 = 4;
 
 /// Rasterises `mesh` (world space) as `camera` sees it at `width`×`height` on `dev`,
 /// `ss`×`ss` pixels to an output pixel (the key of each pixel's sequence,
@@ -40,89 +45,257 @@ pub fn rasterise(
     dev: &Arc<Device>,
     mesh: &Mesh,
     camera: &Camera,
-    (width, height, ss): (u32, u32, u32),
+    size: (u32, u32, u32),
     albedo: Option<&Albedo>,
 ) -> Result<GBuffer> {
-    if mesh.indices.is_empty() {
-        return Ok(GBuffer {
-            width,
-            height,
-            covered: Vec::new(),
-            data: Vec::new(),
-        });
-    }
-    let target = OffscreenTarget::new(dev, width, height)?;
-    let vertices = Buffer::with_data(
-        dev,
-        &format!("{} vertices (G-buffer)", mesh.name),
-        vk::BufferUsageFlags::VERTEX_BUFFER,
-        &mesh.vertices,
-    )?;
-    let indices = Buffer::with_data(
-        dev,
-        &format!("{} indices (G-buffer)", mesh.name),
-        vk::BufferUsageFlags::INDEX_BUFFER,
-        &mesh.indices,
-    )?;
-    let texture = albedo_image(dev, albedo)?;
-    let sampler = Sampler::new(
-        dev,
-        "G-buffer albedo (linear)",
-        vk::Filter::LINEAR,
-        vk::SamplerAddressMode::REPEAT,
-    )?;
-    let layout = PipelineLayout::new(
-        dev,
-        "G-buffer layout",
-        &[
-            Binding {
-                binding: 0,
-                kind: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
-                stages: vk::ShaderStageFlags::FRAGMENT,
-            },
-            Binding {
-                binding: 1,
-                kind: vk::DescriptorType::UNIFORM_BUFFER,
-                stages: vk::ShaderStageFlags::FRAGMENT,
-            },
-        ],
-        (
-            vk::ShaderStageFlags::VERTEX,
-            std::mem::size_of::<Transforms>() as u32,
-        ),
-    )?;
-    let vertex = ShaderModule::new(dev, "gbuffer.vert", shaders::GBUFFER_VERT)?;
-    let fragment = ShaderModule::new(dev, "gbuffer.frag", shaders::GBUFFER_FRAG)?;
-    let pipeline = Pipeline::new(
-        dev,
-        &PipelineDesc {
-            name: "G-buffer",
-            vertex: &vertex,
-            fragment: &fragment,
-            spec: &[],
-            vertex_layout: Some(&mesh_vertex_layout()),
-            layout: &layout,
-            render_pass: target.render_pass(),
-            depth_test: true,
-        },
-    )?;
-    let transforms = Transforms {
-        model: glam::Mat4::IDENTITY.to_cols_array(),
-        view_proj: camera
-            .view_proj(width as f32 / height as f32)
-            .to_cols_array(),
-    };
-    let eye = camera.eye;
-    let mut quarters: Vec<Vec<[f32; 4]>> = Vec::with_capacity(4);
-    for k in 0..4 {
-        let ubo = Buffer::with_data(
+    GBufferPass::new(dev, mesh, albedo)?.draw(camera, size)
+}
+
+/// The four RGBA32F colour images of one size, their depth, the framebuffer and a
+/// host-visible buffer that receives the four side by side.
+struct Target {
+    // Field order is drop order: the framebuffer before its images.
+    framebuffer: Framebuffer,
+    extent: vk::Extent2D,
+    readback: Buffer,
+    _depth: Image,
+    colours: Vec<Image>,
+}
+
+impl Target {
+    fn new(dev: &Arc<Device>, pass: &RenderPass, width: u32, height: u32) -> Result<Self> {
+        let max = dev.info.max_image_dimension_2d;
+        if width == 0 || height == 0 || width > max || height > max {
+            return Err(Error::invalid(
+                "image size",
+                format!("{width}×{height}; each side must be 1..={max} on this device"),
+            ));
+        }
+        let image = |what: &str, format, usage, aspect| {
+            Image::new(
+                dev,
+                what,
+                ImageDesc {
+                    format,
+                    width,
+                    height,
+                    layers: 1,
+                    usage,
+                    aspect,
+                    view_type: vk::ImageViewType::TYPE_2D,
+                },
+            )
+        };
+        let colours = (0..QUARTERS)
+            .map(|_| {
+                image(
+                    "G-buffer quarter",
+                    OffscreenTarget::COLOUR_FORMAT,
+                    vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+                    vk::ImageAspectFlags::COLOR,
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let depth = image(
+            "G-buffer depth",
+            OffscreenTarget::DEPTH_FORMAT,
+            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+            vk::ImageAspectFlags::DEPTH,
+        )?;
+        let readback = Buffer::new(
             dev,
-            "G-buffer quarter",
+            "G-buffer readback",
+            u64::from(width) * u64::from(height) * 16 * u64::from(QUARTERS),
+            vk::BufferUsageFlags::TRANSFER_DST,
+            MemoryLocation::GpuToCpu,
+        )?;
+        let extent = vk::Extent2D { width, height };
+        let views: Vec<vk::ImageView> =
+            colours.iter().map(|c| c.view).chain([depth.view]).collect();
+        let framebuffer = Framebuffer {
+            raw: pass.framebuffer("G-buffer framebuffer", &views, extent)?,
+            dev: Arc::clone(dev),
+        };
+        Ok(Target {
+            framebuffer,
+            extent,
+            readback,
+            _depth: depth,
+            colours,
+        })
+    }
+
+    /// Records the copies of the four images (in `TRANSFER_SRC_OPTIMAL` after the pass)
+    /// into the readback buffer, made visible to the host.
+    fn record_readback(&self, dev: &Device, cb: vk::CommandBuffer) {
+        let bytes = u64::from(self.extent.width) * u64::from(self.extent.height) * 16;
+        let to_host = vk::BufferMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .buffer(self.readback.raw)
+            .offset(0)
+            .size(vk::WHOLE_SIZE);
+        // SAFETY: cb is recording outside a render pass; the buffer holds the four images'
+        // width·height RGBA32F texels side by side; the pass left them in
+        // TRANSFER_SRC_OPTIMAL.
+        unsafe {
+            for (k, image) in self.colours.iter().enumerate() {
+                let region = colour_copy(self.extent).buffer_offset(bytes * k as u64);
+                dev.raw().cmd_copy_image_to_buffer(
+                    cb,
+                    image.raw,
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                    self.readback.raw,
+                    &[region],
+                );
+            }
+            dev.raw().cmd_pipeline_barrier(
+                cb,
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[to_host],
+                &[],
+            );
+        }
+    }
+
+    /// Quarter `k` as read back (after the submission completed), row-major from the top.
+    fn quarter(&self, k: usize) -> Result<Vec<[f32; 4]>> {
+        let bytes = self.readback.mapped()?;
+        let n = self.extent.width as usize * self.extent.height as usize;
+        let part = bytes
+            .get(k * n * 16..(k + 1) * n * 16)
+            .ok_or_else(|| Error::invalid("readback", "buffer smaller than the G-buffer"))?;
+        Ok(part
+            .chunks_exact(16)
+            .map(|c| {
+                let f = |i: usize| f32::from_ne_bytes([c[i], c[i + 1], c[i + 2], c[i + 3]]);
+                [f(0), f(4), f(8), f(12)]
+            })
+            .collect())
+    }
+}
+
+/// A framebuffer destroyed with its owner.
+struct Framebuffer {
+    raw: vk::Framebuffer,
+    dev: Arc<Device>,
+}
+
+impl Drop for Framebuffer {
+    fn drop(&mut self) {
+        // SAFETY: the draws that used it were waited for; its views outlive it (fields of
+        // the target dropped after it).
+        unsafe { self.dev.raw().destroy_framebuffer(self.raw, None) };
+    }
+}
+
+/// The objects of the G-buffer's draw that outlive one view: the mesh and the albedo on
+/// the device, the pipeline (compiled once: lavapipe compiles its shaders when a pipeline
+/// is made) and a target kept for the last size drawn. The viewer keeps one and draws it
+/// at each change of the view.
+pub struct GBufferPass {
+    // Field order is drop order: the users of the layout and the pass first.
+    target: Option<Target>,
+    set: DescriptorSet,
+    eye: Buffer,
+    pipeline: Pipeline,
+    render_pass: RenderPass,
+    layout: PipelineLayout,
+    _modules: [ShaderModule; 2],
+    _sampler: Sampler,
+    _texture: Image,
+    vertices: Buffer,
+    indices: Buffer,
+    index_count: u32,
+    dev: Arc<Device>,
+}
+
+impl GBufferPass {
+    /// Uploads `mesh` and `albedo` and makes the pipeline.
+    pub fn new(dev: &Arc<Device>, mesh: &Mesh, albedo: Option<&Albedo>) -> Result<Self> {
+        let buffer = |what: &str, usage, bytes: &[u8]| {
+            // An empty mesh draws nothing; its buffers hold a placeholder.
+            Buffer::with_data(
+                dev,
+                &format!("{} {what} (G-buffer)", mesh.name),
+                usage,
+                if bytes.is_empty() {
+                    &[0u8; 64][..]
+                } else {
+                    bytes
+                },
+            )
+        };
+        let vertices = buffer(
+            "vertices",
+            vk::BufferUsageFlags::VERTEX_BUFFER,
+            crate::gpu::memory::bytes_of(&mesh.vertices),
+        )?;
+        let indices = buffer(
+            "indices",
+            vk::BufferUsageFlags::INDEX_BUFFER,
+            crate::gpu::memory::bytes_of(&mesh.indices),
+        )?;
+        let texture = albedo_image(dev, albedo)?;
+        let sampler = Sampler::new(
+            dev,
+            "G-buffer albedo (linear)",
+            vk::Filter::LINEAR,
+            vk::SamplerAddressMode::REPEAT,
+        )?;
+        let layout = PipelineLayout::new(
+            dev,
+            "G-buffer layout",
+            &[
+                Binding {
+                    binding: 0,
+                    kind: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                    stages: vk::ShaderStageFlags::FRAGMENT,
+                },
+                Binding {
+                    binding: 1,
+                    kind: vk::DescriptorType::UNIFORM_BUFFER,
+                    stages: vk::ShaderStageFlags::FRAGMENT,
+                },
+            ],
+            (
+                vk::ShaderStageFlags::VERTEX,
+                std::mem::size_of::<Transforms>() as u32,
+            ),
+        )?;
+        let vertex = ShaderModule::new(dev, "gbuffer.vert", shaders::GBUFFER_VERT)?;
+        let fragment = ShaderModule::new(dev, "gbuffer.frag", shaders::GBUFFER_FRAG)?;
+        let render_pass = RenderPass::with_colours(
+            dev,
+            "G-buffer render pass",
+            QUARTERS,
+            OffscreenTarget::COLOUR_FORMAT,
+            vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+        )?;
+        let pipeline = Pipeline::new(
+            dev,
+            &PipelineDesc {
+                name: "G-buffer",
+                vertex: &vertex,
+                fragment: &fragment,
+                spec: &[],
+                vertex_layout: Some(&mesh_vertex_layout()),
+                layout: &layout,
+                render_pass: render_pass.raw,
+                depth_test: true,
+                colours: QUARTERS,
+            },
+        )?;
+        let eye = Buffer::with_data(
+            dev,
+            "G-buffer eye",
             vk::BufferUsageFlags::UNIFORM_BUFFER,
-            &[QuarterUbo {
-                eye: [eye[0], eye[1], eye[2], 1.0],
-                component: [k, 0, 0, 0],
-            }],
+            &[EyeUbo { eye: [0.0; 4] }],
         )?;
         let set = DescriptorSet::new(
             dev,
@@ -130,31 +303,113 @@ pub fn rasterise(
             &layout,
             &[
                 (0, Resource::Sampled(&texture, &sampler)),
-                (1, Resource::Uniform(&ubo)),
+                (1, Resource::Uniform(&eye)),
             ],
         )?;
+        Ok(GBufferPass {
+            target: None,
+            set,
+            eye,
+            pipeline,
+            render_pass,
+            layout,
+            _modules: [vertex, fragment],
+            _sampler: sampler,
+            _texture: texture,
+            vertices,
+            indices,
+            index_count: mesh.indices.len() as u32,
+            dev: Arc::clone(dev),
+        })
+    }
+
+    /// The G-buffer as `camera` sees the mesh at `width`×`height`, `ss`×`ss` pixels to an
+    /// output pixel: one pass writes the four quarters, read back in the same submission.
+    pub fn draw(
+        &mut self,
+        camera: &Camera,
+        (width, height, ss): (u32, u32, u32),
+    ) -> Result<GBuffer> {
+        if self.index_count == 0 {
+            return Ok(GBuffer {
+                width,
+                height,
+                covered: Vec::new(),
+                data: Vec::new(),
+            });
+        }
+        let fits = |t: &Target| t.extent.width == width && t.extent.height == height;
+        if !self.target.as_ref().is_some_and(fits) {
+            self.target = None;
+            self.target = Some(Target::new(&self.dev, &self.render_pass, width, height)?);
+        }
+        let e = camera.eye;
+        self.eye.write(crate::gpu::memory::bytes_of(&[EyeUbo {
+            eye: [e[0], e[1], e[2], 1.0],
+        }]))?;
+        let transforms = Transforms {
+            model: glam::Mat4::IDENTITY.to_cols_array(),
+            view_proj: camera
+                .view_proj(width as f32 / height as f32)
+                .to_cols_array(),
+        };
+        let target = self
+            .target
+            .as_ref()
+            .ok_or_else(|| Error::invalid("G-buffer", "no target"))?;
+        let dev = &self.dev;
         dev.submit_once("G-buffer", |cb| {
-            record_pass(
+            let whole = vk::Rect2D {
+                offset: vk::Offset2D { x: 0, y: 0 },
+                extent: target.extent,
+            };
+            // Zero marks an uncovered pixel; depth clears to the far plane.
+            let mut clears = vec![
+                vk::ClearValue {
+                    color: vk::ClearColorValue { float32: [0.0; 4] },
+                };
+                QUARTERS as usize
+            ];
+            clears.push(vk::ClearValue {
+                depth_stencil: vk::ClearDepthStencilValue {
+                    depth: 1.0,
+                    stencil: 0,
+                },
+            });
+            let begin = vk::RenderPassBeginInfo::default()
+                .render_pass(self.render_pass.raw)
+                .framebuffer(target.framebuffer.raw)
+                .render_area(whole)
+                .clear_values(&clears);
+            // SAFETY: cb is recording outside a render pass; the framebuffer belongs to the
+            // pass and lives until the submission completes (submit_once waits).
+            unsafe {
+                dev.raw()
+                    .cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE)
+            };
+            record_draw(
                 dev,
                 cb,
-                &target.target(),
-                &pipeline,
-                &layout,
-                &set,
+                &self.pipeline,
+                &self.layout,
+                &self.set,
                 &Geometry::Mesh {
-                    vertices: &vertices,
-                    indices: &indices,
-                    index_count: mesh.indices.len() as u32,
+                    vertices: &self.vertices,
+                    indices: &self.indices,
+                    index_count: self.index_count,
                     transforms,
                 },
-                [0.0; 4],
+                whole,
             );
-            target.record_readback(cb);
+            end_pass(dev, cb);
+            target.record_readback(dev, cb);
             Ok(())
         })?;
-        quarters.push(target.read_rgba()?);
+        let quarters = (0..QUARTERS as usize)
+            .map(|k| target.quarter(k))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(assemble(width, height, ss, &quarters))
     }
-    Ok(assemble(width, height, ss, &quarters))
 }
 
 /// The covered pixels (the last quarter's `w` is 1 there, 0 where the clear stayed) and

@@ -401,6 +401,7 @@ impl Renderer {
                 layout,
                 render_pass,
                 depth_test,
+                colours: 1,
             },
         )?;
         Ok((pipeline, fragment))

@@ -32,6 +32,7 @@ use crate::mesh::Mesh;
 use crate::render::env::{map_lights, Dispatch, EnvKernel, EnvLighting, EnvTarget};
 use crate::render::env_brdf::{EnvBrdf, EnvStage};
 use crate::render::env_scene::{scene_lights, Albedo, NOISE_BATCH, SCENE_OUTPUTS};
+use crate::render::gbuffer::GBufferPass;
 use crate::render::variant::VariantKind;
 use crate::scene::Scene;
 use crate::{Error, Result};
@@ -92,6 +93,8 @@ struct Kernels {
     scene: EnvKernel,
     map: EnvKernel,
     albedo: Option<Albedo>,
+    /// The G-buffer's pipeline and mesh on the device, and whether it holds the albedo.
+    gbuffer: Option<(bool, GBufferPass)>,
 }
 
 /// One accumulated picture: its sums (an [`EnvTarget`], the point lights apart from the
@@ -480,6 +483,7 @@ impl EnvView {
             scene,
             map,
             albedo: None,
+            gbuffer: None,
         })
     }
 }
@@ -542,8 +546,14 @@ impl EnvView {
         let mut camera_scene = view_scene.clone();
         camera_scene.output.width = w;
         camera_scene.output.height = h;
-        let g =
-            crate::render::gbuffer::rasterise(dev, mesh, &view_scene.camera, (w, h, 1), albedo)?;
+        if kernels.gbuffer.as_ref().map(|g| g.0) != Some(albedo.is_some()) {
+            kernels.gbuffer = None;
+            kernels.gbuffer = Some((albedo.is_some(), GBufferPass::new(dev, mesh, albedo)?));
+        }
+        let g = match kernels.gbuffer.as_mut() {
+            Some((_, pass)) => pass.draw(&view_scene.camera, (w, h, 1))?,
+            None => return Err(Error::invalid("environment", "no G-buffer pass")),
+        };
         let bg = crate::render::env_scene::background(
             &camera_scene,
             env_on.then_some(env),
