@@ -10,6 +10,7 @@ use diffract::brdf::{schlick_r0, Shading};
 use diffract::colour::{delta_e2000, xyz_to_lab};
 use diffract::heightfield::HeightField;
 use diffract::light::env::{EnvMap, EnvSource};
+use diffract::light::set::EnvLight;
 use diffract::render::env::{map_direction, render_env_brdf_map, EnvLighting, EnvMapRequest};
 
 const SHADING_OFF: Shading = Shading {
@@ -172,7 +173,7 @@ fn environment_lit_pixels_match_the_f64_reference() {
                     hi: [1.95, 0.03],
                     h: 0.001,
                 };
-                env_radiance_converged(&env, &Frame::BRDF_MAP, wr, &shading, &g, &q)
+                env_radiance_converged(&EnvLight::new(&env), &Frame::BRDF_MAP, wr, &shading, &g, &q)
             })
             .collect();
         let white_y = refs.iter().fold(0.0f64, |m, r| m.max(r.0[1]));

@@ -13,7 +13,9 @@ use diffract::brdf::table::{GTable, Region, TableSpec};
 use diffract::colour::{delta_e2000, linear_srgb_to_xyz, xyz_to_lab, xyz_to_linear_srgb};
 use diffract::gpu::Device;
 use diffract::light::env::{map_to_direction, EnvMap, EnvSource};
-use diffract::render::env::{EnvLighting, Lights};
+use diffract::light::set::EnvLight;
+use diffract::light::set::Lights;
+use diffract::render::env::EnvLighting;
 use diffract::render::env_scene::{
     render_env_scene, scene_lights, shade_gbuffer, Albedo, EnvScene, GBuffer, GBufferRequest,
     NoiseTarget,
@@ -374,7 +376,8 @@ fn a_disc_light_matches_the_f64_reference() {
     let lab = |c: [f64; 3]| xyz_to_lab(linear_srgb_to_xyz(c.map(|x| x * e)));
     for (m, (k, frame, wr, _)) in picked.into_iter().enumerate() {
         let q = Quadrature::reachable(wr, 0.0027);
-        let (want, quad_err) = env_radiance_converged(&map, &frame, wr, &shading, &table, &q);
+        let (want, quad_err) =
+            env_radiance_converged(&EnvLight::new(&map), &frame, wr, &shading, &table, &q);
         let want = xyz_to_linear_srgb(want);
         let have = got[m].map(f64::from);
         let de = delta_e2000(lab(have), lab(want));
@@ -427,7 +430,8 @@ fn scene_pixels_under_the_sky_and_the_studio_match_the_f64_reference() {
             // The diffraction part: dense quadrature over (u, v) of the f64 model of the same
             // table (what is compared is the integration).
             let q = Quadrature::reachable(wr, 0.0027);
-            let (diff, quad_err) = env_radiance_converged(&env, &frame, wr, &shading, &table, &q);
+            let (diff, quad_err) =
+                env_radiance_converged(&EnvLight::new(&env), &frame, wr, &shading, &table, &q);
             // The texture part: ∫ L·((1 − α) + w_d)·t cos θi dωi, over the projected disc
             // (cos θi dωi = dx dy), midpoint rule.
             let texture = |h: f64| {

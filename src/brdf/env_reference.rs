@@ -43,9 +43,9 @@
 
 use rayon::prelude::*;
 
-use crate::colour::{linear_srgb_to_xyz, ColourTable};
+use crate::colour::ColourTable;
 use crate::heightfield::HeightField;
-use crate::light::env::EnvMap;
+use crate::light::set::Light;
 use crate::light::DiskSample;
 use crate::Result;
 
@@ -222,12 +222,13 @@ impl Quadrature {
     }
 }
 
-/// `L_o(ωr)` in XYZ radiance under `env` by the midpoint rule over the cells of `q`:
+/// `L_o(ωr)` in XYZ radiance under `light` (an environment, disc lights or a
+/// [`crate::light::set::LightSet`] of them) by the midpoint rule over the cells of `q`:
 /// `Σ L_xyz(ωi)·C(ωi, ωr)·G(u, v, w)·h²` over the cells whose centre is reachable
 /// (`ωr` in tangent space; `frame` places the surface in the world; `g` is a
 /// radiance-weighted `G`).
 pub fn env_radiance(
-    env: &EnvMap,
+    light: &(dyn Light + Sync),
     frame: &Frame,
     wr: [f64; 3],
     shading: &Shading,
@@ -253,7 +254,7 @@ pub fn env_radiance(
                 if c == 0.0 {
                     continue;
                 }
-                let l = linear_srgb_to_xyz(env.radiance(frame.to_world(wi)));
+                let l = light.radiance(frame.to_world(wi));
                 let gv = g([u, v, -wi[2] - wr[2]]);
                 for k in 0..3 {
                     row[k] += l[k] * c * gv[k];
@@ -269,16 +270,16 @@ pub fn env_radiance(
 /// difference of a channel between the two, relative to the finer value's `Y` (the
 /// quadrature's own error, stated beside every reference value).
 pub fn env_radiance_converged(
-    env: &EnvMap,
+    light: &(dyn Light + Sync),
     frame: &Frame,
     wr: [f64; 3],
     shading: &Shading,
     g: &(dyn Fn([f64; 3]) -> [f64; 3] + Sync),
     q: &Quadrature,
 ) -> ([f64; 3], f64) {
-    let coarse = env_radiance(env, frame, wr, shading, g, q);
+    let coarse = env_radiance(light, frame, wr, shading, g, q);
     let fine = env_radiance(
-        env,
+        light,
         frame,
         wr,
         shading,
@@ -319,7 +320,9 @@ pub fn disc_radiance(
 mod tests {
     use super::*;
     use crate::brdf::{direction, reference, schlick_r0};
-    use crate::light::env::EnvSource;
+    use crate::colour::linear_srgb_to_xyz;
+    use crate::light::env::{EnvMap, EnvSource};
+    use crate::light::set::{EnvLight, SampledDisc};
     use crate::light::sun_disk_samples;
 
     fn white_env() -> EnvMap {
@@ -361,8 +364,14 @@ mod tests {
             for theta in [0.0, 20.0, 40.0, 60.0] {
                 let wr = direction(theta, 35.0);
                 let q = Quadrature::around(0.0, 0.0, 0.05, 5e-4);
-                let (l, err) =
-                    env_radiance_converged(&env, &Frame::BRDF_MAP, wr, &s, &|d| lobe.g(d), &q);
+                let (l, err) = env_radiance_converged(
+                    &EnvLight::new(&env),
+                    &Frame::BRDF_MAP,
+                    wr,
+                    &s,
+                    &|d| lobe.g(d),
+                    &q,
+                );
                 let r0 = schlick_r0(1.5);
                 let want = if fresnel {
                     r0 + (1.0 - r0) * (1.0 - wr[2]).powi(5)
@@ -425,17 +434,30 @@ mod tests {
         let wi0 = frame.to_tangent(towards);
         let samples = sun_disk_samples(towards.map(|x| x as f32), 6.0, 256);
         let white_xyz = linear_srgb_to_xyz([1.0; 3]);
+        let omega = light.solid_angle();
+        let disc = SampledDisc {
+            towards,
+            cos_radius: half.cos(),
+            solid_angle: omega,
+            radiance_xyz: white_xyz.map(|c| c / omega),
+        };
         for offset in [0.0, 0.02, 0.04] {
             let wr = [-wi0[0] + offset, -wi0[1], 0.0];
             let wr = [wr[0], wr[1], (1.0 - wr[0] * wr[0] - wr[1] * wr[1]).sqrt()];
             let q = Quadrature::around(-wi0[0] - wr[0], -wi0[1] - wr[1], 0.1, 2e-4);
-            let from_map = env_radiance(&env, &frame, wr, &s, &|d| lobe.g(d), &q);
+            let from_map = env_radiance(&EnvLight::new(&env), &frame, wr, &s, &|d| lobe.g(d), &q);
             let from_light = disc_radiance(white_xyz, &samples, &frame, wr, &s, &|d| lobe.g(d));
-            let rel = (from_map[1] - from_light[1]).abs() / from_light[1].max(1e-3);
-            assert!(
-                rel < 0.03,
-                "offset {offset}: map {from_map:?} light {from_light:?}"
-            );
+            // The disc as a light of the light set: its radiance over its cone.
+            let from_disc = env_radiance(&disc, &frame, wr, &s, &|d| lobe.g(d), &q);
+            for (what, got) in [("light", from_light), ("disc", from_disc)] {
+                for c in 0..3 {
+                    let rel = (from_map[c] - got[c]).abs() / got[c].max(1e-3);
+                    assert!(
+                        rel < 0.03,
+                        "offset {offset}, channel {c}: map {from_map:?} {what} {got:?}"
+                    );
+                }
+            }
         }
     }
 

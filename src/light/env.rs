@@ -144,8 +144,8 @@ pub fn map_to_direction(x: f64, y: f64) -> [f64; 3] {
     [st * sp, ct, -st * cp]
 }
 
-/// `R_y(a)·d`, counter-clockwise about `+Y` seen from above.
-fn rotate_y(d: [f64; 3], a: f64) -> [f64; 3] {
+/// `R_y(a)·d`, counter-clockwise about `+Y` seen from above (as the map turns).
+pub(crate) fn rotate_y(d: [f64; 3], a: f64) -> [f64; 3] {
     let (s, c) = a.sin_cos();
     [c * d[0] + s * d[2], d[1], -s * d[0] + c * d[2]]
 }
@@ -267,6 +267,20 @@ impl EnvMap {
             }
         }
         s
+    }
+
+    /// The luminance moments `(∫ Y dω, ∫ Y² dω)` over the sphere (exact for the
+    /// piecewise-constant map): the light sampler's share and choice
+    /// ([`crate::light::set`]).
+    pub fn moments(&self) -> (f64, f64) {
+        let (mut power, mut square) = (0.0, 0.0);
+        for (p, c) in self.radiance.iter().enumerate() {
+            let omega = self.pixel_solid_angle(p as u32 / self.width);
+            let y = luminance(*c).max(0.0);
+            power += y * omega;
+            square += y * y * omega;
+        }
+        (power, square)
     }
 }
 

@@ -14,6 +14,7 @@ use glam::DVec3;
 
 pub mod area;
 pub mod env;
+pub mod set;
 pub mod sky;
 
 /// Largest accepted angular diameter (degrees): beyond it the light is no longer a sun.

@@ -17,6 +17,7 @@ use crate::brdf::env_reference::{env_radiance, Frame, Quadrature};
 use crate::brdf::table::GTable;
 use crate::budget::{Cost, Fits, Keeper};
 use crate::heightfield::HeightField;
+use crate::light::set::EnvLight;
 use crate::material::Material;
 use crate::render::env::{render_env_brdf_map, EnvLighting, EnvMapRequest, EnvPicture};
 use crate::render::env_brdf::EnvBrdf;
@@ -289,7 +290,7 @@ fn reference(
         let wr = map_direction(i, j, size).unwrap_or([0.0, 0.0, 1.0]);
         let at = |h: f64| {
             env_radiance(
-                &env.map,
+                &EnvLight::new(&env.map),
                 &Frame::BRDF_MAP,
                 wr,
                 shading,

@@ -29,7 +29,8 @@ use crate::gpu::compute::{self, ComputeLayout, ComputePipeline, StorageSet};
 use crate::gpu::memory::Buffer;
 use crate::gpu::Device;
 use crate::heightfield::HeightField;
-use crate::light::env::{map_to_direction, EnvMap, EnvSampler};
+use crate::light::env::{map_to_direction, rotate_y, EnvMap, EnvSampler};
+use crate::light::set::{light_every, Lights, PointLight};
 use crate::{Error, Result};
 use std::f64::consts::PI;
 
@@ -436,136 +437,6 @@ pub struct EnvPicture {
     pub taken: Vec<u32>,
 }
 
-/// A light evaluated once per pixel, in full: a direction of the sun's disc, or a disc
-/// light of no angular size.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct PointLight {
-    /// Towards the light, world space, unit.
-    pub towards: [f64; 3],
-    /// Irradiance on a surface facing it, XYZ.
-    pub irradiance_xyz: [f64; 3],
-}
-
-/// A disc light sampled uniformly in its cone (MODEL §10: radiance `I·colour/Ω`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct SampledDisc {
-    /// Towards the disc's centre, world space, unit.
-    pub towards: [f64; 3],
-    /// Cosine of the angular radius.
-    pub cos_radius: f64,
-    /// Solid angle `2π(1 − cos α)`.
-    pub solid_angle: f64,
-    /// Radiance, XYZ.
-    pub radiance_xyz: [f64; 3],
-}
-
-/// Least and most share of light samples among the BRDF's.
-pub const LIGHT_SHARE: (f64, f64) = (1.0 / 8.0, 1.0);
-
-/// The share of light samples (per BRDF sample) given the lights' luminance integral
-/// `power = ∫ Y dω` and `square = ∫ Y² dω` over the sphere. Their ratio `power²/(4π·square)` is the part of
-/// the sphere the light effectively fills (1 for a uniform sky, `Ω/4π` for one disc of
-/// solid angle `Ω` on black). BRDF samples find light that fills the sphere; only light
-/// samples find a small bright source. The share runs from [`LIGHT_SHARE`]'s least to its
-/// most as `1 − √ratio` runs from 0.2 to 0.8 (smoothly): measured on the default scene,
-/// few light samples serve best under `builtin:sky` (`1 − √ratio` = 0.17), one per BRDF
-/// sample under `builtin:studio` (0.79). It never falls to 0, so every direction that
-/// carries light can be drawn.
-pub fn light_share(power: f64, square: f64) -> f64 {
-    let (lo, hi) = LIGHT_SHARE;
-    if !(power > 0.0 && square > 0.0) {
-        return lo;
-    }
-    let ratio = (power * power / (4.0 * PI * square)).clamp(0.0, 1.0);
-    let x = ((1.0 - ratio.sqrt() - 0.2) / 0.6).clamp(0.0, 1.0);
-    lo + (hi - lo) * x * x * (3.0 - 2.0 * x)
-}
-
-/// One light sample every `m`-th BRDF sample: the largest power of two up to `1/share`
-/// (at most 8, so that pictures read at multiples of 8 samples, as the viewer's are, draw
-/// the same samples as offscreen ones) that divides every count in `counts` (the samples
-/// at which passes end), so that the light samples are exactly `1/m` of the BRDF's, as the
-/// estimator weighs them.
-pub fn light_every(share: f64, counts: &[u32]) -> u32 {
-    let mut m = 8u32;
-    while m > 1 && (f64::from(m) * share > 1.0 + 1e-9 || counts.iter().any(|c| c % m != 0)) {
-        m /= 2;
-    }
-    m
-}
-
-/// Every light besides the environment.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct Lights {
-    pub points: Vec<PointLight>,
-    pub discs: Vec<SampledDisc>,
-}
-
-impl Lights {
-    /// The light sampler's probabilities: the environment's (from its luminance integral
-    /// `env_power`) and each disc's, in proportion to `Y·Ω`.
-    fn probabilities(&self, env_power: f64) -> (f64, Vec<f64>) {
-        let powers: Vec<f64> = self
-            .discs
-            .iter()
-            .map(|d| d.radiance_xyz[1].max(0.0) * d.solid_angle)
-            .collect();
-        let total = env_power.max(0.0) + powers.iter().sum::<f64>();
-        if total <= 0.0 {
-            return (0.0, vec![0.0; powers.len()]);
-        }
-        (
-            env_power.max(0.0) / total,
-            powers.iter().map(|p| p / total).collect(),
-        )
-    }
-
-    /// The probability that a sample is drawn from the lights rather than from the BRDF
-    /// ([`light_share`]), from the environment and these discs.
-    pub fn light_share(&self, env: &EnvMap) -> f64 {
-        let (power, square) = env_moments(env);
-        self.light_share_with(power, square)
-    }
-
-    /// [`Self::light_share`] with the environment's moments `(∫ Y dω, ∫ Y² dω)` given.
-    pub fn light_share_with(&self, env_power: f64, env_square: f64) -> f64 {
-        let (mut power, mut square) = (env_power, env_square);
-        for d in &self.discs {
-            let y = d.radiance_xyz[1].max(0.0);
-            power += y * d.solid_angle;
-            square += y * y * d.solid_angle;
-        }
-        light_share(power, square)
-    }
-
-    /// The shader's light buffer (env_common.glsl) with the discs' probabilities and,
-    /// for texture blending, the environment's irradiance table.
-    fn buffer(&self, disc_probs: &[f64], irradiance: &[[f64; 3]]) -> Vec<f32> {
-        let mut v = Vec::new();
-        for p in &self.points {
-            v.extend(p.towards.iter().chain(&[0.0]).map(|&x| x as f32));
-            v.extend(p.irradiance_xyz.iter().chain(&[0.0]).map(|&x| x as f32));
-        }
-        for (d, q) in self.discs.iter().zip(disc_probs) {
-            v.extend(d.towards.iter().chain(&[d.cos_radius]).map(|&x| x as f32));
-            v.extend(
-                d.radiance_xyz
-                    .iter()
-                    .chain(&[d.solid_angle])
-                    .map(|&x| x as f32),
-            );
-            v.extend([*q as f32, 0.0, 0.0, 0.0]);
-        }
-        for e in irradiance {
-            v.extend(e.iter().chain(&[0.0]).map(|&x| x as f32));
-        }
-        if v.is_empty() {
-            v.extend([0.0; 4]);
-        }
-        v
-    }
-}
-
 /// Normals of the irradiance table, around and down (env_common.glsl's IRR_W, IRR_H).
 pub const IRRADIANCE_SIZE: (u32, u32) = (128, 64);
 /// Largest map the irradiance table sums directly; a larger one is summed over blocks.
@@ -653,12 +524,6 @@ fn irradiance_patches(env: &EnvMap) -> Vec<([f64; 3], [f64; 3])> {
             sum.iter().any(|&x| x > 0.0).then_some((sum, d))
         })
         .collect()
-}
-
-/// `R_y(a)·d`, counter-clockwise about `+Y` seen from above (as the map turns).
-fn rotate_y(d: [f64; 3], a: f64) -> [f64; 3] {
-    let (s, c) = a.sin_cos();
-    [c * d[0] + s * d[2], d[1], -s * d[0] + c * d[2]]
 }
 
 /// Mirror of `EnvParams` in glsl/env_common.glsl.
@@ -807,18 +672,6 @@ pub(crate) struct EnvTarget {
     pub per_dispatch: u32,
 }
 
-/// The environment's luminance moments `(∫ Y dω, ∫ Y² dω)`.
-fn env_moments(env: &EnvMap) -> (f64, f64) {
-    let (mut power, mut square) = (0.0, 0.0);
-    for (p, c) in env.radiance.iter().enumerate() {
-        let omega = env.pixel_solid_angle(p as u32 / env.width);
-        let y = crate::light::env::luminance(*c).max(0.0);
-        power += y * omega;
-        square += y * y * omega;
-    }
-    (power, square)
-}
-
 impl EnvKernel {
     /// The objects of `lighting` and `env` for `stage` evaluating `brdf` (a scene's stage
     /// reads a G-buffer at binding 6 and the pass's pixels at binding 7).
@@ -851,7 +704,7 @@ impl EnvKernel {
         let layout =
             ComputeLayout::after(dev, name, &[brdf.set_layout()], 6 + 2 * u32::from(extra), 8)?;
         let pipeline = ComputePipeline::new(dev, name, &layout, brdf.spirv(stage)?, brdf.spec())?;
-        let (env_power, env_square) = env_moments(env);
+        let (env_power, env_square) = env.moments();
         Ok(EnvKernel {
             dev: Arc::clone(dev),
             radiance: b("radiance", &env_xyz)?,
@@ -1255,48 +1108,6 @@ pub fn map_direction(i: u32, j: u32, size: u32) -> Option<[f64; 3]> {
 mod tests {
     use super::*;
     use crate::light::env::EnvSource;
-
-    #[test]
-    fn the_light_share_follows_how_much_of_the_sphere_the_light_fills() {
-        let white = EnvMap::load(&EnvSource::White, 1.0, 0.0).unwrap();
-        let none = Lights::default();
-        // A uniform sphere: ratio 1, the least share.
-        assert!((none.light_share(&white) - LIGHT_SHARE.0).abs() < 1e-9);
-        // One small disc on black: ratio Ω/4π, the most.
-        let black = EnvMap::from_pixels(2, 1, vec![[0.0; 3]; 2], "black").unwrap();
-        let alpha = 0.5f64.to_radians();
-        let omega = 2.0 * PI * (1.0 - alpha.cos());
-        let disc = Lights {
-            points: Vec::new(),
-            discs: vec![SampledDisc {
-                towards: [0.0, 1.0, 0.0],
-                cos_radius: alpha.cos(),
-                solid_angle: omega,
-                radiance_xyz: [1.0 / omega; 3],
-            }],
-        };
-        assert!((disc.light_share(&black) - LIGHT_SHARE.1).abs() < 1e-9);
-        // The built-in maps in between, in order; nothing lit at all: the least.
-        let sky = EnvMap::load(&EnvSource::Sky, 1.0, 0.0).unwrap();
-        let studio = EnvMap::load(&EnvSource::Studio, 1.0, 0.0).unwrap();
-        let (a, b) = (none.light_share(&sky), none.light_share(&studio));
-        assert!(LIGHT_SHARE.0 <= a && a < b && b <= LIGHT_SHARE.1, "{a} {b}");
-        assert_eq!(light_share(0.0, 0.0), LIGHT_SHARE.0);
-        // The ratio itself: half the sphere at radiance 1, the other half black: 1/2.
-        let x = ((1.0 - 0.5f64.sqrt() - 0.2) / 0.6).clamp(0.0, 1.0);
-        let want = LIGHT_SHARE.0 + (LIGHT_SHARE.1 - LIGHT_SHARE.0) * x * x * (3.0 - 2.0 * x);
-        assert!((light_share(2.0 * PI, 2.0 * PI) - want).abs() < 1e-12);
-    }
-
-    #[test]
-    fn light_samples_come_every_mth_sample_where_m_divides_the_counts() {
-        assert_eq!(light_every(1.0 / 8.0, &[1024, 16]), 8);
-        assert_eq!(light_every(1.0 / 8.0, &[1024, 4]), 4);
-        assert_eq!(light_every(0.3, &[256]), 2);
-        assert_eq!(light_every(1.0, &[256]), 1);
-        assert_eq!(light_every(0.01, &[7]), 1);
-        assert_eq!(light_every(0.01, &[96, 64]), 8);
-    }
 
     #[test]
     fn the_irradiance_table_is_the_cosine_integral_of_the_map() {

@@ -21,11 +21,12 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::env::{dispatch_passes, Dispatch, EnvLighting, Lights, PointLight, SampledDisc};
+use super::env::{dispatch_passes, Dispatch, EnvLighting};
 use crate::brdf::Shading;
 use crate::colour::linear_srgb_to_xyz;
 use crate::gpu::Device;
 use crate::light::env::EnvMap;
+use crate::light::set::{Lights, PointLight, SampledDisc};
 use crate::mesh::Mesh;
 use crate::scene::Scene;
 use crate::Result;

@@ -23,6 +23,7 @@ use crate::brdf::Shading;
 use crate::colour::ColourTable;
 use crate::heightfield::HeightField;
 use crate::light::env::{map_to_direction, sky, tabulate, EnvMap};
+use crate::light::set::EnvLight;
 use crate::render::env::{map_direction, render_env_brdf_map, EnvLighting, EnvMapRequest};
 use crate::render::variant::VariantKind;
 use crate::render::Renderer;
@@ -166,8 +167,14 @@ pub fn run(r: &mut Renderer) -> Result<Vec<LightingCell>> {
                     continue;
                 };
                 let q = Quadrature::around(0.0, 0.0, 0.04, 0.001);
-                let (xyz, quad) =
-                    env_radiance_converged(&env, &Frame::BRDF_MAP, wr, &shading, &g, &q);
+                let (xyz, quad) = env_radiance_converged(
+                    &EnvLight::new(&env),
+                    &Frame::BRDF_MAP,
+                    wr,
+                    &shading,
+                    &g,
+                    &q,
+                );
                 want.push(((j * MAP_SIZE + i) as usize, xyz, quad));
             }
         }

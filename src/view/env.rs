@@ -38,7 +38,7 @@ use crate::scene::Scene;
 use crate::{Error, Result};
 
 /// The picture's light samples are exactly their share at every multiple of this many
-/// samples (and at the cap): [`crate::render::env::light_every`].
+/// samples (and at the cap): [`crate::light::set::light_every`].
 const EXACT_EVERY: u32 = 8;
 const RESOLVE_SPIRV: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/env_resolve.comp.spv"));
 /// Push-constant bytes of env_resolve.comp.
