@@ -380,11 +380,15 @@ fn print_result(
     };
     let v = &frame.variant;
     if let Some(built) = &v.table_build {
-        println!(
-            "table: {}, {built}, {:.1} MB",
-            v.name,
-            v.gpu_bytes as f64 / 1e6
-        );
+        let line = crate::render::table_build::TableLine {
+            label: "table",
+            holds: v.name.clone(),
+            origin: built.to_string(),
+            bytes: v.gpu_bytes,
+            bytes_of: None,
+            extra: None,
+        };
+        println!("{line}");
     }
     // A scene's pixel evaluates the variant once per direction over the light's disc (once
     // when the disc is pre-filtered into the table), for each of its supersample²

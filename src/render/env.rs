@@ -21,6 +21,7 @@ use gpu_allocator::MemoryLocation;
 use rayon::prelude::*;
 
 use super::env_brdf::{EnvBrdf, EnvStage};
+use super::table_build::Built;
 use crate::brdf::env_reference::{radiance_planes, radiance_slices_in};
 use crate::brdf::table::{clenshaw, spline_weights, ChebyshevW, Response, TableSpec};
 use crate::brdf::Shading;
@@ -355,53 +356,49 @@ impl EnvLighting {
 }
 
 impl EnvLighting {
-    /// The one line that says what the table holds and how it was obtained, in the words
-    /// every table's report uses ([`crate::render::table_build::Built`]); `cached`: its
-    /// samples were read from the table cache (then the fit and the density are what
-    /// `build_ms` took).
+    /// The one line that says what the table holds and how it was obtained, in the form
+    /// every table's report takes ([`crate::render::table_build::TableLine`]); `cached`:
+    /// its samples were read from the table cache (then the fit and the density are what
+    /// `build_ms` took). The size is of the CPU's float32 spline planes; the device's copy
+    /// is the variant's (`render --env` names it).
     pub fn report_line(&self, cached: bool) -> String {
         let t = &self.table;
         let r = t.region;
-        let mb = (t.nu + 2) * (t.nv + 2) * t.coeffs.len() * 12;
         let seconds = self.build_ms / 1e3;
         let origin = if cached {
-            format!(
-                "{}, prepared in {seconds:.1} s",
-                crate::render::table_build::Built::Cached
-            )
+            format!("{}, prepared in {seconds:.1} s", Built::Cached)
         } else {
-            crate::render::table_build::Built::Cpu {
+            Built::Cpu {
                 seconds,
                 probe: self.probe,
             }
             .to_string()
         };
-        format!(
-            "environment table: u ∈ [{}, {}], v ∈ [{}, {}], w ∈ [{}, {}], texel {:.4}, K = {}{}, {}×{} nodes, {:.1} MB float32, {} nm, {origin}; BRDF density {}×{} cells",
-            r.lo[0],
-            r.hi[0],
-            r.lo[1],
-            r.hi[1],
-            r.lo[2],
-            r.hi[2],
-            self.spec.texel_uv,
-            t.coeffs.len(),
-            if self.dropped > 0 {
-                format!(
-                    " of {} (the rest below {:.0e} of the peak)",
-                    t.coeffs.len() + self.dropped,
-                    TERM_TOLERANCE
-                )
-            } else {
-                String::new()
-            },
-            t.nu,
-            t.nv,
-            mb as f64 / 1e6,
-            self.spec.step_nm,
-            self.density.bins[0],
-            self.density.bins[1]
-        )
+        let kept = t.coeffs.len();
+        let terms = match self.dropped {
+            0 => format!("K={kept}"),
+            n => format!("K={kept} of {}", kept + n),
+        };
+        let dropped = (self.dropped > 0)
+            .then(|| format!("the terms left out stay below {TERM_TOLERANCE:.0e} of the peak; "));
+        crate::render::table_build::TableLine {
+            label: "environment table",
+            holds: format!(
+                "chebyshev-w {terms} {}×{} texel {:.4} dλ={} over u ∈ [{}, {}], v ∈ [{}, {}], w ∈ [{}, {}]",
+                t.nu, t.nv, self.spec.texel_uv, self.spec.step_nm,
+                r.lo[0], r.hi[0], r.lo[1], r.hi[1], r.lo[2], r.hi[2],
+            ),
+            origin,
+            bytes: (t.nu + 2) * (t.nv + 2) * kept * 12,
+            bytes_of: Some("float32 planes"),
+            extra: Some(format!(
+                "{}BRDF density {}×{} cells",
+                dropped.unwrap_or_default(),
+                self.density.bins[0],
+                self.density.bins[1]
+            )),
+        }
+        .to_string()
     }
 }
 

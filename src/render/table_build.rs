@@ -763,6 +763,38 @@ impl std::fmt::Display for Built {
     }
 }
 
+/// The one line every table's report prints, the sun-lit variants' (`table: …`) and the
+/// environment's (`environment table: …`) alike: what it holds in the variants' notation
+/// (`chebyshev-w K=12 440×997 texel 0.0027 dλ=2 …`), how its samples were obtained
+/// ([`Built`], and what came after), its size, then anything particular to it after a `;`.
+pub struct TableLine {
+    pub label: &'static str,
+    pub holds: String,
+    pub origin: String,
+    pub bytes: usize,
+    /// What the bytes are, when not the device's copy (`float32 planes`).
+    pub bytes_of: Option<&'static str>,
+    pub extra: Option<String>,
+}
+
+impl std::fmt::Display for TableLine {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let mb = self.bytes as f64 / 1e6;
+        write!(
+            f,
+            "{}: {}, {}, {mb:.1} MB",
+            self.label, self.holds, self.origin
+        )?;
+        if let Some(of) = self.bytes_of {
+            write!(f, " ({of})")?;
+        }
+        if let Some(extra) = &self.extra {
+            write!(f, "; {extra}")?;
+        }
+        Ok(())
+    }
+}
+
 /// Samples `G` where `build` says (on `dev` or on the CPU), through the table cache in
 /// `dir`. A float64 device build shares the CPU build's cache files: the two agree to
 /// ~1e-13 of the slice peak (tests/gpu_table_build.rs), far below the files' float32
