@@ -135,52 +135,84 @@ impl OffscreenTarget {
     /// Records the copy of the colour image (in `TRANSFER_SRC_OPTIMAL` after the render
     /// pass) into the readback buffer, made visible to the host.
     pub fn record_readback(&self, cb: vk::CommandBuffer) {
-        let region = colour_copy(self.extent);
-        let to_host = vk::BufferMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .buffer(self.readback.raw)
-            .offset(0)
-            .size(vk::WHOLE_SIZE);
-        // SAFETY: cb is recording outside a render pass; the buffer holds width·height
-        // RGBA32F texels; the render pass left the image in TRANSFER_SRC_OPTIMAL.
-        unsafe {
-            self.dev.raw.cmd_copy_image_to_buffer(
-                cb,
-                self.colour.raw,
-                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                self.readback.raw,
-                &[region],
-            );
-            self.dev.raw.cmd_pipeline_barrier(
-                cb,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[to_host],
-                &[],
-            );
-        }
+        record_readbacks(
+            &self.dev,
+            cb,
+            &[self.colour.raw],
+            self.extent,
+            &self.readback,
+        );
     }
 
     /// The read-back pixels, row-major from the top row (after the submission completed).
     pub fn read_rgba(&self) -> Result<Vec<[f32; 4]>> {
-        let bytes = self.readback.mapped()?;
-        let n = self.extent.width as usize * self.extent.height as usize;
-        if bytes.len() < n * 16 {
-            return Err(Error::invalid("readback", "buffer smaller than the image"));
-        }
-        Ok(bytes[..n * 16]
-            .chunks_exact(16)
-            .map(|c| {
-                let f = |i: usize| f32::from_ne_bytes([c[i], c[i + 1], c[i + 2], c[i + 3]]);
-                [f(0), f(4), f(8), f(12)]
-            })
-            .collect())
+        read_rgba_at(&self.readback, self.extent, 0)
     }
+}
+
+/// Records the copies of RGBA32F `images` of `extent` (each in `TRANSFER_SRC_OPTIMAL` after
+/// its render pass) side by side into `readback`, made visible to the host.
+pub(crate) fn record_readbacks(
+    dev: &Device,
+    cb: vk::CommandBuffer,
+    images: &[vk::Image],
+    extent: vk::Extent2D,
+    readback: &Buffer,
+) {
+    let bytes = u64::from(extent.width) * u64::from(extent.height) * 16;
+    let to_host = vk::BufferMemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(vk::AccessFlags::HOST_READ)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .buffer(readback.raw)
+        .offset(0)
+        .size(vk::WHOLE_SIZE);
+    // SAFETY: cb is recording outside a render pass; the buffer holds the images'
+    // width·height RGBA32F texels side by side (its callers size it so); the render passes
+    // left the images in TRANSFER_SRC_OPTIMAL.
+    unsafe {
+        for (k, &image) in images.iter().enumerate() {
+            let region = colour_copy(extent).buffer_offset(bytes * k as u64);
+            dev.raw.cmd_copy_image_to_buffer(
+                cb,
+                image,
+                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                readback.raw,
+                &[region],
+            );
+        }
+        dev.raw.cmd_pipeline_barrier(
+            cb,
+            vk::PipelineStageFlags::TRANSFER,
+            vk::PipelineStageFlags::HOST,
+            vk::DependencyFlags::empty(),
+            &[],
+            &[to_host],
+            &[],
+        );
+    }
+}
+
+/// Image `k` of those [`record_readbacks`] copied into `readback` (after the submission
+/// completed), row-major from the top row.
+pub(crate) fn read_rgba_at(
+    readback: &Buffer,
+    extent: vk::Extent2D,
+    k: usize,
+) -> Result<Vec<[f32; 4]>> {
+    let bytes = readback.mapped()?;
+    let n = extent.width as usize * extent.height as usize;
+    let part = bytes
+        .get(k * n * 16..(k + 1) * n * 16)
+        .ok_or_else(|| Error::invalid("readback", "buffer smaller than the image"))?;
+    Ok(part
+        .chunks_exact(16)
+        .map(|c| {
+            let f = |i: usize| f32::from_ne_bytes([c[i], c[i + 1], c[i + 2], c[i + 3]]);
+            [f(0), f(4), f(8), f(12)]
+        })
+        .collect())
 }
 
 impl Drop for OffscreenTarget {

@@ -19,7 +19,7 @@ use crate::gpu::pipeline::{
     Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
 };
 use crate::gpu::render_pass::RenderPass;
-use crate::gpu::target::{colour_copy, OffscreenTarget};
+use crate::gpu::target::{read_rgba_at, record_readbacks, OffscreenTarget};
 use crate::gpu::{shaders, Device};
 use crate::mesh::Mesh;
 use crate::scene::Camera;
@@ -125,58 +125,15 @@ impl Target {
         })
     }
 
-    /// Records the copies of the four images (in `TRANSFER_SRC_OPTIMAL` after the pass)
-    /// into the readback buffer, made visible to the host.
+    /// Records the copies of the four images into the readback buffer, side by side.
     fn record_readback(&self, dev: &Device, cb: vk::CommandBuffer) {
-        let bytes = u64::from(self.extent.width) * u64::from(self.extent.height) * 16;
-        let to_host = vk::BufferMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .buffer(self.readback.raw)
-            .offset(0)
-            .size(vk::WHOLE_SIZE);
-        // SAFETY: cb is recording outside a render pass; the buffer holds the four images'
-        // width·height RGBA32F texels side by side; the pass left them in
-        // TRANSFER_SRC_OPTIMAL.
-        unsafe {
-            for (k, image) in self.colours.iter().enumerate() {
-                let region = colour_copy(self.extent).buffer_offset(bytes * k as u64);
-                dev.raw().cmd_copy_image_to_buffer(
-                    cb,
-                    image.raw,
-                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                    self.readback.raw,
-                    &[region],
-                );
-            }
-            dev.raw().cmd_pipeline_barrier(
-                cb,
-                vk::PipelineStageFlags::TRANSFER,
-                vk::PipelineStageFlags::HOST,
-                vk::DependencyFlags::empty(),
-                &[],
-                &[to_host],
-                &[],
-            );
-        }
+        let images: Vec<vk::Image> = self.colours.iter().map(|c| c.raw).collect();
+        record_readbacks(dev, cb, &images, self.extent, &self.readback);
     }
 
     /// Quarter `k` as read back (after the submission completed), row-major from the top.
     fn quarter(&self, k: usize) -> Result<Vec<[f32; 4]>> {
-        let bytes = self.readback.mapped()?;
-        let n = self.extent.width as usize * self.extent.height as usize;
-        let part = bytes
-            .get(k * n * 16..(k + 1) * n * 16)
-            .ok_or_else(|| Error::invalid("readback", "buffer smaller than the G-buffer"))?;
-        Ok(part
-            .chunks_exact(16)
-            .map(|c| {
-                let f = |i: usize| f32::from_ne_bytes([c[i], c[i + 1], c[i + 2], c[i + 3]]);
-                [f(0), f(4), f(8), f(12)]
-            })
-            .collect())
+        read_rgba_at(&self.readback, self.extent, k)
     }
 }
 
