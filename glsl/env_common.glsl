@@ -33,7 +33,7 @@ layout(std430, set = 1, binding = 1) readonly buffer EnvXyz { float envXyz[]; };
 // density in solid angle of each pixel (W·H).
 layout(std430, set = 1, binding = 2) readonly buffer EnvCdf { float envCdf[]; };
 // Per CDF node: marginal over v bins (nbv + 1), conditionals over u bins (nbv·(nbu + 1)),
-// then the density in (u, v) of each bin (nbu·nbv).
+// then the density in (u, v) at each bin corner ((nbu + 1)·(nbv + 1)), bilinear inside a bin.
 layout(std430, set = 1, binding = 3) readonly buffer GCdf { float gCdf[]; };
 // The sums over the samples so far (the CPU divides by their number): each dispatch adds
 // samples [base, base + count); the first also adds the point lights. The stage decides
@@ -110,15 +110,32 @@ vec3 sampleEnv(vec2 xi, out int p) {
 
 int nodeBase(int m) {
     int nbu = P.cdfDims.x, nbv = P.cdfDims.y;
-    return m * ((nbv + 1) + nbv * (nbu + 1) + nbu * nbv);
+    return m * ((nbv + 1) + nbv * (nbu + 1) + (nbu + 1) * (nbv + 1));
 }
 
+// The density at the corners of cell (col, row) of node m: (0, 0), (1, 0), (0, 1), (1, 1).
+vec4 cellCorners(int m, int col, int row) {
+    int nbu = P.cdfDims.x, nbv = P.cdfDims.y;
+    int c = nodeBase(m) + (nbv + 1) + nbv * (nbu + 1) + row * (nbu + 1) + col;
+    return vec4(gCdf[c], gCdf[c + 1], gCdf[c + nbu + 1], gCdf[c + nbu + 2]);
+}
+
+// Bilinear between the corners of the cell holding uv; 0 outside the region.
 float nodeDensity(int m, vec2 uv) {
     int nbu = P.cdfDims.x, nbv = P.cdfDims.y;
     vec2 b = (uv - P.cdfLo.xy) / P.cdfStep.xy;
     if (any(lessThan(b, vec2(0.0))) || b.x >= float(nbu) || b.y >= float(nbv)) return 0.0;
-    int base = nodeBase(m) + (nbv + 1) + nbv * (nbu + 1);
-    return gCdf[base + int(b.y) * nbu + int(b.x)];
+    int col = int(b.x), row = int(b.y);
+    vec2 f = b - vec2(col, row);
+    vec4 k = cellCorners(m, col, row);
+    return mix(mix(k.x, k.y, f.x), mix(k.z, k.w, f.x), f.y);
+}
+
+// The point of [0, 1) whose CDF under the density ∝ mix(p0, p1, t) is u.
+float sampleLinear(float u, float p0, float p1) {
+    float d = p0 + sqrt(max(mix(p0 * p0, p1 * p1, u), 0.0));
+    float t = d > 0.0 ? u * (p0 + p1) / d : u;
+    return clamp(t, 0.0, 0.99999994);
 }
 
 // The two CDF nodes around the pixel's specular w and the weight of the second.
@@ -133,14 +150,23 @@ float brdfDensity(vec2 uv, int m0, int m1, float t) {
     return (1.0 - t) * nodeDensity(m0, uv) + t * nodeDensity(m1, uv);
 }
 
-vec2 sampleBrdf(vec3 xi, int m0, int m1, float t) {
+// A (u, v) drawn from the density of node m0 or m1 (weight t of m1), and in pdf the
+// mixture's density there.
+vec2 sampleBrdf(vec3 xi, int m0, int m1, float t, out float pdf) {
     int m = xi.z < t ? m1 : m0;
     int nbu = P.cdfDims.x, nbv = P.cdfDims.y;
     int base = nodeBase(m);
     float fr, fc;
     int row = invertCdf(false, base, nbv, xi.x, fr);
     int col = invertCdf(false, base + (nbv + 1) + row * (nbu + 1), nbu, xi.y, fc);
-    return P.cdfLo.xy + (vec2(col, row) + vec2(fc, fr)) * P.cdfStep.xy;
+    // Inside the cell, the bilinear density: v by its marginal, then u given v.
+    vec4 k = cellCorners(m, col, row);
+    float y = sampleLinear(fr, k.x + k.y, k.z + k.w);
+    float x = sampleLinear(fc, mix(k.x, k.z, y), mix(k.y, k.w, y));
+    vec2 uv = P.cdfLo.xy + (vec2(col, row) + vec2(x, y)) * P.cdfStep.xy;
+    // One node (the density is one envelope over w): its bilinear value at the point.
+    pdf = m0 == m1 ? mix(mix(k.x, k.y, x), mix(k.z, k.w, x), y) : brdfDensity(uv, m0, m1, t);
+    return uv;
 }
 
 // --- sequences ------------------------------------------------------------------------------
@@ -315,10 +341,10 @@ void integrate(Surface s, uint key, uint place, uint stride, int batch, out vec3
         vec3 x3 = vec3(unitFloat(rot[0] + ib * alpha[0]), unitFloat(rot[1] + ib * alpha[1]),
                        unitFloat(rot[2] + ib * alpha[2]));
         // The BRDF's sample: (u, v), then ωi; the integrand per du dv over p_uv.
-        vec2 uv = sampleBrdf(x3, m0, m1, tw);
+        float pUv;
+        vec2 uv = sampleBrdf(x3, m0, m1, tw, pUv);
         vec2 ixy = -uv - s.wr.xy;
         float s2 = dot(ixy, ixy);
-        float pUv = brdfDensity(uv, m0, m1, tw);
         if (s2 < 1.0 && pUv > 0.0) {
             vec3 wi = vec3(ixy, sqrt(1.0 - s2));
             float pl;

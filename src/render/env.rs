@@ -7,11 +7,15 @@
 //!
 //! **The BRDF's sampler.** The largest over `M` nodes uniform in `w` of the table's
 //! `G_X + G_Y + G_Z` is evaluated (as the spline interpolates it) at the corners of cells
-//! `SUB` times finer than the table's, each cell holding the largest of its corners (so
-//! no cell next to a lobe is left with zero probability), and turned into a marginal CDF over rows of bins and a conditional CDF
-//! over the bins of each row; a sample is uniform inside its cell: a piecewise-constant density
-//! in `(u, v)` that the shader evaluates exactly, so the estimator is unbiased whatever the
-//! fit; the fit only sets the variance.
+//! `SUB` times finer than the table's, each corner raised to a sixteenth of its largest
+//! neighbour (so a lobe's tail between two corners keeps its weights `G/p` bounded). The
+//! density is bilinear between the corners inside each cell: a cell is drawn by its
+//! integral (a marginal CDF over rows of cells and a conditional CDF over the cells of each
+//! row), then the point inside it by the bilinear density's marginal in `v` and its
+//! conditional in `u`, both linear, inverted in closed form. The shader evaluates that
+//! density exactly, so the estimator is unbiased whatever the fit; the fit only sets the
+//! variance (a cell holding the largest of its corners, uniform inside, took 1.44 times the
+//! samples for the same error on the default scene under the sky).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -65,7 +69,7 @@ pub fn samples_per_dispatch(info: &crate::gpu::DeviceInfo, iterations: u64) -> u
 /// Default samples per pixel.
 pub const DEFAULT_SAMPLES: u32 = 256;
 
-/// The piecewise-constant density over `(u, v)` the BRDF's samples are drawn from.
+/// The piecewise-bilinear density over `(u, v)` the BRDF's samples are drawn from.
 #[derive(Debug, Clone)]
 pub struct GDensity {
     pub bins: [usize; 2],
@@ -128,20 +132,22 @@ impl GDensity {
                 *c = c.max(g);
             });
         }
+        let corners = floored(&corners, nbu + 1, nbv + 1);
         let mut cells = vec![0.0f64; nbu * nbv];
         for b in 0..nbv {
             for a in 0..nbu {
                 let at = |i: usize, j: usize| corners[j * (nbu + 1) + i];
-                cells[b * nbu + a] = at(a, b)
-                    .max(at(a + 1, b))
-                    .max(at(a, b + 1))
-                    .max(at(a + 1, b + 1));
+                cells[b * nbu + a] =
+                    (at(a, b) + at(a + 1, b) + at(a, b + 1) + at(a + 1, b + 1)) / 4.0;
             }
         }
-        if cells.iter().sum::<f64>() <= 0.0 {
+        let corners = if cells.iter().sum::<f64>() <= 0.0 {
             cells.iter_mut().for_each(|c| *c = 1.0);
-        }
-        let data = cdf_block(&cells, nbu, nbv, step[0] * step[1]);
+            vec![1.0; corners.len()]
+        } else {
+            corners
+        };
+        let data = cdf_block(&cells, &corners, nbu, nbv, step[0] * step[1]);
         let (nodes, dw) = (1, 1.0);
         GDensity {
             bins: [nbu, nbv],
@@ -173,9 +179,34 @@ fn spline_sum(plane: &[[f64; 3]], su: usize, x: f64, y: f64, nu: usize, nv: usiz
     g.iter().map(|v| v.max(0.0)).sum()
 }
 
-/// Marginal CDF over rows, conditional CDFs over each row's columns, then each cell's
-/// density (probability over `cell_area`), as f32 in the shader's layout.
-fn cdf_block(weights: &[f64], w: usize, h: usize, cell_area: f64) -> Vec<f32> {
+/// The corner values of the density, each raised to at least [`TAIL`] of the largest of its
+/// eight neighbours: between a lobe's last sampled node and the next, where `G` falls
+/// faster than that, the density stays above it (the weights `G/p` stay bounded in a
+/// lobe's tail), and far from every lobe it stays 0.
+fn floored(corners: &[f64], w: usize, h: usize) -> Vec<f64> {
+    (0..w * h)
+        .into_par_iter()
+        .map(|p| {
+            let (x, y) = (p % w, p / w);
+            let mut near = 0.0f64;
+            for j in y.saturating_sub(1)..(y + 2).min(h) {
+                for i in x.saturating_sub(1)..(x + 2).min(w) {
+                    near = near.max(corners[j * w + i]);
+                }
+            }
+            corners[p].max(TAIL * near)
+        })
+        .collect()
+}
+
+/// The least a density corner keeps of its largest neighbour ([`floored`]).
+const TAIL: f64 = 1.0 / 16.0;
+
+/// Marginal CDF over rows and conditional CDFs over each row's columns of the cells'
+/// `weights` (their mean density), then the density (probability over area) at every cell
+/// corner, as f32 in the shader's layout: inside a cell the density is bilinear between
+/// its corners, and its integral over the cell is the cell's weight.
+fn cdf_block(weights: &[f64], corners: &[f64], w: usize, h: usize, cell_area: f64) -> Vec<f32> {
     let total: f64 = weights.iter().sum();
     let mut marginal = vec![0f32; h + 1];
     let mut conditional = vec![0f32; h * (w + 1)];
@@ -197,7 +228,7 @@ fn cdf_block(weights: &[f64], w: usize, h: usize, cell_area: f64) -> Vec<f32> {
         marginal[r + 1] = (acc / total) as f32;
     }
     marginal[h] = 1.0;
-    let density = weights.iter().map(|x| (x / total / cell_area) as f32);
+    let density = corners.iter().map(|x| (x / total / cell_area) as f32);
     marginal
         .into_iter()
         .chain(conditional)
@@ -227,9 +258,10 @@ pub struct EnvLighting {
 }
 
 /// The most the Chebyshev terms left out of an environment table may add to `G`, relative
-/// to its peak ([`ChebyshevW::truncate`]): far below the integration's noise (a sample
-/// reads every term kept, so each term costs a sixteenth of a sample's table reads).
-pub const TERM_TOLERANCE: f64 = 1e-4;
+/// to its peak ([`ChebyshevW::truncate`]): a material's default tolerance, far below the
+/// integration's noise (a sample reads every term kept: the default skin keeps 6 of 8, and
+/// its pictures move by ΔE2000 mean 0.012, p99 0.09 against 7, with the same samples).
+pub const TERM_TOLERANCE: f64 = 1e-3;
 
 /// A table whose last Chebyshev term in `w` is above this (relative to the peak) gets a
 /// warning that more `w` nodes would resolve it: a material's default tolerance
