@@ -2,8 +2,8 @@
 // (MODEL §10), one invocation per pixel: N samples per pixel of L_o = ∫ L(ωi)·f_r·cos θi
 // dωi, combining two samplers by multiple importance sampling (power heuristic with the
 // samples' counts):
-//  - the BRDF, every sample: (u, v) drawn from a piecewise-constant density fitted to the
-//    variant's G (the envelope over w), dωi = du dv / cos θi;
+//  - the BRDF, every sample: (u, v) drawn from a piecewise-bilinear density fitted to the
+//    table's G (the envelope over w), dωi = du dv / cos θi;
 //  - the lights, every m-th sample: an environment pixel drawn by luminance, uniform in
 //    solid angle inside it, or a disc light.
 // Random numbers: the 5-dimensional R-sequence (Roberts' generalised golden ratio), with a
