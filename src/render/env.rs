@@ -333,9 +333,9 @@ impl EnvLighting {
                 Ok(sampled.slices)
             },
         )?;
-        let mut table = ChebyshevW::from_nodes(spec.region, &slices);
+        let (table, dropped) =
+            ChebyshevW::from_nodes_within(spec.region, &slices, Some(TERM_TOLERANCE));
         drop(slices);
-        let dropped = table.truncate(TERM_TOLERANCE);
         let last = table.decay().last().copied().unwrap_or(0.0);
         if dropped == 0 && last > W_TOLERANCE {
             report.warn(&format!(

@@ -146,6 +146,17 @@ impl ChebyshevW {
 
     /// Coefficients from samples at the Chebyshev nodes (as made by [`chebyshev_nodes`]).
     pub fn from_nodes(region: Region, slices: &Slices) -> Self {
+        Self::from_nodes_within(region, slices, None).0
+    }
+
+    /// [`Self::from_nodes`] with its highest terms dropped as [`Self::truncate`] drops
+    /// them at `tolerance` before the splines are fitted (only the kept terms are fitted);
+    /// also the terms dropped. `None` keeps every term.
+    pub fn from_nodes_within(
+        region: Region,
+        slices: &Slices,
+        tolerance: Option<f64>,
+    ) -> (Self, usize) {
         let k = slices.data.len();
         let n = slices.nu * slices.nv;
         let coeffs = (0..k)
@@ -168,17 +179,20 @@ impl ChebyshevW {
                     .collect()
             })
             .collect::<Vec<Vec<[f64; 3]>>>();
-        let splines = coeffs
-            .par_iter()
-            .map(|c| spline_plane(c, slices.nu, slices.nv))
-            .collect();
-        Self {
+        let mut table = Self {
             region,
             nu: slices.nu,
             nv: slices.nv,
             coeffs,
-            splines,
-        }
+            splines: Vec::new(),
+        };
+        let dropped = tolerance.map_or(0, |t| table.truncate(t));
+        table.splines = table
+            .coeffs
+            .par_iter()
+            .map(|c| spline_plane(c, slices.nu, slices.nv))
+            .collect();
+        (table, dropped)
     }
 
     /// `ŵ ∈ [−1, 1]` of `w`.
