@@ -498,6 +498,7 @@ impl Swapchain {
             render_pass: self.render_pass.raw,
             framebuffer: self.framebuffers[index as usize],
             extent: self.extent,
+            colours: 1,
         }
     }
 

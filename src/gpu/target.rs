@@ -1,7 +1,8 @@
 //! Render targets. A [`Target`] is what a pass is recorded into (render pass,
-//! framebuffer, extent): it does not know whether the image behind it is offscreen or a
-//! swapchain image. [`OffscreenTarget`] is the headless one: an RGBA32F colour image (linear
-//! values, no clamping), a D32 depth image, and a host-visible readback buffer.
+//! framebuffer, extent, colour attachments): it does not know whether the images behind it
+//! are offscreen or a swapchain image. [`OffscreenTarget`] is the headless one: RGBA32F
+//! colour images (linear values, no clamping; one, or the G-buffer's four), a D32 depth
+//! image, and a host-visible buffer that receives the colour images side by side.
 
 use std::sync::Arc;
 
@@ -19,6 +20,8 @@ pub struct Target {
     pub render_pass: vk::RenderPass,
     pub framebuffer: vk::Framebuffer,
     pub extent: vk::Extent2D,
+    /// Colour attachments (attachments `0..colours`; depth after them).
+    pub colours: u32,
 }
 
 /// Headless colour + depth target with readback.
@@ -30,7 +33,7 @@ pub struct OffscreenTarget {
     pub extent: vk::Extent2D,
     readback: Buffer,
     _depth: Image,
-    pub colour: Image,
+    colours: Vec<Image>,
 }
 
 impl OffscreenTarget {
@@ -39,6 +42,12 @@ impl OffscreenTarget {
     pub const DEPTH_FORMAT: vk::Format = DEPTH_FORMAT;
 
     pub fn new(dev: &Arc<Device>, width: u32, height: u32) -> Result<Self> {
+        Self::with_colours(dev, width, height, 1)
+    }
+
+    /// A target of `colours` colour attachments (fragment outputs `0..colours`), all
+    /// cleared, drawn and read back together.
+    pub fn with_colours(dev: &Arc<Device>, width: u32, height: u32, colours: u32) -> Result<Self> {
         let max = dev.info.max_image_dimension_2d;
         if width == 0 || height == 0 || width > max || height > max {
             return Err(Error::invalid(
@@ -63,48 +72,59 @@ impl OffscreenTarget {
                 ));
             }
         }
-        let colour = Image::new(
-            dev,
-            "offscreen colour",
-            ImageDesc {
-                format: Self::COLOUR_FORMAT,
-                width,
-                height,
-                layers: 1,
-                usage: vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
-                aspect: vk::ImageAspectFlags::COLOR,
-                view_type: vk::ImageViewType::TYPE_2D,
-            },
-        )?;
-        let depth = Image::new(
-            dev,
+        let image = |what: &str, format, usage, aspect| {
+            Image::new(
+                dev,
+                what,
+                ImageDesc {
+                    format,
+                    width,
+                    height,
+                    layers: 1,
+                    usage,
+                    aspect,
+                    view_type: vk::ImageViewType::TYPE_2D,
+                },
+            )
+        };
+        let colour_images = (0..colours.max(1))
+            .map(|_| {
+                image(
+                    "offscreen colour",
+                    Self::COLOUR_FORMAT,
+                    vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
+                    vk::ImageAspectFlags::COLOR,
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let depth = image(
             "offscreen depth",
-            ImageDesc {
-                format: Self::DEPTH_FORMAT,
-                width,
-                height,
-                layers: 1,
-                usage: vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
-                aspect: vk::ImageAspectFlags::DEPTH,
-                view_type: vk::ImageViewType::TYPE_2D,
-            },
+            Self::DEPTH_FORMAT,
+            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
+            vk::ImageAspectFlags::DEPTH,
         )?;
         let readback = Buffer::new(
             dev,
             "offscreen readback",
-            width as u64 * height as u64 * 16,
+            u64::from(width) * u64::from(height) * 16 * colour_images.len() as u64,
             vk::BufferUsageFlags::TRANSFER_DST,
             MemoryLocation::GpuToCpu,
         )?;
-        let pass = RenderPass::new(
+        let pass = RenderPass::with_colours(
             dev,
             "offscreen render pass",
+            colour_images.len() as u32,
             Self::COLOUR_FORMAT,
             vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
         )?;
+        let views: Vec<vk::ImageView> = colour_images
+            .iter()
+            .map(|c| c.view)
+            .chain([depth.view])
+            .collect();
         let framebuffer = pass.framebuffer(
             "offscreen framebuffer",
-            &[colour.view, depth.view],
+            &views,
             vk::Extent2D { width, height },
         )?;
         Ok(OffscreenTarget {
@@ -114,7 +134,7 @@ impl OffscreenTarget {
             extent: vk::Extent2D { width, height },
             readback,
             _depth: depth,
-            colour,
+            colours: colour_images,
         })
     }
 
@@ -129,90 +149,69 @@ impl OffscreenTarget {
             render_pass: self.pass.raw,
             framebuffer: self.framebuffer,
             extent: self.extent,
+            colours: self.colours.len() as u32,
         }
     }
 
-    /// Records the copy of the colour image (in `TRANSFER_SRC_OPTIMAL` after the render
-    /// pass) into the readback buffer, made visible to the host.
+    /// Records the copies of the colour images (in `TRANSFER_SRC_OPTIMAL` after the render
+    /// pass) side by side into the readback buffer, made visible to the host.
     pub fn record_readback(&self, cb: vk::CommandBuffer) {
-        record_readbacks(
-            &self.dev,
-            cb,
-            &[self.colour.raw],
-            self.extent,
-            &self.readback,
-        );
-    }
-
-    /// The read-back pixels, row-major from the top row (after the submission completed).
-    pub fn read_rgba(&self) -> Result<Vec<[f32; 4]>> {
-        read_rgba_at(&self.readback, self.extent, 0)
-    }
-}
-
-/// Records the copies of RGBA32F `images` of `extent` (each in `TRANSFER_SRC_OPTIMAL` after
-/// its render pass) side by side into `readback`, made visible to the host.
-pub(crate) fn record_readbacks(
-    dev: &Device,
-    cb: vk::CommandBuffer,
-    images: &[vk::Image],
-    extent: vk::Extent2D,
-    readback: &Buffer,
-) {
-    let bytes = u64::from(extent.width) * u64::from(extent.height) * 16;
-    let to_host = vk::BufferMemoryBarrier::default()
-        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-        .dst_access_mask(vk::AccessFlags::HOST_READ)
-        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-        .buffer(readback.raw)
-        .offset(0)
-        .size(vk::WHOLE_SIZE);
-    // SAFETY: cb is recording outside a render pass; the buffer holds the images'
-    // width·height RGBA32F texels side by side (its callers size it so); the render passes
-    // left the images in TRANSFER_SRC_OPTIMAL.
-    unsafe {
-        for (k, &image) in images.iter().enumerate() {
-            let region = colour_copy(extent).buffer_offset(bytes * k as u64);
-            dev.raw.cmd_copy_image_to_buffer(
+        let bytes = u64::from(self.extent.width) * u64::from(self.extent.height) * 16;
+        let to_host = vk::BufferMemoryBarrier::default()
+            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+            .dst_access_mask(vk::AccessFlags::HOST_READ)
+            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+            .buffer(self.readback.raw)
+            .offset(0)
+            .size(vk::WHOLE_SIZE);
+        // SAFETY: cb is recording outside a render pass; the buffer holds every colour
+        // image's width·height RGBA32F texels side by side; the render pass left them in
+        // TRANSFER_SRC_OPTIMAL.
+        unsafe {
+            for (k, image) in self.colours.iter().enumerate() {
+                let region = colour_copy(self.extent).buffer_offset(bytes * k as u64);
+                self.dev.raw.cmd_copy_image_to_buffer(
+                    cb,
+                    image.raw,
+                    vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
+                    self.readback.raw,
+                    &[region],
+                );
+            }
+            self.dev.raw.cmd_pipeline_barrier(
                 cb,
-                image,
-                vk::ImageLayout::TRANSFER_SRC_OPTIMAL,
-                readback.raw,
-                &[region],
+                vk::PipelineStageFlags::TRANSFER,
+                vk::PipelineStageFlags::HOST,
+                vk::DependencyFlags::empty(),
+                &[],
+                &[to_host],
+                &[],
             );
         }
-        dev.raw.cmd_pipeline_barrier(
-            cb,
-            vk::PipelineStageFlags::TRANSFER,
-            vk::PipelineStageFlags::HOST,
-            vk::DependencyFlags::empty(),
-            &[],
-            &[to_host],
-            &[],
-        );
     }
-}
 
-/// Image `k` of those [`record_readbacks`] copied into `readback` (after the submission
-/// completed), row-major from the top row.
-pub(crate) fn read_rgba_at(
-    readback: &Buffer,
-    extent: vk::Extent2D,
-    k: usize,
-) -> Result<Vec<[f32; 4]>> {
-    let bytes = readback.mapped()?;
-    let n = extent.width as usize * extent.height as usize;
-    let part = bytes
-        .get(k * n * 16..(k + 1) * n * 16)
-        .ok_or_else(|| Error::invalid("readback", "buffer smaller than the image"))?;
-    Ok(part
-        .chunks_exact(16)
-        .map(|c| {
-            let f = |i: usize| f32::from_ne_bytes([c[i], c[i + 1], c[i + 2], c[i + 3]]);
-            [f(0), f(4), f(8), f(12)]
-        })
-        .collect())
+    /// The read-back pixels of the first colour image, row-major from the top row (after
+    /// the submission completed).
+    pub fn read_rgba(&self) -> Result<Vec<[f32; 4]>> {
+        self.read_rgba_at(0)
+    }
+
+    /// [`Self::read_rgba`] of colour image `k`.
+    pub fn read_rgba_at(&self, k: usize) -> Result<Vec<[f32; 4]>> {
+        let bytes = self.readback.mapped()?;
+        let n = self.extent.width as usize * self.extent.height as usize;
+        let part = bytes
+            .get(k * n * 16..(k + 1) * n * 16)
+            .ok_or_else(|| Error::invalid("readback", "buffer smaller than the image"))?;
+        Ok(part
+            .chunks_exact(16)
+            .map(|c| {
+                let f = |i: usize| f32::from_ne_bytes([c[i], c[i + 1], c[i + 2], c[i + 3]]);
+                [f(0), f(4), f(8), f(12)]
+            })
+            .collect())
+    }
 }
 
 impl Drop for OffscreenTarget {

@@ -3,23 +3,23 @@
 //! same vertex layout, transforms, depth test and no culling, so the same pixels are
 //! covered), per pixel the frame made orthonormal, `ωr` towards the eye in it and the
 //! texture's albedo. A colour attachment holds four floats, so the G-buffer's sixteen are
-//! four RGBA32F attachments of one pass, read back in the same submission; the host then
+//! four RGBA32F attachments of one pass (an [`OffscreenTarget`] of four colours), read
+//! back in the same submission; the host then
 //! keeps the covered pixels ([`GBuffer`]) for the compute stages. [`GBufferPass`] keeps
 //! the pipeline and the mesh on the device between draws.
 
 use std::sync::Arc;
 
 use ash::vk;
-use gpu_allocator::MemoryLocation;
 
 use super::env_scene::{Albedo, GBuffer};
-use super::record::{end_pass, mesh_vertex_layout, record_draw, Geometry, Transforms};
+use super::record::{mesh_vertex_layout, record_pass, Geometry, Transforms};
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Sampler};
 use crate::gpu::pipeline::{
     Binding, DescriptorSet, Pipeline, PipelineDesc, PipelineLayout, Resource, ShaderModule,
 };
 use crate::gpu::render_pass::RenderPass;
-use crate::gpu::target::{read_rgba_at, record_readbacks, OffscreenTarget};
+use crate::gpu::target::OffscreenTarget;
 use crate::gpu::{shaders, Device};
 use crate::mesh::Mesh;
 use crate::scene::Camera;
@@ -51,117 +51,19 @@ pub fn rasterise(
     GBufferPass::new(dev, mesh, albedo)?.draw(camera, size)
 }
 
-/// The four RGBA32F colour images of one size, their depth, the framebuffer and a
-/// host-visible buffer that receives the four side by side.
-struct Target {
-    // Field order is drop order: the framebuffer before its images.
-    framebuffer: Framebuffer,
-    extent: vk::Extent2D,
-    readback: Buffer,
-    _depth: Image,
-    colours: Vec<Image>,
-}
-
-impl Target {
-    fn new(dev: &Arc<Device>, pass: &RenderPass, width: u32, height: u32) -> Result<Self> {
-        let max = dev.info.max_image_dimension_2d;
-        if width == 0 || height == 0 || width > max || height > max {
-            return Err(Error::invalid(
-                "image size",
-                format!("{width}×{height}; each side must be 1..={max} on this device"),
-            ));
-        }
-        let image = |what: &str, format, usage, aspect| {
-            Image::new(
-                dev,
-                what,
-                ImageDesc {
-                    format,
-                    width,
-                    height,
-                    layers: 1,
-                    usage,
-                    aspect,
-                    view_type: vk::ImageViewType::TYPE_2D,
-                },
-            )
-        };
-        let colours = (0..QUARTERS)
-            .map(|_| {
-                image(
-                    "G-buffer quarter",
-                    OffscreenTarget::COLOUR_FORMAT,
-                    vk::ImageUsageFlags::COLOR_ATTACHMENT | vk::ImageUsageFlags::TRANSFER_SRC,
-                    vk::ImageAspectFlags::COLOR,
-                )
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let depth = image(
-            "G-buffer depth",
-            OffscreenTarget::DEPTH_FORMAT,
-            vk::ImageUsageFlags::DEPTH_STENCIL_ATTACHMENT,
-            vk::ImageAspectFlags::DEPTH,
-        )?;
-        let readback = Buffer::new(
-            dev,
-            "G-buffer readback",
-            u64::from(width) * u64::from(height) * 16 * u64::from(QUARTERS),
-            vk::BufferUsageFlags::TRANSFER_DST,
-            MemoryLocation::GpuToCpu,
-        )?;
-        let extent = vk::Extent2D { width, height };
-        let views: Vec<vk::ImageView> =
-            colours.iter().map(|c| c.view).chain([depth.view]).collect();
-        let framebuffer = Framebuffer {
-            raw: pass.framebuffer("G-buffer framebuffer", &views, extent)?,
-            dev: Arc::clone(dev),
-        };
-        Ok(Target {
-            framebuffer,
-            extent,
-            readback,
-            _depth: depth,
-            colours,
-        })
-    }
-
-    /// Records the copies of the four images into the readback buffer, side by side.
-    fn record_readback(&self, dev: &Device, cb: vk::CommandBuffer) {
-        let images: Vec<vk::Image> = self.colours.iter().map(|c| c.raw).collect();
-        record_readbacks(dev, cb, &images, self.extent, &self.readback);
-    }
-
-    /// Quarter `k` as read back (after the submission completed), row-major from the top.
-    fn quarter(&self, k: usize) -> Result<Vec<[f32; 4]>> {
-        read_rgba_at(&self.readback, self.extent, k)
-    }
-}
-
-/// A framebuffer destroyed with its owner.
-struct Framebuffer {
-    raw: vk::Framebuffer,
-    dev: Arc<Device>,
-}
-
-impl Drop for Framebuffer {
-    fn drop(&mut self) {
-        // SAFETY: the draws that used it were waited for; its views outlive it (fields of
-        // the target dropped after it).
-        unsafe { self.dev.raw().destroy_framebuffer(self.raw, None) };
-    }
-}
-
 /// The objects of the G-buffer's draw that outlive one view: the mesh and the albedo on
 /// the device, the pipeline (compiled once: lavapipe compiles its shaders when a pipeline
 /// is made) and a target kept for the last size drawn. The viewer keeps one and draws it
 /// at each change of the view.
 pub struct GBufferPass {
     // Field order is drop order: the users of the layout and the pass first.
-    target: Option<Target>,
+    target: Option<OffscreenTarget>,
     set: DescriptorSet,
     eye: Buffer,
     pipeline: Pipeline,
-    render_pass: RenderPass,
+    /// What the pipeline was made for; each target's own pass of the same attachments is
+    /// compatible with it.
+    _render_pass: RenderPass,
     layout: PipelineLayout,
     _modules: [ShaderModule; 2],
     _sampler: Sampler,
@@ -268,7 +170,7 @@ impl GBufferPass {
             set,
             eye,
             pipeline,
-            render_pass,
+            _render_pass: render_pass,
             layout,
             _modules: [vertex, fragment],
             _sampler: sampler,
@@ -295,10 +197,12 @@ impl GBufferPass {
                 data: Vec::new(),
             });
         }
-        let fits = |t: &Target| t.extent.width == width && t.extent.height == height;
+        let fits = |t: &OffscreenTarget| t.extent.width == width && t.extent.height == height;
         if !self.target.as_ref().is_some_and(fits) {
             self.target = None;
-            self.target = Some(Target::new(&self.dev, &self.render_pass, width, height)?);
+            self.target = Some(OffscreenTarget::with_colours(
+                &self.dev, width, height, QUARTERS,
+            )?);
         }
         let e = camera.eye;
         self.eye.write(crate::gpu::memory::bytes_of(&[EyeUbo {
@@ -316,37 +220,11 @@ impl GBufferPass {
             .ok_or_else(|| Error::invalid("G-buffer", "no target"))?;
         let dev = &self.dev;
         dev.submit_once("G-buffer", |cb| {
-            let whole = vk::Rect2D {
-                offset: vk::Offset2D { x: 0, y: 0 },
-                extent: target.extent,
-            };
-            // Zero marks an uncovered pixel; depth clears to the far plane.
-            let mut clears = vec![
-                vk::ClearValue {
-                    color: vk::ClearColorValue { float32: [0.0; 4] },
-                };
-                QUARTERS as usize
-            ];
-            clears.push(vk::ClearValue {
-                depth_stencil: vk::ClearDepthStencilValue {
-                    depth: 1.0,
-                    stencil: 0,
-                },
-            });
-            let begin = vk::RenderPassBeginInfo::default()
-                .render_pass(self.render_pass.raw)
-                .framebuffer(target.framebuffer.raw)
-                .render_area(whole)
-                .clear_values(&clears);
-            // SAFETY: cb is recording outside a render pass; the framebuffer belongs to the
-            // pass and lives until the submission completes (submit_once waits).
-            unsafe {
-                dev.raw()
-                    .cmd_begin_render_pass(cb, &begin, vk::SubpassContents::INLINE)
-            };
-            record_draw(
+            // Zero marks an uncovered pixel.
+            record_pass(
                 dev,
                 cb,
+                &target.target(),
                 &self.pipeline,
                 &self.layout,
                 &self.set,
@@ -356,14 +234,13 @@ impl GBufferPass {
                     index_count: self.index_count,
                     transforms,
                 },
-                whole,
+                [0.0; 4],
             );
-            end_pass(dev, cb);
-            target.record_readback(dev, cb);
+            target.record_readback(cb);
             Ok(())
         })?;
         let quarters = (0..QUARTERS as usize)
-            .map(|k| target.quarter(k))
+            .map(|k| target.read_rgba_at(k))
             .collect::<Result<Vec<_>>>()?;
         Ok(assemble(width, height, ss, &quarters))
     }

@@ -71,20 +71,19 @@ pub(crate) fn record_pass(
     end_pass(dev, cb);
 }
 
-/// Begins `target`'s render pass over the whole target, clearing colour to `clear` and
-/// depth to 1. Draws follow with [`record_draw`], then [`end_pass`].
+/// Begins `target`'s render pass over the whole target, clearing every colour attachment
+/// to `clear` and depth to 1. Draws follow with [`record_draw`], then [`end_pass`].
 pub(crate) fn begin_pass(dev: &Device, cb: vk::CommandBuffer, target: &Target, clear: [f32; 4]) {
-    let clears = [
-        vk::ClearValue {
-            color: vk::ClearColorValue { float32: clear },
+    let colour = vk::ClearValue {
+        color: vk::ClearColorValue { float32: clear },
+    };
+    let mut clears = vec![colour; target.colours as usize];
+    clears.push(vk::ClearValue {
+        depth_stencil: vk::ClearDepthStencilValue {
+            depth: 1.0,
+            stencil: 0,
         },
-        vk::ClearValue {
-            depth_stencil: vk::ClearDepthStencilValue {
-                depth: 1.0,
-                stencil: 0,
-            },
-        },
-    ];
+    });
     let area = vk::Rect2D {
         offset: vk::Offset2D { x: 0, y: 0 },
         extent: target.extent,
