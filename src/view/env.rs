@@ -65,7 +65,7 @@ pub(super) struct EnvSettings {
     pub spec: TableSpec,
     pub cache_dir: Option<std::path::PathBuf>,
     /// The scene's texture, when it has one.
-    pub texture: Option<(u32, u32, Vec<[u8; 3]>)>,
+    pub texture: Option<Texels>,
 }
 
 impl EnvSettings {
@@ -488,6 +488,38 @@ impl EnvView {
     }
 }
 
+impl Kernels {
+    /// The G-buffer of `mesh` as `camera` sees it at `w`×`h`, with the texture's albedo
+    /// when `blend` gives one (decoded once for these kernels), drawn by the pass kept here
+    /// (made again when whether the albedo is blended changes).
+    fn gbuffer(
+        &mut self,
+        dev: &Arc<Device>,
+        mesh: &Mesh,
+        camera: &crate::scene::Camera,
+        (w, h): (u32, u32),
+        blend: Option<(&crate::scene::TextureSpec, &Texels)>,
+        lighting: &EnvLighting,
+    ) -> Result<crate::render::env_scene::GBuffer> {
+        if let (Some((spec, (tw, th, bytes))), None) = (blend, &self.albedo) {
+            let scale = f64::from(spec.gain) * lighting.mirror_scale;
+            self.albedo = Some(Albedo::from_srgb8(*tw, *th, bytes, scale));
+        }
+        let albedo = blend.and(self.albedo.as_ref());
+        let pass = match self.gbuffer.take() {
+            Some((blended, pass)) if blended == albedo.is_some() => pass,
+            _ => GBufferPass::new(dev, mesh, albedo)?,
+        };
+        self.gbuffer
+            .insert((albedo.is_some(), pass))
+            .1
+            .draw(camera, (w, h, 1))
+    }
+}
+
+/// A texture as loaded: width, height, sRGB bytes.
+type Texels = (u32, u32, Vec<[u8; 3]>);
+
 /// Where a picture goes and what it is drawn with.
 struct PictureSpec<'a> {
     kernel: &'a mut EnvKernel,
@@ -528,17 +560,6 @@ impl EnvView {
             .as_ref()
             .zip(s.texture.as_ref())
             .filter(|_| state.texture);
-        if blend.is_some() && kernels.albedo.is_none() {
-            kernels.albedo = blend.map(|(spec, (tw, th, bytes))| {
-                Albedo::from_srgb8(
-                    *tw,
-                    *th,
-                    bytes,
-                    f64::from(spec.gain) * lighting.mirror_scale,
-                )
-            });
-        }
-        let albedo = blend.and(kernels.albedo.as_ref());
         let mut shading = view_scene.material.shading();
         shading.fresnel = state.fresnel;
         shading.shadowing = state.shadowing;
@@ -546,14 +567,7 @@ impl EnvView {
         let mut camera_scene = view_scene.clone();
         camera_scene.output.width = w;
         camera_scene.output.height = h;
-        if kernels.gbuffer.as_ref().map(|g| g.0) != Some(albedo.is_some()) {
-            kernels.gbuffer = None;
-            kernels.gbuffer = Some((albedo.is_some(), GBufferPass::new(dev, mesh, albedo)?));
-        }
-        let g = match kernels.gbuffer.as_mut() {
-            Some((_, pass)) => pass.draw(&view_scene.camera, (w, h, 1))?,
-            None => return Err(Error::invalid("environment", "no G-buffer pass")),
-        };
+        let g = kernels.gbuffer(dev, mesh, &view_scene.camera, (w, h), blend, lighting)?;
         let bg = crate::render::env_scene::background(
             &camera_scene,
             env_on.then_some(env),
