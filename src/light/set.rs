@@ -140,11 +140,7 @@ impl Lights {
     /// The light sampler's probabilities: the environment's (from its luminance integral
     /// `env_power`) and each disc's, in proportion to `Y·Ω`.
     pub fn probabilities(&self, env_power: f64) -> (f64, Vec<f64>) {
-        let powers: Vec<f64> = self
-            .discs
-            .iter()
-            .map(|d| d.radiance_xyz[1].max(0.0) * d.solid_angle)
-            .collect();
+        let powers: Vec<f64> = self.discs.iter().map(|d| d.moments().0).collect();
         let total = env_power.max(0.0) + powers.iter().sum::<f64>();
         if total <= 0.0 {
             return (0.0, vec![0.0; powers.len()]);
@@ -164,13 +160,16 @@ impl Lights {
 
     /// [`Self::light_share`] with the environment's moments `(∫ Y dω, ∫ Y² dω)` given.
     pub fn light_share_with(&self, env_power: f64, env_square: f64) -> f64 {
-        let (mut power, mut square) = (env_power, env_square);
-        for d in &self.discs {
-            let y = d.radiance_xyz[1].max(0.0);
-            power += y * d.solid_angle;
-            square += y * y * d.solid_angle;
-        }
+        let (power, square) = self.moments_with((env_power, env_square));
         light_share(power, square)
+    }
+
+    /// The luminance moments of the discs added to the environment's `env`.
+    fn moments_with(&self, env: (f64, f64)) -> (f64, f64) {
+        self.discs.iter().fold(env, |(power, square), d| {
+            let (p, q) = d.moments();
+            (power + p, square + q)
+        })
     }
 
     /// The shader's light buffer (glsl/env_common.glsl's `Lights`) with the discs'
@@ -273,12 +272,6 @@ impl<'a> LightSet<'a> {
             lights,
         }
     }
-
-    /// The share of light samples among the BRDF's ([`light_share`]).
-    pub fn share(&self) -> f64 {
-        let (p, s) = self.moments();
-        light_share(p, s)
-    }
 }
 
 impl Light for LightSet<'_> {
@@ -332,13 +325,8 @@ impl Light for LightSet<'_> {
     }
 
     fn moments(&self) -> (f64, f64) {
-        let (mut power, mut square) = self.env.as_ref().map_or((0.0, 0.0), |e| e.moments());
-        for d in &self.lights.discs {
-            let (p, s) = d.moments();
-            power += p;
-            square += s;
-        }
-        (power, square)
+        let env = self.env.as_ref().map_or((0.0, 0.0), |e| e.moments());
+        self.lights.moments_with(env)
     }
 }
 
