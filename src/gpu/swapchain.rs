@@ -557,14 +557,7 @@ impl Swapchain {
             ),
             (vk::AccessFlags::empty(), vk::ImageLayout::PRESENT_SRC_KHR),
         );
-        let to_host = vk::BufferMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .buffer(readback.raw)
-            .offset(0)
-            .size(vk::WHOLE_SIZE);
+        let to_host = super::target::host_read(readback);
         let region = super::target::colour_copy(self.extent);
         let raw = self.dev.raw();
         // SAFETY: cb records outside a render pass; the image was acquired by this frame and

@@ -157,14 +157,7 @@ impl OffscreenTarget {
     /// pass) side by side into the readback buffer, made visible to the host.
     pub fn record_readback(&self, cb: vk::CommandBuffer) {
         let bytes = u64::from(self.extent.width) * u64::from(self.extent.height) * 16;
-        let to_host = vk::BufferMemoryBarrier::default()
-            .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
-            .dst_access_mask(vk::AccessFlags::HOST_READ)
-            .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
-            .buffer(self.readback.raw)
-            .offset(0)
-            .size(vk::WHOLE_SIZE);
+        let to_host = host_read(&self.readback);
         // SAFETY: cb is recording outside a render pass; the buffer holds every colour
         // image's width·height RGBA32F texels side by side; the render pass left them in
         // TRANSFER_SRC_OPTIMAL.
@@ -220,6 +213,18 @@ impl Drop for OffscreenTarget {
         // the render pass and the image views it references (fields, dropped after).
         unsafe { self.dev.raw.destroy_framebuffer(self.framebuffer, None) };
     }
+}
+
+/// The barrier that makes a transfer's writes into `buffer` visible to the host.
+pub(crate) fn host_read(buffer: &Buffer) -> vk::BufferMemoryBarrier<'static> {
+    vk::BufferMemoryBarrier::default()
+        .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
+        .dst_access_mask(vk::AccessFlags::HOST_READ)
+        .src_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
+        .buffer(buffer.raw)
+        .offset(0)
+        .size(vk::WHOLE_SIZE)
 }
 
 /// The copy between a buffer of tightly packed texels and the whole colour image of

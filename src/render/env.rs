@@ -79,7 +79,8 @@ pub struct GDensity {
     pub w0: f64,
     pub dw: f64,
     pub nodes: usize,
-    /// Per node: marginal CDF, conditional CDFs, densities (the shader's layout).
+    /// Per node: marginal CDF, conditional CDFs, the density at each cell corner (the
+    /// shader's layout).
     pub data: Vec<f32>,
 }
 
