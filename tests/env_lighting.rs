@@ -7,7 +7,7 @@ mod gpu_util;
 use diffract::brdf::env_reference::{env_radiance_converged, Frame, Quadrature};
 use diffract::brdf::table::{GTable, Region, TableSpec};
 use diffract::brdf::{schlick_r0, Shading};
-use diffract::colour::{delta_e2000, xyz_to_lab};
+use diffract::colour::{delta_e2000, xyz_to_lab, xyz_to_linear_srgb};
 use diffract::heightfield::HeightField;
 use diffract::light::env::{EnvMap, EnvSource};
 use diffract::light::set::EnvLight;
@@ -62,6 +62,9 @@ fn white_furnace_on_the_gpu() {
         };
         let pic = render_env_brdf_map(&dev, &lighting, &req).unwrap();
         let (mut worst, mut n, mut mean) = ([0.0f64; 3], 0, [0.0f64; 3]);
+        // And as the picture's R, G, B (linear sRGB), against white's.
+        let white_rgb = xyz_to_linear_srgb(lighting.white);
+        let mut worst_rgb = [0.0f64; 3];
         for j in 0..size {
             for i in 0..size {
                 let Some(wr) = map_direction(i, j, size) else {
@@ -77,20 +80,28 @@ fn white_furnace_on_the_gpu() {
                     1.0
                 };
                 let px = pic.xyz[(j * size + i) as usize];
+                let rgb = xyz_to_linear_srgb(px.map(f64::from));
                 for c in 0..3 {
                     let r = f64::from(px[c]) / lighting.white[c] / want - 1.0;
                     worst[c] = worst[c].max(r.abs());
                     mean[c] += r;
+                    let r = rgb[c] / white_rgb[c] / want - 1.0;
+                    worst_rgb[c] = worst_rgb[c].max(r.abs());
                 }
                 n += 1;
             }
         }
         let mean = mean.map(|m| m / n as f64);
         eprintln!(
-            "white furnace, Fresnel {fresnel}, texel {}: {n} pixels with θr ≤ 60°, mean X, Y, Z/white − 1 = {mean:?}, worst {worst:?}",
+            "white furnace, Fresnel {fresnel}, texel {}: {n} pixels with θr ≤ 60°, mean X, Y, Z/white − 1 = {mean:?}, worst {worst:?}; worst R, G, B/white − 1 {worst_rgb:?}",
             spec.texel_uv
         );
         for c in 0..3 {
+            assert!(
+                worst_rgb[c] < 0.01,
+                "Fresnel {fresnel}, R, G, B channel {c}: worst {}",
+                worst_rgb[c]
+            );
             assert!(
                 worst[c] < 0.01 && mean[c].abs() < 2e-3,
                 "Fresnel {fresnel}, channel {c}: worst {}, mean {}",
