@@ -34,6 +34,14 @@ void main() {
     // The map's patch (MODEL §10): N = +Y, T = +X, B = N × T = −Z.
     Surface s = Surface(vec3(1.0, 0.0, 0.0), vec3(0.0, 0.0, -1.0), vec3(0.0, 1.0, 0.0),
                         vec3(x, y, sqrt(1.0 - r2)), vec3(0.0));
+    if (chunk.count == 0) {
+        // The point lights alone, evaluated by this variant for another's samples
+        // (src/render/env.rs, EnvKernel::record): they replace the first dispatch's.
+        vec3 pxyz, prgb;
+        pointLights(s, pxyz, prgb);
+        outSum[2u * idx + 1u] = vec4(pxyz, outSum[2u * idx + 1u].w);
+        return;
+    }
     vec3 xyz, rgb, sq;
     int closed, dropped;
     // Batches of one sample: a dispatch the driver cuts short keeps every sample it took.

@@ -27,6 +27,14 @@ void main() {
     vec4 d = gbuffer[4u * idx + 3u];
     Surface s = Surface(a.xyz, b.xyz, c.xyz, d.xyz, vec3(a.w, b.w, c.w));
     uint key = floatBitsToUint(d.w);
+    if (chunk.count == 0) {
+        // The point lights alone, evaluated by this variant for another's samples
+        // (src/render/env.rs, EnvKernel::record): they replace the first dispatch's.
+        vec3 pxyz, prgb;
+        pointLights(s, pxyz, prgb);
+        outSum[3u * idx + 2u] = vec4(XYZ_TO_SRGB * pxyz + prgb, 0.0);
+        return;
+    }
     vec3 xyz, rgb, sq;
     int closed, dropped;
     integrate(s, key >> 4, key & 15u, uint(P.sequence.x), P.cdfDims.w, xyz, rgb, sq, closed,

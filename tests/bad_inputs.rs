@@ -2394,7 +2394,13 @@ fn environment_maps_lights_and_levels_keep_the_contract() {
             "light: --env-noise without any environment",
             |_| {},
             &["render", "--env-noise", "0.3", "-o", "{d}/o.png"],
-            Fail("--env-noise and --no-sun need an environment"),
+            Fail("--env-seed and --no-sun need an environment"),
+        ),
+        case(
+            "light: --env-seed without any environment",
+            |_| {},
+            &["render", "--env-seed", "3", "-o", "{d}/o.png"],
+            Fail("--env-seed and --no-sun need an environment"),
         ),
         case(
             "map: an 8194×4097 map is over the budget, by its header",

@@ -39,6 +39,11 @@ pub struct EnvArgs {
     /// Turn the directional light (the sun) off.
     #[arg(long)]
     pub no_sun: bool,
+    /// The scrambling of the sample sequence: pictures drawn with different seeds have
+    /// independent noise (a converged reference for a picture takes another seed than the
+    /// picture's) [default: 0].
+    #[arg(long, value_name = "N")]
+    pub env_seed: Option<u32>,
 }
 
 impl EnvArgs {
@@ -82,13 +87,17 @@ impl EnvArgs {
                     "--env-intensity and --env-rotate-deg need an environment (--env SOURCE)",
                 ));
             }
-            if (self.env_samples.is_some() || self.env_noise.is_some() || self.no_sun) && !discs {
+            let sampling = self.env_samples.is_some()
+                || self.env_noise.is_some()
+                || self.env_seed.is_some()
+                || self.no_sun;
+            if sampling && !discs {
                 return Err(Error::invalid(
                     "lighting",
                     if brdf_map {
-                        "--env-samples and --no-sun need an environment (--env SOURCE)"
+                        "--env-samples, --env-seed and --no-sun need an environment (--env SOURCE)"
                     } else {
-                        "--env-samples, --env-noise and --no-sun need an environment (--env SOURCE) or [[disc_light]] tables in the scene"
+                        "--env-samples, --env-noise, --env-seed and --no-sun need an environment (--env SOURCE) or [[disc_light]] tables in the scene"
                     },
                 ));
             }
@@ -226,7 +235,7 @@ pub fn draw_map(
     let (lighting, built) = lighting_for(hf, material, spec, cache)?;
     let variant = env_variant(
         dev,
-        gpu.variant,
+        (gpu.variant, false),
         (material, hf),
         &lighting,
         &gpu.table,
@@ -240,7 +249,7 @@ pub fn draw_map(
         samples,
         size,
         sun,
-        seed: 0,
+        seed: args.env_seed.unwrap_or(0),
         brdf: Some(&variant.brdf),
         per_dispatch: None,
     };
@@ -323,14 +332,6 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     crate::render::env_scene::check_size(Some(&dev), scene)?;
     let shading = material.shading();
     let (lighting, built) = lighting_for(&hf, &material, &spec, args.cache)?;
-    let variant = env_variant(
-        &dev,
-        args.gpu.variant,
-        (&material, &hf),
-        &lighting,
-        &args.gpu.table,
-        args.cache,
-    )?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);
     // Without a map the scene's own sky (its ambient) is the environment.
     let sky = match env {
@@ -341,6 +342,23 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     // Without an environment or disc lights there is nothing to sample: the sun's
     // directions are point lights, evaluated in full once a pixel (`--shading compute`).
     let nothing_sampled = env.is_none() && lights.discs.is_empty();
+    let kind = crate::render::env_brdf::scene_variant(args.gpu.variant, !nothing_sampled);
+    let paired = kind != args.gpu.variant.resolve();
+    let mut variant = env_variant(
+        &dev,
+        (kind, paired),
+        (&material, &hf),
+        &lighting,
+        &args.gpu.table,
+        args.cache,
+    )?;
+    if paired {
+        variant.name = format!(
+            "{} (the default where light is sampled; its converged picture within ΔE2000 p99 {} of chebyshev-w's, which --variant chebyshev-w draws)",
+            variant.name,
+            crate::render::env_brdf::VOLUME_BIAS_P99
+        );
+    }
     let samples = match (nothing_sampled, args.env.env_samples) {
         (true, None) => 1,
         (_, n) => n.unwrap_or(crate::render::env_scene::DEFAULT_SAMPLES),
@@ -364,7 +382,7 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
             lights: &lights,
             shading,
             samples,
-            seed: 0,
+            seed: args.env.env_seed.unwrap_or(0),
             noise: (noise > 0.0).then_some(noise),
             brdf: Some(&variant.brdf),
         },
@@ -432,16 +450,16 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     Ok(())
 }
 
-/// The variant the environment-lit stages evaluate for `--variant`: for the default,
-/// `chebyshev-w` drawn from the environment table itself in `--table-format`; else
-/// `variant` built on `dev` from `material` and its height field `hf` (already loaded)
-/// in radiance units with the table options of `table`
-/// ([`crate::render::Renderer::env_brdf`]; a variant that cannot be lit by an environment
-/// is refused there, before any build). The renderer comes back too: it owns what the
-/// variant's set points at.
+/// The variant the environment-lit stages evaluate for `--variant`: `chebyshev-w` (or
+/// `default`) drawn from the environment table itself in `--table-format`; else `variant`
+/// built on `dev` from `material` and its height field `hf` (already loaded) in radiance
+/// units with the table options of `table` ([`crate::render::Renderer::env_brdf`]; a
+/// variant that cannot be lit by an environment is refused there, before any build). A
+/// scene's default where light is sampled comes as `volume` with `paired`: its point
+/// lights are drawn by `chebyshev-w` ([`crate::render::env_brdf::default_pair`]).
 pub fn env_variant(
     dev: &std::sync::Arc<crate::gpu::Device>,
-    variant: crate::render::variant::VariantKind,
+    (variant, paired): (crate::render::variant::VariantKind, bool),
     (material, hf): (&crate::material::Material, &crate::heightfield::HeightField),
     lighting: &EnvLighting,
     table: &crate::cli::gpu::TableArgs,
@@ -466,9 +484,22 @@ pub fn env_variant(
     renderer.set_cache_dir(dir.clone());
     let prepared = material.prepare_anywhere(hf.clone(), dir.as_deref(), &crate::report::Stderr)?;
     // The stages' variant lives in the binding (it holds the variant), not in the renderer.
-    let brdf = renderer.env_brdf(&prepared, lighting, &material.shading())?;
-    let name = brdf.variant_name();
-    Ok(EnvVariant { brdf, name })
+    let shading = material.shading();
+    let mut brdf = renderer.env_brdf_owned(&prepared, lighting, &shading)?;
+    if paired {
+        brdf = crate::render::env_brdf::default_pair(
+            dev,
+            lighting,
+            &shading,
+            table.table_format,
+            brdf,
+        )?;
+    }
+    let name = brdf.report_name();
+    Ok(EnvVariant {
+        brdf: std::sync::Arc::new(brdf),
+        name,
+    })
 }
 
 /// The error of a variant that cannot be lit by an environment (a debug view), before any

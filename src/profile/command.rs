@@ -233,6 +233,7 @@ fn env_profile(args: &ProfileArgs, base: &Material) -> Result<Option<EnvProfile>
         env: args.env.clone(),
         env_samples: None,
         env_noise: None,
+        env_seed: None,
         env_intensity: args.env_intensity,
         env_rotate_deg: args.env_rotate_deg,
         no_sun: false,

@@ -678,8 +678,22 @@ pub(crate) struct EnvKernel {
     /// pixels at binding 7.
     extra: bool,
     name: String,
+    /// The stage of the variant that evaluates the point lights, where the BRDF names
+    /// another ([`EnvBrdf::points`]).
+    points: Option<PointStage>,
     /// Set 0 of the stage: the variant it evaluates. Last: the pipeline was made with its
     /// layout.
+    brdf: Arc<EnvBrdf>,
+}
+
+/// The same stage made of another variant's fragment file, dispatched once after the first
+/// dispatch of a picture with no samples (`count = 0`): it writes the point lights alone,
+/// over the first dispatch's. It binds the kernel's storage set after its own set 0 (the
+/// two layouts define set 1 alike).
+struct PointStage {
+    pipeline: ComputePipeline,
+    layout: ComputeLayout,
+    /// Last: the pipeline was made with its layout.
     brdf: Arc<EnvBrdf>,
 }
 
@@ -731,9 +745,23 @@ impl EnvKernel {
         let b = |what: &str, bytes: &[u8]| {
             compute::storage_with_data(dev, &format!("{name} {what}"), bytes)
         };
-        let layout =
-            ComputeLayout::after(dev, name, &[brdf.set_layout()], 6 + 2 * u32::from(extra), 8)?;
+        let bindings = 6 + 2 * u32::from(extra);
+        let layout = ComputeLayout::after(dev, name, &[brdf.set_layout()], bindings, 8)?;
         let pipeline = ComputePipeline::new(dev, name, &layout, brdf.spirv(stage)?, brdf.spec())?;
+        let points = match brdf.points() {
+            Some(p) => {
+                let label = format!("{name} point lights");
+                let layout = ComputeLayout::after(dev, &label, &[p.set_layout()], bindings, 8)?;
+                let pipeline =
+                    ComputePipeline::new(dev, &label, &layout, p.spirv(stage)?, p.spec())?;
+                Some(PointStage {
+                    pipeline,
+                    layout,
+                    brdf: Arc::clone(p),
+                })
+            }
+            None => None,
+        };
         let (env_power, env_square) = env.moments();
         Ok(EnvKernel {
             dev: Arc::clone(dev),
@@ -750,6 +778,7 @@ impl EnvKernel {
             irradiance: None,
             extra,
             name: name.to_string(),
+            points,
             brdf: Arc::clone(brdf),
         })
     }
@@ -878,8 +907,9 @@ impl EnvKernel {
     }
 
     /// Records the dispatches that add samples `[base, base + count)` to `t`'s sums
-    /// (`base = 0` starts them and writes the point lights apart), each followed by a
-    /// barrier, so what comes after in `cb` reads the sums.
+    /// (`base = 0` starts them and writes the point lights apart, by the point lights' own
+    /// stage where there is one), each followed by a barrier, so what comes after in `cb`
+    /// reads the sums.
     pub fn record(
         &self,
         cb: vk::CommandBuffer,
@@ -905,6 +935,18 @@ impl EnvKernel {
                 t.pixels.max(1),
             )?;
             compute::compute_barrier(&self.dev, cb);
+            if let (0, Some(p)) = (at, &self.points) {
+                let none: Vec<u8> = [0u32, 0].iter().flat_map(|v| v.to_le_bytes()).collect();
+                p.layout.dispatch_after(
+                    cb,
+                    &p.pipeline,
+                    &[p.brdf.set()],
+                    set,
+                    &none,
+                    t.pixels.max(1),
+                )?;
+                compute::compute_barrier(&self.dev, cb);
+            }
             at += n;
             if at >= base + count {
                 return Ok(());

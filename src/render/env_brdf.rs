@@ -57,6 +57,8 @@ pub struct EnvBrdf {
     _sampler: Sampler,
     /// Last among the resources: the set points at its images and buffers.
     variant: Arc<dyn PreparedVariant>,
+    /// Another variant that evaluates the point lights ([`EnvBrdf::with_points`]).
+    points: Option<Arc<EnvBrdf>>,
 }
 
 impl EnvBrdf {
@@ -162,7 +164,34 @@ impl EnvBrdf {
             _white: white,
             _sampler: sampler,
             variant,
+            points: None,
         })
+    }
+
+    /// This variant for the samples, `points` for the point lights (the sun's directions),
+    /// which a pixel evaluates once each and sees unblurred: the stages' default draws its
+    /// samples with `volume` and the point lights with `chebyshev-w`'s splines
+    /// ([`scene_variant`]).
+    pub fn with_points(mut self, points: Arc<EnvBrdf>) -> Self {
+        self.points = Some(points);
+        self
+    }
+
+    /// The variant that evaluates the point lights, where it is another.
+    pub fn points(&self) -> Option<&Arc<EnvBrdf>> {
+        self.points.as_ref()
+    }
+
+    /// What the report calls the pair: the variant, and the point lights' where another.
+    pub fn report_name(&self) -> String {
+        match &self.points {
+            Some(p) => format!(
+                "{} with the point lights by {}",
+                self.variant_name(),
+                p.variant_name()
+            ),
+            None => self.variant_name(),
+        }
     }
 
     /// The layout of set 0, which the stages' pipeline layout starts with.
@@ -192,6 +221,29 @@ impl EnvBrdf {
         env_spirv(self.kind, stage)
     }
 }
+
+/// The variant that draws a scene's environment-lit pixels for `--variant requested`, where
+/// light is `sampled` (an environment or disc lights) or not (the sun's directions alone,
+/// `--shading compute`). The default is `volume` where light is sampled: one trilinear
+/// fetch a sample against `chebyshev-w`'s twenty bilinear ones, so a sample costs about half
+/// as much. Its bilinear lobes would shift the colour of the sun's glints, which the point
+/// lights see unblurred, so the default draws the point lights with `chebyshev-w`'s splines
+/// ([`default_pair`]); its picture stays within [`VOLUME_BIAS_P99`] of `chebyshev-w`'s
+/// (both converged), the unbiased row, named with `--variant chebyshev-w`. With point
+/// lights alone a pixel takes one evaluation a light, and the default stays `chebyshev-w`,
+/// the raster pass's own.
+pub fn scene_variant(requested: VariantKind, sampled: bool) -> VariantKind {
+    match requested {
+        VariantKind::Default if sampled => VariantKind::Volume,
+        k => k.resolve(),
+    }
+}
+
+/// The CIEDE2000 99th percentile that a converged environment-lit scene drawn by the
+/// default pair ([`default_pair`]) keeps from the same scene drawn by `chebyshev-w`, the
+/// two converged at 4096 samples a pixel with independent sequences (what is left of
+/// their noise included): `tests/env_scene.rs` checks it on the default scene.
+pub const VOLUME_BIAS_P99: f64 = 0.3;
 
 /// The variants of `candidates` that can be lit by an environment, each once, the default
 /// first when it is among them.
@@ -257,10 +309,21 @@ impl super::Renderer {
         lighting: &super::env::EnvLighting,
         shading: &Shading,
     ) -> Result<Arc<EnvBrdf>> {
+        self.env_brdf_owned(prepared, lighting, shading)
+            .map(Arc::new)
+    }
+
+    /// [`Self::env_brdf`] not yet shared, for [`default_pair`] to complete.
+    pub fn env_brdf_owned(
+        &self,
+        prepared: &crate::material::PreparedMaterial,
+        lighting: &super::env::EnvLighting,
+        shading: &Shading,
+    ) -> Result<EnvBrdf> {
         let kind = self.variant().resolve();
         env_spirv(kind, EnvStage::Map)?;
         if kind == VariantKind::ChebyshevW {
-            return lighting.brdf(self.device(), shading).map(Arc::new);
+            return lighting.brdf(self.device(), shading);
         }
         // Built here with its own options, not through the renderer's prepared variant: the
         // renderer's settings and the variant it draws with stay as they are. The stages
@@ -297,6 +360,19 @@ impl super::Renderer {
             &weights,
             lighting.mirror_scale,
         )
-        .map(Arc::new)
     }
+}
+
+/// The stages' default where light is sampled ([`scene_variant`]): `samples` (`volume`)
+/// draws the samples, and `chebyshev-w` from `lighting`'s own table, stored in `format`,
+/// the point lights.
+pub fn default_pair(
+    dev: &Arc<crate::gpu::Device>,
+    lighting: &super::env::EnvLighting,
+    shading: &Shading,
+    format: super::variant::TableFormat,
+    samples: EnvBrdf,
+) -> Result<EnvBrdf> {
+    let points = lighting.brdf_in(dev, shading, format)?;
+    Ok(samples.with_points(Arc::new(points)))
 }

@@ -305,13 +305,14 @@ impl EnvView {
             return Ok(());
         };
         self.load_map(state)?;
-        // A debug view draws no BRDF: the environment shows the default variant's.
+        // `default` stands for the stages' own default (`brdf_for`); a debug view draws no
+        // BRDF, and the environment shows that default's.
         let variant = match crate::render::env_brdf::env_spirv(
             variant.resolve(),
             crate::render::env_brdf::EnvStage::Map,
         ) {
-            Ok(_) => variant.resolve(),
-            Err(_) => VariantKind::DEFAULT,
+            Ok(_) => variant,
+            Err(_) => VariantKind::Default,
         };
         let kernel_key = (key, self.current, state.shadowing, variant);
         if self.kernels.as_ref().is_none_or(|k| k.key != kernel_key) {
@@ -430,7 +431,9 @@ impl EnvView {
     /// `variant` bound for the stages with `shading` (the lighting's Fresnel, the view's
     /// shadowing): `chebyshev-w` from the environment table itself, any other built now by
     /// the view's own renderer with the view's table options (a table variant's build takes
-    /// seconds; it is said).
+    /// seconds; it is said); `default`, `render`'s default where light is sampled
+    /// ([`crate::render::env_brdf::scene_variant`]: `volume`, its point lights by
+    /// `chebyshev-w`).
     fn brdf_for(
         &mut self,
         dev: &Arc<Device>,
@@ -442,7 +445,8 @@ impl EnvView {
         if variant == VariantKind::ChebyshevW {
             return Ok(Arc::new(lighting.brdf(dev, shading)?));
         }
-        println!("environment: building {variant} for the environment's stages");
+        let kind = crate::render::env_brdf::scene_variant(variant, true);
+        println!("environment: building {kind} for the environment's stages");
         let renderer = match &mut self.variants {
             Some(r) => r,
             None => {
@@ -451,9 +455,20 @@ impl EnvView {
                 self.variants.insert(r)
             }
         };
-        renderer.set_variant(variant);
+        renderer.set_variant(kind);
         renderer.set_table_options(table);
-        renderer.env_brdf(material, lighting, shading)
+        let brdf = renderer.env_brdf_owned(material, lighting, shading)?;
+        Ok(Arc::new(match variant {
+            // The point lights' `chebyshev-w` in float32, as the view's own `chebyshev-w`.
+            VariantKind::Default => crate::render::env_brdf::default_pair(
+                dev,
+                lighting,
+                shading,
+                crate::render::variant::TableFormat::Rgba32f,
+                brdf,
+            )?,
+            _ => brdf,
+        }))
     }
 
     /// The stages of the scene and the map for the lighting and map of `key`, evaluating
@@ -477,7 +492,20 @@ impl EnvView {
             EnvStage::Scene,
             "viewer env scene",
         )?;
-        let map = EnvKernel::new(dev, lighting, env, &brdf, EnvStage::Map, "viewer env map")?;
+        // A BRDF map's default is `chebyshev-w` alone, as `render --brdf-map --env` draws
+        // it: the default pair's own point-light variant.
+        let map_brdf = match key.3 {
+            VariantKind::Default => brdf.points().map_or_else(|| Arc::clone(&brdf), Arc::clone),
+            _ => Arc::clone(&brdf),
+        };
+        let map = EnvKernel::new(
+            dev,
+            lighting,
+            env,
+            &map_brdf,
+            EnvStage::Map,
+            "viewer env map",
+        )?;
         Ok(Kernels {
             key,
             scene,

@@ -152,7 +152,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     args.gpu.check_per_vertex(false, args.gpu.variant)?;
     scene.material = args.material.apply(scene.material.clone());
     let settings = app::Settings {
-        variant: args.gpu.variant.resolve(),
+        variant: args.gpu.variant,
         per_vertex: args.gpu.per_vertex,
         storage: args.gpu.storage,
         table: args.gpu.table.options(),
@@ -190,6 +190,12 @@ fn env_settings(
         return Err(crate::Error::invalid(
             "env noise",
             "--env-noise applies to render's scenes; the viewer accumulates every pixel to --env-samples",
+        ));
+    }
+    if args.env.env_seed.is_some() {
+        return Err(crate::Error::invalid(
+            "env seed",
+            "--env-seed applies to render; the viewer accumulates one sequence of samples",
         ));
     }
     let source = match (&args.env.env, &scene.environment) {
