@@ -33,10 +33,17 @@ pub const PACKED_FILES: &str = "gpack-";
 /// Prefixes of the cache's files: all count towards the cap and are listed and cleared.
 pub const FILE_PREFIXES: [&str; 4] = [TERM_FILES, TABLE_FILES, VALIDITY_FILES, PACKED_FILES];
 
-/// 64-bit FNV-1a, fed incrementally. Not cryptographic: it guards against corruption and
-/// accidental reuse, not against an adversary who edits cache files.
+/// 64-bit FNV-1a's step over little-endian 64-bit words (eight bytes a multiply: a 300 MB
+/// table is checked in a tenth of the byte-wise hash's time), fed incrementally. Not
+/// cryptographic: it guards against corruption and accidental reuse, not against an
+/// adversary who edits cache files.
 #[derive(Clone, Copy)]
-pub struct Fnv1a(u64);
+pub struct Fnv1a {
+    state: u64,
+    /// The bytes not yet a whole word, little-endian from the low byte, and their number.
+    tail: u64,
+    tail_len: u32,
+}
 
 impl Default for Fnv1a {
     fn default() -> Self {
@@ -49,19 +56,60 @@ impl Fnv1a {
     const PRIME: u64 = 0x0000_0100_0000_01b3;
 
     pub fn new() -> Self {
-        Self(Self::OFFSET)
-    }
-    pub fn bytes(&mut self, data: &[u8]) {
-        for &b in data {
-            self.0 ^= u64::from(b);
-            self.0 = self.0.wrapping_mul(Self::PRIME);
+        Self {
+            state: Self::OFFSET,
+            tail: 0,
+            tail_len: 0,
         }
     }
+
+    fn word(&mut self, w: u64) {
+        self.state ^= w;
+        self.state = self.state.wrapping_mul(Self::PRIME);
+    }
+
+    /// Adds `data`: the same hash however a stream is cut into calls.
+    pub fn bytes(&mut self, mut data: &[u8]) {
+        while self.tail_len > 0 {
+            let Some((&b, rest)) = data.split_first() else {
+                return;
+            };
+            self.push(b);
+            data = rest;
+        }
+        let mut words = data.chunks_exact(8);
+        for w in &mut words {
+            let mut le = [0u8; 8];
+            le.copy_from_slice(w);
+            self.word(u64::from_le_bytes(le));
+        }
+        for &b in words.remainder() {
+            self.push(b);
+        }
+    }
+
+    fn push(&mut self, b: u8) {
+        self.tail |= u64::from(b) << (8 * self.tail_len);
+        self.tail_len += 1;
+        if self.tail_len == 8 {
+            let w = self.tail;
+            self.tail = 0;
+            self.tail_len = 0;
+            self.word(w);
+        }
+    }
+
     pub fn u64(&mut self, v: u64) {
         self.bytes(&v.to_le_bytes());
     }
-    pub fn finish(self) -> u64 {
-        self.0
+
+    /// The hash: a last partial word is added with its length.
+    pub fn finish(mut self) -> u64 {
+        if self.tail_len > 0 {
+            let w = self.tail ^ (u64::from(self.tail_len) << 59);
+            self.word(w);
+        }
+        self.state
     }
 }
 
@@ -376,6 +424,45 @@ pub fn clean_stale_temps(dir: &Path) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_hash_is_the_same_however_a_stream_is_cut_and_tells_lengths_apart() {
+        let data: Vec<u8> = (0..1000u32).map(|i| (i * 37 % 251) as u8).collect();
+        let whole = {
+            let mut h = Fnv1a::new();
+            h.bytes(&data);
+            h.finish()
+        };
+        for cut in [1usize, 3, 7, 8, 9, 64, 333] {
+            let mut h = Fnv1a::new();
+            for piece in data.chunks(cut) {
+                h.bytes(piece);
+            }
+            assert_eq!(h.finish(), whole, "pieces of {cut}");
+        }
+        let of = |d: &[u8]| {
+            let mut h = Fnv1a::new();
+            h.bytes(d);
+            h.finish()
+        };
+        // A trailing zero, a zero word and a changed byte anywhere change the hash.
+        let mut seen = std::collections::HashSet::new();
+        for d in [
+            &b""[..],
+            b"\0",
+            b"ab",
+            b"ab\0",
+            b"ab\0\0\0\0\0\0\0\0",
+            b"ba",
+        ] {
+            assert!(seen.insert(of(d)), "{d:?}");
+        }
+        for k in 0..data.len() {
+            let mut d = data.clone();
+            d[k] ^= 1;
+            assert_ne!(of(&d), whole, "byte {k}");
+        }
+    }
 
     fn tmpdir(name: &str) -> PathBuf {
         let d = std::env::temp_dir().join(format!("diffract-cache-{name}-{}", std::process::id()));

@@ -935,7 +935,10 @@ impl EnvKernel {
                 t.pixels.max(1),
             )?;
             compute::compute_barrier(&self.dev, cb);
-            if let (0, Some(p)) = (at, &self.points) {
+            // Without point lights the first dispatch's part is the lights' stage's too (the
+            // irradiance term does not depend on the BRDF).
+            let points = t.params.light_dims[0] > 0;
+            if let (0, Some(p), true) = (at, &self.points, points) {
                 let none: Vec<u8> = [0u32, 0].iter().flat_map(|v| v.to_le_bytes()).collect();
                 p.layout.dispatch_after(
                     cb,
