@@ -261,7 +261,8 @@ impl EnvView {
         }
     }
 
-    /// The title's part: the environment and the samples so far, or that it is prepared.
+    /// The title's part: the environment, what draws it where that is not the variant the
+    /// view shows, and the samples so far, or that it is prepared.
     pub fn title(&self) -> Option<String> {
         if !self.on() {
             return None;
@@ -269,6 +270,9 @@ impl EnvView {
         let mut name = self.settings.name(self.current);
         if self.turned_deg != 0.0 {
             name = format!("{name} {}°", self.turned_deg);
+        }
+        if let Some(VariantKind::Default) = self.kernels.as_ref().map(|k| k.key.3) {
+            name = format!("{name} · volume, point lights by chebyshev-w");
         }
         Some(match (&self.building, &self.view) {
             (Some((_, _, t)), _) => format!(
