@@ -26,7 +26,7 @@ layout(std430, set = 1, binding = 0) readonly buffer EnvParams {
     ivec4 cdfDims;   // x: bins along u, y: along v, z: CDF nodes in w, w: samples per noise batch
     ivec4 envDims;   // x: W, y: H, z: samples per pixel, w: invocations (map side², or the G-buffer pixels of this pass)
     ivec4 lightDims; // x: point lights, y: disc lights, z: texture blending, w: a BRDF map's side
-    ivec4 sequence;  // x: pixels that share a sequence, y: the environment can be sampled, z: seed
+    ivec4 sequence;  // x: pixels that share a sequence, y: the environment can be sampled, z: seed, w: G-buffer pixels whose neighbours follow the G-buffer (0: none)
 } P;
 layout(std430, set = 1, binding = 1) readonly buffer EnvXyz { float envXyz[]; };
 // Marginal CDF over rows (H + 1), conditional CDFs over columns (H·(W + 1)), then the
@@ -261,6 +261,33 @@ struct Surface {
 vec3 toWorld(Surface s, vec3 v) { return v.x * s.t + v.y * s.b + v.z * s.n; }
 vec3 toTangent(Surface s, vec3 d) { return vec3(dot(d, s.t), dot(d, s.b), dot(d, s.n)); }
 
+// The surfaces of the G-buffer pixels next to the one shaded (right, left, down, up) and
+// whether each is covered, set by the scene stage: a point light's (u, v) footprint over
+// the pixel, for a variant that reads its table filtered to it, as the raster pass's dFdx
+// and dFdy give it (glsl/shade.glsl). None for a map.
+Surface gNear[4];
+bool gHas[4] = bool[4](false, false, false, false);
+
+// (u, v) of the light towards world direction d at s: −(ωi + ωr) in s's frame.
+vec2 uvOf(Surface s, vec3 d) { return -(vec2(dot(d, s.t), dot(d, s.b)) + s.wr.xy); }
+
+// The change of (u, v) = uv (at s) one pixel along an axis: of the differences towards the
+// next pixel (gNear[k]) and from the previous (gNear[k + 1]), the smaller, so that a
+// neighbour across an edge of the mesh (another scale, the silhouette), where the raster
+// pass's quad would extrapolate its own triangle, is not taken; 0 without either.
+vec2 uvStep(vec3 d, vec2 uv, int k) {
+    vec2 a = uvOf(gNear[k], d) - uv;
+    vec2 b = uv - uvOf(gNear[k + 1], d);
+    if (gHas[k] && gHas[k + 1]) return dot(a, a) <= dot(b, b) ? a : b;
+    return gHas[k] ? a : (gHas[k + 1] ? b : vec2(0.0));
+}
+
+// gUvFootprint (interface.glsl) of the light towards d at s.
+void setFootprint(Surface s, vec3 d) {
+    vec2 uv = uvOf(s, d);
+    gUvFootprint = 0.5 * vec4(uvStep(d, uv, 0), uvStep(d, uv, 2));
+}
+
 // Adds scale·L·[(1 − w_d)·C·G] to xyz and the texture part to rgb (header): of the lights
 // outside the irradiance table (lOwn) scale·L·((1 − α) + w_d)·t; of the environment only
 // −scale·L·α·t, its (1 + w_d)·t·E(n) being added once from the table (a control variate:
@@ -290,8 +317,11 @@ void pointLights(Surface s, out vec3 xyz, out vec3 rgb) {
     for (int j = 0; j < P.lightDims.x; ++j) {
         vec3 wi = toTangent(s, lights[2 * j].xyz);
         vec3 e = lights[2 * j + 1].xyz;
+        setFootprint(s, lights[2 * j].xyz);
         if (wi.z > 0.0) addDirection(s, wi, e, e, wi.z, xyz, rgb);
     }
+    // The samples read the table at their point.
+    gUvFootprint = vec4(0.0);
     if (P.lightDims.z != 0) rgb += (1.0 + P.blend.x) * irradianceAt(s.n) * s.tex;
     if (any(isnan(xyz)) || any(isinf(xyz))) xyz = vec3(0.0);
     if (any(isnan(rgb)) || any(isinf(rgb))) rgb = vec3(0.0);

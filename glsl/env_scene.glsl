@@ -11,10 +11,19 @@
 // Per pixel: (T, t_r), (B, t_g), (N, t_b), (ωr in the tangent frame, key): an orthonormal
 // frame in world space, the texture's linear-sRGB albedo, and as the bits of the last float
 // the output pixel × 16 + the G-buffer pixel's place among the output pixel's
-// supersample² (they interleave one sequence).
+// supersample² (they interleave one sequence). Then, for the P.sequence.w pixels, a vec4
+// of ints a pixel: the indices of its covered neighbours right, left, down and up, −1 for
+// none (src/render/env_scene.rs, GBuffer::device_bytes).
 layout(std430, set = 1, binding = 6) readonly buffer Pixels { vec4 gbuffer[]; };
 // The G-buffer pixels this pass integrates (those whose noise is still above the target).
 layout(std430, set = 1, binding = 7) readonly buffer Active { uint passPixels[]; };
+
+// The surface of G-buffer pixel j.
+Surface surfaceAt(uint j) {
+    vec4 a = gbuffer[4u * j], b = gbuffer[4u * j + 1u], c = gbuffer[4u * j + 2u];
+    vec4 d = gbuffer[4u * j + 3u];
+    return Surface(a.xyz, b.xyz, c.xyz, d.xyz, vec3(a.w, b.w, c.w));
+}
 
 // Per G-buffer pixel, three vec4 of Out: (the added samples' linear-sRGB sum, the samples
 // taken), (the sum of the squared batch sums per channel, the batches dropped for a NaN or
@@ -27,6 +36,13 @@ void main() {
     vec4 d = gbuffer[4u * idx + 3u];
     Surface s = Surface(a.xyz, b.xyz, c.xyz, d.xyz, vec3(a.w, b.w, c.w));
     uint key = floatBitsToUint(d.w);
+    if (P.sequence.w > 0) {
+        ivec4 near = floatBitsToInt(gbuffer[4u * uint(P.sequence.w) + idx]);
+        for (int k = 0; k < 4; ++k) {
+            gHas[k] = near[k] >= 0;
+            gNear[k] = surfaceAt(gHas[k] ? uint(near[k]) : idx);
+        }
+    }
     if (chunk.count == 0) {
         // The point lights alone, evaluated by this variant for another's samples
         // (src/render/env.rs, EnvKernel::record): they replace the first dispatch's.

@@ -343,7 +343,9 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     // directions are point lights, evaluated in full once a pixel (`--shading compute`).
     let nothing_sampled = env.is_none() && lights.discs.is_empty();
     let kind = crate::render::env_brdf::scene_variant(args.gpu.variant, !nothing_sampled);
-    let paired = kind != args.gpu.variant.resolve();
+    let default = kind != args.gpu.variant.resolve();
+    // Without point lights `volume` draws everything.
+    let paired = default && !lights.points.is_empty();
     let mut variant = env_variant(
         &dev,
         (kind, paired),
@@ -352,7 +354,7 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
         &args.gpu.table,
         args.cache,
     )?;
-    if paired {
+    if default {
         variant.name = format!(
             "{} (the default where light is sampled; its converged picture within ΔE2000 p99 {} of chebyshev-w's, which --variant chebyshev-w draws)",
             variant.name,
@@ -467,7 +469,12 @@ pub fn env_variant(
 ) -> Result<EnvVariant> {
     use crate::render::variant::VariantKind;
     if matches!(variant, VariantKind::Default | VariantKind::ChebyshevW) {
-        let brdf = lighting.brdf_in(dev, &material.shading(), table.table_format)?;
+        let brdf = lighting.brdf_in(
+            dev,
+            &material.shading(),
+            table.table_format,
+            table.table_levels,
+        )?;
         return Ok(EnvVariant {
             brdf: std::sync::Arc::new(brdf),
             name: format!(
@@ -491,7 +498,7 @@ pub fn env_variant(
             dev,
             lighting,
             &shading,
-            table.table_format,
+            (table.table_format, table.table_levels),
             brdf,
         )?;
     }

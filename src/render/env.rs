@@ -364,18 +364,25 @@ impl EnvLighting {
 
 impl EnvLighting {
     /// `chebyshev-w` drawn from the lighting's own table for the environment-lit stages,
-    /// stored in float32.
+    /// stored in float32, the table alone (read at each point).
     pub(crate) fn brdf(&self, dev: &Arc<Device>, shading: &Shading) -> Result<EnvBrdf> {
-        self.brdf_in(dev, shading, crate::render::variant::TableFormat::Rgba32f)
+        self.brdf_in(
+            dev,
+            shading,
+            crate::render::variant::TableFormat::Rgba32f,
+            1,
+        )
     }
 
     /// [`EnvLighting::brdf`] stored in `format` (`--table-format`: the values are those of
-    /// a relative table, [`EnvBrdf::scale`], so float16 holds them).
+    /// a relative table, [`EnvBrdf::scale`], so float16 holds them) with `levels` levels
+    /// pre-filtered for a pixel's footprint (`--table-levels`; 1: the table alone).
     pub fn brdf_in(
         &self,
         dev: &Arc<Device>,
         shading: &Shading,
         format: crate::render::variant::TableFormat,
+        levels: usize,
     ) -> Result<EnvBrdf> {
         EnvBrdf::chebyshev_w(
             dev,
@@ -383,7 +390,7 @@ impl EnvLighting {
             &self.spec,
             shading,
             self.mirror_scale,
-            format,
+            (format, levels),
         )
     }
 }
@@ -1006,7 +1013,12 @@ fn params(
             d.stride.max(1) as i32,
             i32::from(q_env > 0.0),
             d.seed as i32,
-            0,
+            // A scene's G-buffer is followed by its pixels' neighbours
+            // (`GBuffer::device_bytes`).
+            match d.stage {
+                EnvStage::Scene => d.pixels as i32,
+                EnvStage::Map => 0,
+            },
         ],
     }
 }

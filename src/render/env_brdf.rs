@@ -68,23 +68,25 @@ impl EnvBrdf {
     }
 
     /// `chebyshev-w` drawn from `table` (radiance units; the environment's sampling table,
-    /// so the draw builds no second one), stored in `format` over `spec`.
+    /// so the draw builds no second one), stored in `format` over `spec`, with `levels`
+    /// levels pre-filtered for a pixel's footprint: the scene stage reads them for the
+    /// point lights (glsl/env_common.glsl, `setFootprint`), the samples read the finest.
     pub(crate) fn chebyshev_w(
         dev: &Arc<Device>,
         table: &ChebyshevW,
         spec: &TableSpec,
         shading: &Shading,
         scale: f64,
-        format: super::variant::TableFormat,
+        (format, levels): (super::variant::TableFormat, usize),
     ) -> Result<Self> {
         let scaled = scaled(table, 1.0 / scale);
-        let variant = super::variant::table::upload_built(
-            VariantKind::ChebyshevW,
-            dev,
-            spec,
-            &scaled,
-            format,
-        )?;
+        let upload = |t: &dyn crate::brdf::table::GTable| {
+            super::variant::table::upload_built(VariantKind::ChebyshevW, dev, spec, t, format)
+        };
+        let variant = match levels {
+            0 | 1 => upload(&scaled)?,
+            n => upload(&crate::brdf::table::Levelled::new(scaled, n))?,
+        };
         Self::new(
             dev,
             VariantKind::ChebyshevW,
@@ -364,15 +366,15 @@ impl super::Renderer {
 }
 
 /// The stages' default where light is sampled ([`scene_variant`]): `samples` (`volume`)
-/// draws the samples, and `chebyshev-w` from `lighting`'s own table, stored in `format`,
-/// the point lights.
+/// draws the samples, and `chebyshev-w` from `lighting`'s own table, stored in `format`
+/// with `levels` levels for the pixel's footprint, the point lights.
 pub fn default_pair(
     dev: &Arc<crate::gpu::Device>,
     lighting: &super::env::EnvLighting,
     shading: &Shading,
-    format: super::variant::TableFormat,
+    (format, levels): (super::variant::TableFormat, usize),
     samples: EnvBrdf,
 ) -> Result<EnvBrdf> {
-    let points = lighting.brdf_in(dev, shading, format)?;
+    let points = lighting.brdf_in(dev, shading, format, levels)?;
     Ok(samples.with_points(Arc::new(points)))
 }

@@ -76,6 +76,48 @@ pub struct GBuffer {
     pub data: Vec<f32>,
 }
 
+impl GBuffer {
+    /// Per covered pixel, the indices of its covered neighbours right, left, down and up
+    /// (−1 for none): what a point light's `(u, v)` footprint is taken over, as the raster
+    /// pass's `dFdx` and `dFdy` take it (glsl/env_common.glsl, `uvStep`).
+    pub fn neighbours(&self) -> Vec<[i32; 4]> {
+        let (w, h) = (self.width as usize, self.height as usize);
+        let mut at = vec![-1i32; w * h];
+        for (k, &p) in self.covered.iter().enumerate() {
+            if let Some(slot) = at.get_mut(p as usize) {
+                *slot = k as i32;
+            }
+        }
+        let of = |p: Option<usize>| p.and_then(|p| at.get(p)).copied().unwrap_or(-1);
+        self.covered
+            .iter()
+            .map(|&p| {
+                let p = p as usize;
+                let (x, y) = (p % w.max(1), p / w.max(1));
+                [
+                    of((x + 1 < w).then_some(p + 1)),
+                    of((x > 0).then(|| p - 1)),
+                    of((y + 1 < h).then_some(p + w)),
+                    of((y > 0).then(|| p - w)),
+                ]
+            })
+            .collect()
+    }
+
+    /// What the scene stage reads at binding 6: the sixteen floats of every pixel, then
+    /// [`Self::neighbours`], a vec4 a pixel (glsl/env_scene.glsl).
+    pub fn device_bytes(&self) -> Vec<u8> {
+        let mut bytes: Vec<u8> = self.data.iter().flat_map(|x| x.to_le_bytes()).collect();
+        bytes.extend(
+            self.neighbours()
+                .iter()
+                .flatten()
+                .flat_map(|k| k.to_le_bytes()),
+        );
+        bytes
+    }
+}
+
 /// The lights of `scene` besides its environment: the sun over its disc (a point light per
 /// direction of `[light]`'s spiral, D65 white) unless `sun` is false, and each
 /// `[[disc_light]]`, sampled in its cone (a point light when it has no angular size).
@@ -259,7 +301,7 @@ pub fn shade_gbuffer(
     g: &GBuffer,
     req: &GBufferRequest<'_>,
 ) -> Result<Shaded> {
-    let bytes: Vec<u8> = g.data.iter().flat_map(|x| x.to_le_bytes()).collect();
+    let bytes = g.device_bytes();
     let stride = req.stride.max(1);
     let first = match req.noise {
         Some(_) => FIRST_PASS_SAMPLES
@@ -564,6 +606,32 @@ mod tests {
             ..target
         };
         assert!(dim.delta_e_of(grey, [1e-2; 3]) < large);
+    }
+
+    #[test]
+    fn neighbours_are_the_covered_pixels_right_left_down_and_up() {
+        // A 3×3 frame covering all but its centre and its top-right corner:
+        //   0 1 .
+        //   3 . 5
+        //   6 7 8
+        let covered = vec![0u32, 1, 3, 5, 6, 7, 8];
+        let g = GBuffer {
+            width: 3,
+            height: 3,
+            data: vec![0.0; 16 * covered.len()],
+            covered,
+        };
+        let n = g.neighbours();
+        // Indices into `covered`: pixel 0 is 0, 1 is 1, 3 is 2, 5 is 3, 6 is 4, 7 is 5, 8 is 6.
+        assert_eq!(n[0], [1, -1, 2, -1]); // pixel 0: right 1, down 3
+        assert_eq!(n[1], [-1, 0, -1, -1]); // pixel 1: left 0 (2 and 4 not covered)
+        assert_eq!(n[2], [-1, -1, 4, 0]); // pixel 3: down 6, up 0 (4 not covered)
+        assert_eq!(n[3], [-1, -1, 6, -1]); // pixel 5: down 8 (2 not covered, 3 is another row)
+        assert_eq!(n[5], [6, 4, -1, -1]); // pixel 7: right 8, left 6
+        let bytes = g.device_bytes();
+        assert_eq!(bytes.len(), (16 + 4) * 4 * g.covered.len());
+        let at = 16 * 4 * g.covered.len();
+        assert_eq!(bytes[at..at + 4], 1i32.to_le_bytes());
     }
 
     #[test]

@@ -446,8 +446,10 @@ impl EnvView {
         lighting: &EnvLighting,
         shading: &crate::brdf::Shading,
     ) -> Result<Arc<EnvBrdf>> {
+        // Float32, with the view's levels for the point lights' footprints.
+        let own = (crate::render::variant::TableFormat::Rgba32f, table.levels);
         if variant == VariantKind::ChebyshevW {
-            return Ok(Arc::new(lighting.brdf(dev, shading)?));
+            return Ok(Arc::new(lighting.brdf_in(dev, shading, own.0, own.1)?));
         }
         let kind = crate::render::env_brdf::scene_variant(variant, true);
         println!("environment: building {kind} for the environment's stages");
@@ -463,14 +465,10 @@ impl EnvView {
         renderer.set_table_options(table);
         let brdf = renderer.env_brdf_owned(material, lighting, shading)?;
         Ok(Arc::new(match variant {
-            // The point lights' `chebyshev-w` in float32, as the view's own `chebyshev-w`.
-            VariantKind::Default => crate::render::env_brdf::default_pair(
-                dev,
-                lighting,
-                shading,
-                crate::render::variant::TableFormat::Rgba32f,
-                brdf,
-            )?,
+            // The point lights' `chebyshev-w` as the view's own `chebyshev-w`.
+            VariantKind::Default => {
+                crate::render::env_brdf::default_pair(dev, lighting, shading, own, brdf)?
+            }
             _ => brdf,
         }))
     }
@@ -609,7 +607,7 @@ impl EnvView {
         );
         let pixels = resolve_pixels(&bg, &g.covered);
         let lights = scene_lights(&view_scene, s.sun, lighting.white);
-        let gbytes: Vec<u8> = g.data.iter().flat_map(|x| x.to_le_bytes()).collect();
+        let gbytes = g.device_bytes();
         let texels = compute::storage(
             dev,
             "viewer env texels",
