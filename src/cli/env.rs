@@ -233,9 +233,10 @@ pub fn draw_map(
     let shading = material.shading();
     refuse_variant(gpu.variant)?;
     let (lighting, built) = lighting_for(hf, material, spec, cache)?;
+    // A map's pixels are points: no footprint to read levels at.
     let variant = env_variant(
         dev,
-        (gpu.variant, false),
+        (gpu.variant, false, 1),
         (material, hf),
         &lighting,
         &gpu.table,
@@ -348,7 +349,7 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     let paired = default && !lights.points.is_empty();
     let mut variant = env_variant(
         &dev,
-        (kind, paired),
+        (kind, paired, args.gpu.table.table_levels),
         (&material, &hf),
         &lighting,
         &args.gpu.table,
@@ -459,9 +460,10 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
 /// variant that cannot be lit by an environment is refused there, before any build). A
 /// scene's default where light is sampled comes as `volume` with `paired`: its point
 /// lights are drawn by `chebyshev-w` ([`crate::render::env_brdf::default_pair`]).
+/// `chebyshev-w` keeps `levels` levels for the point lights' footprints (1 for a map).
 pub fn env_variant(
     dev: &std::sync::Arc<crate::gpu::Device>,
-    (variant, paired): (crate::render::variant::VariantKind, bool),
+    (variant, paired, levels): (crate::render::variant::VariantKind, bool, usize),
     (material, hf): (&crate::material::Material, &crate::heightfield::HeightField),
     lighting: &EnvLighting,
     table: &crate::cli::gpu::TableArgs,
@@ -469,12 +471,7 @@ pub fn env_variant(
 ) -> Result<EnvVariant> {
     use crate::render::variant::VariantKind;
     if matches!(variant, VariantKind::Default | VariantKind::ChebyshevW) {
-        let brdf = lighting.brdf_in(
-            dev,
-            &material.shading(),
-            table.table_format,
-            table.table_levels,
-        )?;
+        let brdf = lighting.brdf_in(dev, &material.shading(), table.table_format, levels)?;
         return Ok(EnvVariant {
             brdf: std::sync::Arc::new(brdf),
             name: format!(
@@ -498,7 +495,7 @@ pub fn env_variant(
             dev,
             lighting,
             &shading,
-            (table.table_format, table.table_levels),
+            (table.table_format, levels),
             brdf,
         )?;
     }
