@@ -1127,10 +1127,17 @@ fn run_view_in(x: &Xvfb, dir: &Path, args: &[&str]) -> String {
 /// linear pixels.
 fn render_env_png(dir: &Path, scene: &Path, args: &[&str], name: &str) -> Vec<[f32; 3]> {
     let png = dir.join(name);
+    // The viewer's default under an environment is `chebyshev-w`, not `render`'s pair.
+    let named = args.contains(&"--variant");
     let out = diffract()
         .args(["render", "--scene"])
         .arg(scene)
         .args(args)
+        .args(if named {
+            &[][..]
+        } else {
+            &["--variant", "chebyshev-w"][..]
+        })
         .arg("--out")
         .arg(&png)
         .env("DIFFRACT_VALIDATION", "1")

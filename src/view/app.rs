@@ -41,7 +41,6 @@ const REGION_MARGIN: f64 = 0.25;
 
 /// What `diffract view` was asked for (parsed arguments).
 pub(super) struct Settings {
-    /// As named: `default` until `--variant` names another.
     pub variant: VariantKind,
     pub per_vertex: bool,
     pub storage: StorageFormat,
@@ -315,7 +314,7 @@ impl Viewer {
         let surface = unsafe { Surface::new(&instance, display, handle)? };
         let dev = Device::on_surface(instance, &surface)?;
         let mut renderer = Renderer::on(dev)?;
-        renderer.set_variant(settings.variant.resolve());
+        renderer.set_variant(settings.variant);
         renderer.set_per_vertex(settings.per_vertex);
         renderer.set_storage_format(settings.storage);
         renderer.set_table_options(settings.table);

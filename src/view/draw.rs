@@ -292,13 +292,7 @@ impl Draw {
             &self.mesh,
             extent,
             (mesh_rect, map),
-            (
-                match controls.named {
-                    true => self.renderer.variant(),
-                    false => crate::render::variant::VariantKind::Default,
-                },
-                self.renderer.table_options(),
-            ),
+            (self.renderer.variant(), self.renderer.table_options()),
         );
         if let Err(e) = result {
             eprintln!("error: {e} (environment off)");

@@ -261,8 +261,7 @@ impl EnvView {
         }
     }
 
-    /// The title's part: the environment, what draws it where that is not the variant the
-    /// view shows, and the samples so far, or that it is prepared.
+    /// The title's part: the environment and the samples so far, or that it is prepared.
     pub fn title(&self) -> Option<String> {
         if !self.on() {
             return None;
@@ -270,9 +269,6 @@ impl EnvView {
         let mut name = self.settings.name(self.current);
         if self.turned_deg != 0.0 {
             name = format!("{name} {}°", self.turned_deg);
-        }
-        if let Some(VariantKind::Default) = self.kernels.as_ref().map(|k| k.key.3) {
-            name = format!("{name} · volume, point lights by chebyshev-w");
         }
         Some(match (&self.building, &self.view) {
             (Some((_, _, t)), _) => format!(
@@ -309,14 +305,13 @@ impl EnvView {
             return Ok(());
         };
         self.load_map(state)?;
-        // `default` stands for the stages' own default (`brdf_for`); a debug view draws no
-        // BRDF, and the environment shows that default's.
+        // A debug view draws no BRDF: the environment shows the default variant's.
         let variant = match crate::render::env_brdf::env_spirv(
             variant.resolve(),
             crate::render::env_brdf::EnvStage::Map,
         ) {
-            Ok(_) => variant,
-            Err(_) => VariantKind::Default,
+            Ok(_) => variant.resolve(),
+            Err(_) => VariantKind::DEFAULT,
         };
         let kernel_key = (key, self.current, state.shadowing, variant);
         if self.kernels.as_ref().is_none_or(|k| k.key != kernel_key) {
@@ -433,11 +428,12 @@ impl EnvView {
     }
 
     /// `variant` bound for the stages with `shading` (the lighting's Fresnel, the view's
-    /// shadowing): `chebyshev-w` from the environment table itself, any other built now by
-    /// the view's own renderer with the view's table options (a table variant's build takes
-    /// seconds; it is said); `default`, `render`'s default where light is sampled
-    /// ([`crate::render::env_brdf::scene_variant`]: `volume`, its point lights by
-    /// `chebyshev-w`).
+    /// shadowing): `chebyshev-w` from the environment table itself (float32, with the view's
+    /// levels for the point lights' footprints), any other built now by the view's own
+    /// renderer with the view's table options (a table variant's build takes seconds; it is
+    /// said). The view's default is `chebyshev-w`, not `render`'s default pair
+    /// ([`crate::render::env_brdf::scene_variant`]), whose `volume` would be a second table
+    /// to build before the first environment-lit frame (8 s cold at 256²).
     fn brdf_for(
         &mut self,
         dev: &Arc<Device>,
@@ -446,13 +442,16 @@ impl EnvView {
         lighting: &EnvLighting,
         shading: &crate::brdf::Shading,
     ) -> Result<Arc<EnvBrdf>> {
-        // Float32, with the view's levels for the point lights' footprints.
-        let own = (crate::render::variant::TableFormat::Rgba32f, table.levels);
         if variant == VariantKind::ChebyshevW {
-            return Ok(Arc::new(lighting.brdf_in(dev, shading, own.0, own.1)?));
+            let format = crate::render::variant::TableFormat::Rgba32f;
+            return Ok(Arc::new(lighting.brdf_in(
+                dev,
+                shading,
+                format,
+                table.levels,
+            )?));
         }
-        let kind = crate::render::env_brdf::scene_variant(variant, true);
-        println!("environment: building {kind} for the environment's stages");
+        println!("environment: building {variant} for the environment's stages");
         let renderer = match &mut self.variants {
             Some(r) => r,
             None => {
@@ -461,16 +460,9 @@ impl EnvView {
                 self.variants.insert(r)
             }
         };
-        renderer.set_variant(kind);
+        renderer.set_variant(variant);
         renderer.set_table_options(table);
-        let brdf = renderer.env_brdf_owned(material, lighting, shading)?;
-        Ok(Arc::new(match variant {
-            // The point lights' `chebyshev-w` as the view's own `chebyshev-w`.
-            VariantKind::Default => {
-                crate::render::env_brdf::default_pair(dev, lighting, shading, own, brdf)?
-            }
-            _ => brdf,
-        }))
+        renderer.env_brdf(material, lighting, shading)
     }
 
     /// The stages of the scene and the map for the lighting and map of `key`, evaluating
@@ -494,20 +486,7 @@ impl EnvView {
             EnvStage::Scene,
             "viewer env scene",
         )?;
-        // A BRDF map's default is `chebyshev-w` alone, as `render --brdf-map --env` draws
-        // it: the default pair's own point-light variant.
-        let map_brdf = match key.3 {
-            VariantKind::Default => brdf.points().map_or_else(|| Arc::clone(&brdf), Arc::clone),
-            _ => Arc::clone(&brdf),
-        };
-        let map = EnvKernel::new(
-            dev,
-            lighting,
-            env,
-            &map_brdf,
-            EnvStage::Map,
-            "viewer env map",
-        )?;
+        let map = EnvKernel::new(dev, lighting, env, &brdf, EnvStage::Map, "viewer env map")?;
         Ok(Kernels {
             key,
             scene,

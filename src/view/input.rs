@@ -139,10 +139,6 @@ pub enum Effect {
 pub struct Controls {
     pub state: ViewState,
     pub variant: VariantKind,
-    /// The variant was named (`--variant`, or `V`): else the environment's stages draw
-    /// their own default where light is sampled
-    /// ([`crate::render::env_brdf::scene_variant`]).
-    pub named: bool,
     /// The BRDF map is drawn beside the mesh.
     pub map: bool,
     /// Mesh frames are evaluated per vertex: `V` cycles only the variants that have a
@@ -163,7 +159,6 @@ impl Controls {
         Self {
             state,
             variant: variant.resolve(),
-            named: variant != VariantKind::Default,
             map: false,
             per_vertex: false,
             material: MaterialEdit::default(),
@@ -212,7 +207,6 @@ impl Controls {
                         .collect();
                     let i = all.iter().position(|k| *k == self.variant).unwrap_or(0);
                     self.variant = all[(i + 1) % all.len()];
-                    self.named = true;
                     return Effect::Rebuild(format!("variant → {}", self.variant.name()));
                 }
                 "f" => {

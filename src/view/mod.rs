@@ -152,7 +152,7 @@ pub fn run(args: &ViewArgs) -> Result<()> {
     args.gpu.check_per_vertex(false, args.gpu.variant)?;
     scene.material = args.material.apply(scene.material.clone());
     let settings = app::Settings {
-        variant: args.gpu.variant,
+        variant: args.gpu.variant.resolve(),
         per_vertex: args.gpu.per_vertex,
         storage: args.gpu.storage,
         table: args.gpu.table.options(),
