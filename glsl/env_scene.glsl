@@ -32,11 +32,11 @@ void main() {
     uint i = gl_GlobalInvocationID.x + gl_GlobalInvocationID.y * gl_NumWorkGroups.x * 64u;
     if (i >= uint(P.envDims.w)) return;
     uint idx = passPixels[i];
-    vec4 a = gbuffer[4u * idx], b = gbuffer[4u * idx + 1u], c = gbuffer[4u * idx + 2u];
-    vec4 d = gbuffer[4u * idx + 3u];
-    Surface s = Surface(a.xyz, b.xyz, c.xyz, d.xyz, vec3(a.w, b.w, c.w));
-    uint key = floatBitsToUint(d.w);
-    if (P.sequence.w > 0) {
+    Surface s = surfaceAt(idx);
+    uint key = floatBitsToUint(gbuffer[4u * idx + 3u].w);
+    // The neighbours serve the point lights' footprints: read where the point lights are
+    // evaluated (the first dispatch, or the lights' own stage).
+    if (P.sequence.w > 0 && (chunk.base == 0 || chunk.count == 0)) {
         ivec4 near = floatBitsToInt(gbuffer[4u * uint(P.sequence.w) + idx]);
         for (int k = 0; k < 4; ++k) {
             gHas[k] = near[k] >= 0;

@@ -929,33 +929,24 @@ impl EnvKernel {
             .as_ref()
             .ok_or(Error::Internal("an environment target without its pass"))?;
         compute::compute_barrier(&self.dev, cb);
+        // One dispatch of samples [at, at + n) over the target's pixels, then a barrier.
+        let dispatch = |(layout, pipeline, brdf): (&ComputeLayout, &ComputePipeline, &EnvBrdf),
+                        at: u32,
+                        n: u32| {
+            let push: Vec<u8> = [at, n].iter().flat_map(|v| v.to_le_bytes()).collect();
+            layout.dispatch_after(cb, pipeline, &[brdf.set()], set, &push, t.pixels.max(1))?;
+            compute::compute_barrier(&self.dev, cb);
+            Ok::<(), Error>(())
+        };
         let mut at = base;
         loop {
             let n = t.per_dispatch.max(1).min(base + count - at);
-            let push: Vec<u8> = [at, n].iter().flat_map(|v| v.to_le_bytes()).collect();
-            self.layout.dispatch_after(
-                cb,
-                &self.pipeline,
-                &[self.brdf.set()],
-                set,
-                &push,
-                t.pixels.max(1),
-            )?;
-            compute::compute_barrier(&self.dev, cb);
+            dispatch((&self.layout, &self.pipeline, &self.brdf), at, n)?;
             // Without point lights the first dispatch's part is the lights' stage's too (the
             // irradiance term does not depend on the BRDF).
             let points = t.params.light_dims[0] > 0;
             if let (0, Some(p), true) = (at, &self.points, points) {
-                let none: Vec<u8> = [0u32, 0].iter().flat_map(|v| v.to_le_bytes()).collect();
-                p.layout.dispatch_after(
-                    cb,
-                    &p.pipeline,
-                    &[p.brdf.set()],
-                    set,
-                    &none,
-                    t.pixels.max(1),
-                )?;
-                compute::compute_barrier(&self.dev, cb);
+                dispatch((&p.layout, &p.pipeline, &p.brdf), 0, 0)?;
             }
             at += n;
             if at >= base + count {
