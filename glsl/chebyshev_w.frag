@@ -9,10 +9,17 @@
 #include "table.glsl"
 
 layout(set = 0, binding = 1) uniform sampler2DArray gCoefficients;
+// Summed-area planes of the coefficient planes' node values ((nu + 1) × (nv + 1) texels,
+// float32) for FOOTPRINT_BOX; a placeholder texel otherwise.
+layout(set = 0, binding = 5) uniform sampler2DArray gSummed;
 
-// The table holds levels pre-filtered for a pixel's footprint (brdf::table::Levelled), read
-// below; false compiles the lookup at the pixel's centre alone.
-layout(constant_id = 11) const bool FOOTPRINT_LEVELS = false;
+// How the table is read for the pixel's footprint (gUvFootprint): at the pixel's centre
+// alone; from the level pre-filtered nearest to it (brdf::table::Levelled); or as the mean
+// over the footprint's box from the summed-area planes (brdf::table::Summed).
+const int FOOTPRINT_POINT = 0;
+const int FOOTPRINT_LEVELS = 1;
+const int FOOTPRINT_BOX = 2;
+layout(constant_id = 11) const int FOOTPRINT = FOOTPRINT_POINT;
 
 // The level of the table for the pixel's footprint (brdf::table::levels): the footprint's
 // covariance in texels of the finest level is (J Jᵀ)/12 for the pixel's box (J: ∂(u, v)/
@@ -66,17 +73,8 @@ vec3 coefficient(vec4 packed[PACKED_LAYERS], int j) {
                 packed[(q + 2) / 4][(q + 2) % 4]);
 }
 
-// G at fraction f of the box from level `level` of the table: the spline in (u, v) of each
-// coefficient plane, then Clenshaw in w.
-vec3 seriesAt(vec3 f, int level) {
-    vec4 at = tableInfo.levels[level];
-    vec2 p0, p1, g0, g1;
-    splineTaps(f.xy, at.xy, at.zw, p0, p1, g0, g1);
-    vec4 packed[PACKED_LAYERS];
-    for (int l = 0; l < PACKED_LAYERS; ++l) {
-        packed[l] = layerAt(p0, p1, g0, g1, l);
-    }
-    float x = 2.0 * f.z - 1.0;
+// Σ_j c_j T_j(x) by Clenshaw's recurrence, the c_j packed as `coefficient` reads them.
+vec3 clenshaw(vec4 packed[PACKED_LAYERS], float x) {
     vec3 b1 = vec3(0.0);
     vec3 b2 = vec3(0.0);
     for (int j = TABLE_TERMS - 1; j >= 1; --j) {
@@ -87,13 +85,59 @@ vec3 seriesAt(vec3 f, int level) {
     return coefficient(packed, 0) + x * b1 - b2;
 }
 
+// G at fraction f of the box from level `level` of the table: the spline in (u, v) of each
+// coefficient plane, then Clenshaw in w.
+vec3 seriesAt(vec3 f, int level) {
+    vec4 at = tableInfo.levels[level];
+    vec2 p0, p1, g0, g1;
+    splineTaps(f.xy, at.xy, at.zw, p0, p1, g0, g1);
+    vec4 packed[PACKED_LAYERS];
+    for (int l = 0; l < PACKED_LAYERS; ++l) {
+        packed[l] = layerAt(p0, p1, g0, g1, l);
+    }
+    return clenshaw(packed, 2.0 * f.z - 1.0);
+}
+
+// The mean of G over the box of half-widths r (in node spacings, each at least ½) about
+// fraction f, the nodes held constant over their cells and G zero outside the table: four
+// reads of the summed-area planes a layer, whatever the box's size.
+vec3 boxAt(vec3 f, vec2 r) {
+    vec2 n = tableInfo.nodes.xy;
+    vec2 t = f.xy * (n - 1.0);
+    // The corner at node coordinate c is summed texel c + ½, whose centre is at c + 1.
+    vec2 p0 = (clamp(t - r, vec2(-0.5), n - 0.5) + 1.0) / (n + 1.0);
+    vec2 p1 = (clamp(t + r, vec2(-0.5), n - 0.5) + 1.0) / (n + 1.0);
+    float inv = 0.25 / (r.x * r.y);
+    vec4 packed[PACKED_LAYERS];
+    for (int l = 0; l < PACKED_LAYERS; ++l) {
+        float z = float(l);
+        packed[l] = inv * (texture(gSummed, vec3(p1.x, p1.y, z)) - texture(gSummed, vec3(p0.x, p1.y, z))
+                         - texture(gSummed, vec3(p1.x, p0.y, z)) + texture(gSummed, vec3(p0.x, p0.y, z)));
+    }
+    return clenshaw(packed, 2.0 * f.z - 1.0);
+}
+
+// G at fraction f as the mean over the pixel's footprint: the box whose widths along u and
+// v are those of a box with the footprint's variance along each (J Jᵀ/12, J = ∂(u, v)/
+// ∂(x, y)), at least a node spacing (the nodes' linear interpolation, for a point). No
+// branch to the spline for small footprints: on lavapipe it triples the draw's time.
+vec3 footprintAt(vec3 f) {
+    vec2 h = 1.0 / (tableInfo.invExtent.xy * (tableInfo.nodes.xy - 1.0));
+    vec2 width = sqrt(gUvFootprint.xy * gUvFootprint.xy + gUvFootprint.zw * gUvFootprint.zw) / h;
+    return boxAt(f, max(0.5 * width, vec2(0.5)));
+}
+
 vec3 diffractionXyz(vec3 wi, vec3 wr) {
     float gainC = gainFactor(wi, wr);
     vec3 f;
     if (gainC == 0.0 || !tableFraction(-wi - wr, f)) {
         return vec3(0.0);
     }
-    vec3 g = seriesAt(f, FOOTPRINT_LEVELS ? footprintLevel() : 0);
+    // A map's pixels are directions: they read the table at their point.
+    bool mesh = OUTPUT_MODE == MODE_MESH;
+    vec3 g = FOOTPRINT == FOOTPRINT_BOX && mesh ? footprintAt(f)
+           : FOOTPRINT == FOOTPRINT_LEVELS      ? seriesAt(f, footprintLevel())
+                                                : seriesAt(f, 0);
     // G ≥ 0: the splines and the series in w may overshoot below zero; light cannot.
     return gainC * max(g, vec3(0.0));
 }

@@ -1,7 +1,8 @@
-//! `chebyshev-w` with its table pre-filtered for a pixel's footprint (`--table-levels`), on
-//! lavapipe with validation on: a BRDF map (one direction a pixel, a point footprint)
-//! reads the finest level and draws the unfiltered map; the default scene reads coarser
-//! levels where its pixels span many lobes, and its light is the converged picture's (8×8
+//! `chebyshev-w` with its table read over a pixel's footprint (`--table-levels` > 1: the
+//! mean over the footprint's box from summed-area planes, where the device filters float32),
+//! on lavapipe with validation on: a BRDF map (one direction a pixel, a point footprint)
+//! reads the table at its points and draws the unfiltered map; the default scene reads
+//! boxes where its pixels span many lobes, and its light is the converged picture's (8×8
 //! samples a pixel) where the pixels' centres alone miss a tenth of it.
 
 mod gpu_util;
@@ -18,7 +19,7 @@ fn options(levels: usize) -> TableOptions {
 }
 
 #[test]
-fn a_point_reads_the_finest_level_and_a_pixel_its_footprint() {
+fn a_point_reads_the_table_and_a_pixel_its_footprint() {
     let Some(mut r) = renderer() else { return };
     r.set_variant(VariantKind::ChebyshevW);
     let mut scene = Scene::default_scene();
@@ -41,7 +42,7 @@ fn a_point_reads_the_finest_level_and_a_pixel_its_footprint() {
                 frame
                     .variant
                     .name
-                    .contains("levels for the pixel footprint"),
+                    .contains("summed-area planes for the pixel footprint"),
                 "{}",
                 frame.variant.name
             );
@@ -83,7 +84,7 @@ fn a_point_reads_the_finest_level_and_a_pixel_its_footprint() {
     // comes to the converged one is profile --picture's, tests/gpu_profile_picture.rs).
     assert!(
         (filtered / truth - 1.0).abs() < 0.05,
-        "the levels keep the light: {filtered} against {truth} converged"
+        "the footprint keeps the light: {filtered} against {truth} converged"
     );
     assert!(
         (filtered - truth).abs() < (plain - truth).abs(),

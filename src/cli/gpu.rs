@@ -40,9 +40,11 @@ pub struct TableArgs {
     /// CPU when Vulkan itself runs on the CPU, e.g. lavapipe).
     #[arg(long, value_enum, default_value_t = TableBuild::Auto)]
     pub table_build: TableBuild,
-    /// chebyshev-w: levels of its table pre-filtered for a pixel's footprint, each twice as
-    /// coarse as the one before; a pixel reads the level its footprint in (u, v) spans
-    /// (1: the table alone, read at the pixel's centre).
+    /// chebyshev-w: reading its table over a pixel's footprint in (u, v). 1: the table alone,
+    /// read at the pixel's centre. More: a raster pass reads the mean over the footprint's
+    /// box from summed-area planes where the device filters float32 (else from this many
+    /// levels pre-filtered, each twice as coarse as the one before); the compute stages'
+    /// point lights read the level their footprint spans among this many.
     #[arg(long, default_value_t = TableOptions::RENDER.levels)]
     pub table_levels: usize,
 }

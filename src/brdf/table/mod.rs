@@ -14,8 +14,8 @@
 //!
 //! One file each: the region and the spec ([`region`]), the exact sampler ([`sample`]), the
 //! disc pre-filter ([`disc`]), the splines ([`spline`]), the `w` nodes and how many a table
-//! needs ([`nodes`]), the representations ([`representation`]) and the levels pre-filtered
-//! for a pixel's footprint ([`levels`]).
+//! needs ([`nodes`]), the representations ([`representation`]), and for a pixel's footprint
+//! the levels pre-filtered ([`levels`]) and the summed-area planes ([`summed`]).
 
 mod disc;
 mod levels;
@@ -24,6 +24,7 @@ mod region;
 mod representation;
 mod sample;
 mod spline;
+mod summed;
 
 pub use disc::{prefilter_disc, DiscKernel};
 pub use levels::{Levelled, MAX_LEVELS};
@@ -37,3 +38,4 @@ pub use sample::{
     FAST_BUILD_TOLERANCE,
 };
 pub use spline::{spline_plane, spline_weights};
+pub use summed::Summed;

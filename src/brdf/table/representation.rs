@@ -43,6 +43,12 @@ pub trait GTable: Send + Sync {
         1
     }
 
+    /// Summed-area planes of the node values, `(nu + 1) × (nv + 1)` each, for box reads at
+    /// a pixel's footprint ([`super::Summed`]); `None` where the table has none.
+    fn summed(&self) -> Option<Vec<Vec<[f64; 3]>>> {
+        None
+    }
+
     /// How much float32 rounding the representation amplifies (the condition number of its
     /// sum), where that is the limiting factor; `None` for stable representations.
     fn conditioning(&self) -> Option<f64> {
@@ -58,6 +64,44 @@ pub trait GTable: Send + Sync {
     /// `XYZ = C(ωi, ωr)·G(u, v, w)`; black outside the region.
     fn xyz(&self, shading: &Shading, wi: [f64; 3], wr: [f64; 3]) -> [f64; 3] {
         integrated(wi, wr, shading, |d| self.g(d).unwrap_or([0.0; 3]))
+    }
+}
+
+/// A table chosen at run time (`chebyshev-w`'s levels or summed-area planes): every method
+/// is the boxed table's.
+impl GTable for Box<dyn GTable> {
+    fn region(&self) -> &Region {
+        (**self).region()
+    }
+    fn g_unclamped(&self, uvw: [f64; 3]) -> Option<[f64; 3]> {
+        (**self).g_unclamped(uvw)
+    }
+    fn g(&self, uvw: [f64; 3]) -> Option<[f64; 3]> {
+        (**self).g(uvw)
+    }
+    fn planes(&self) -> &[Vec<[f64; 3]>] {
+        (**self).planes()
+    }
+    fn nodes_uv(&self) -> (usize, usize) {
+        (**self).nodes_uv()
+    }
+    fn plane_dims(&self) -> (usize, usize) {
+        (**self).plane_dims()
+    }
+    fn footprint_levels(&self) -> usize {
+        (**self).footprint_levels()
+    }
+    fn summed(&self) -> Option<Vec<Vec<[f64; 3]>>> {
+        (**self).summed()
+    }
+    fn conditioning(&self) -> Option<f64> {
+        (**self).conditioning()
+    }
+    fn f32_error(&self) -> Option<f64> {
+        (**self).f32_error()
+    }
+    fn xyz(&self, shading: &Shading, wi: [f64; 3], wr: [f64; 3]) -> [f64; 3] {
+        (**self).xyz(shading, wi, wr)
     }
 }
 

@@ -84,9 +84,13 @@ impl Variant for ChebyshevW {
             setup,
             LAYOUT.layout,
             table::ChebyshevW::nodes,
-            |r, s| {
+            |r, s| -> Result<Box<dyn table::GTable>> {
                 let base = table::ChebyshevW::from_nodes(r, &s);
-                Ok(table::Levelled::new(base, setup.table.levels))
+                Ok(if super::table::reads_boxes(dev, setup) {
+                    Box::new(table::Summed::new(base))
+                } else {
+                    Box::new(table::Levelled::new(base, setup.table.levels))
+                })
             },
         )
     }

@@ -13,7 +13,7 @@ use crate::report::Report;
 
 const MAGIC: &[u8; 8] = b"DIFFPACK";
 /// Bump when the layout of the texels or of the file changes.
-const VERSION: u64 = 2;
+const VERSION: u64 = 3;
 /// Header: magic, version, key, 8 sizes, format, 6 region bounds, byte count.
 const HEADER: usize = 8 + 8 + 8 + 8 * 8 + 8 + 6 * 8 + 8;
 
@@ -33,6 +33,9 @@ pub struct Packed {
     pub format: TableFormat,
     pub region: Region,
     pub bytes: Vec<u8>,
+    /// Summed-area planes (`(nu + 1) × (nv + 1)` texels, `layers` layers, float32) for box
+    /// reads at a pixel's footprint; empty where the table has none.
+    pub summed: Vec<u8>,
 }
 
 impl Packed {
@@ -64,6 +67,8 @@ impl Packed {
         }
         out.extend_from_slice(&(self.bytes.len() as u64).to_le_bytes());
         out.extend_from_slice(&self.bytes);
+        out.extend_from_slice(&(self.summed.len() as u64).to_le_bytes());
+        out.extend_from_slice(&self.summed);
         let mut h = Fnv1a::new();
         h.bytes(&out);
         out.extend_from_slice(&h.finish().to_le_bytes());
@@ -109,16 +114,32 @@ impl Packed {
             levels: size(9)?,
             format,
             region,
-            bytes: body[HEADER..].to_vec(),
+            bytes: Vec::new(),
+            summed: Vec::new(),
         };
         let expected =
             p.pu.checked_mul(p.pv)
                 .and_then(|t| t.checked_mul(p.layers))
                 .and_then(|t| t.checked_mul(format.texel_bytes()));
-        if size(17)? != p.bytes.len() || expected != Some(p.bytes.len()) {
+        let count = size(17)?;
+        if expected != Some(count) || body.len() < HEADER + count + 8 {
             return Err("texel count does not match its sizes".into());
         }
-        Ok(p)
+        let rest = &body[HEADER + count..];
+        let summed = u64::from_le_bytes(rest[..8].try_into().unwrap_or([0; 8]));
+        let summed_expected = (p.nu + 1)
+            .checked_mul(p.nv + 1)
+            .and_then(|t| t.checked_mul(p.layers * 16));
+        let summed_ok = (summed == 0 || Some(summed as usize) == summed_expected)
+            && rest.len() == 8 + summed as usize;
+        if !summed_ok {
+            return Err("summed-area texel count does not match its sizes".into());
+        }
+        Ok(Packed {
+            bytes: body[HEADER..HEADER + count].to_vec(),
+            summed: rest[8..].to_vec(),
+            ..p
+        })
     }
 }
 
@@ -133,7 +154,7 @@ pub fn load(
 ) -> Option<Packed> {
     let cache = CacheDir::open(dir).ok()?;
     let path = cache.file(PACKED_FILES, key);
-    let limit = max_bytes.saturating_add((HEADER + 8) as u64);
+    let limit = max_bytes.saturating_add((HEADER + 16) as u64);
     let data = cache.read(&path, "packed table cache", limit, report)?;
     match Packed::decode(&data, key) {
         Ok(p) if (p.nu, p.nv) == nodes => {
@@ -157,7 +178,7 @@ pub fn load(
 pub fn store(dir: &Path, key: u64, packed: Packed, report: &dyn Report) {
     match CacheDir::open(dir) {
         Ok(cache) => {
-            let size = (HEADER + packed.bytes.len() + 8) as u64;
+            let size = (HEADER + packed.bytes.len() + 8 + packed.summed.len() + 8) as u64;
             // Over the cap it is silently not stored: the sampled table's line says so.
             if size <= cache.max_bytes() {
                 let path = cache.file(PACKED_FILES, key);
@@ -189,6 +210,7 @@ mod tests {
                 hi: [0.1, 0.2, -1.0],
             },
             bytes: (0..5 * 4 * 8).map(|i| i as u8).collect(),
+            summed: Vec::new(),
         }
     }
 
@@ -204,6 +226,21 @@ mod tests {
         assert!(
             Packed::decode(&data[..data.len() - 1], 7).is_err(),
             "cut short"
+        );
+        // With summed-area planes: (3 + 1) × (2 + 1) texels of 16 bytes in its one layer.
+        let with = Packed {
+            summed: (0..4 * 3 * 16).map(|i| (i * 7) as u8).collect(),
+            ..packed()
+        };
+        let data = with.encode(7);
+        assert_eq!(Packed::decode(&data, 7), Ok(with.clone()));
+        let short = Packed {
+            summed: vec![1; 4 * 3 * 16 - 16],
+            ..packed()
+        };
+        assert!(
+            Packed::decode(&short.encode(7), 7).is_err(),
+            "summed planes of the wrong size"
         );
     }
 

@@ -247,8 +247,9 @@ pub(crate) fn prepare<T: GTable + 'static>(
     let packed_key = packed_key(kind, dev, setup, &spec, nodes, keep, layout, smoothed)?;
     if let (Some(key), Some(dir)) = (packed_key, setup.cache_dir) {
         let (nu, nv) = spec.uv_nodes()?;
-        // The levels for a pixel's footprint take up to half as many texels again.
-        let levels = if setup.table.levels > 1 { 2 } else { 1 };
+        // The levels for a pixel's footprint take up to half as many texels again; the
+        // summed-area planes, in float32, twice as many bytes as the table in float16.
+        let levels = if setup.table.levels > 1 { 4 } else { 1 };
         let most = (levels * (nu + 3) * (nv + 3) * spec.w_nodes.max(1) * 16) as u64;
         if let Some(cached) = packed::load(dir, key, (nu, nv), most, setup.report) {
             let mut gpu = TableGpu::from_packed(kind, dev, &spec, &cached, layout, start)?;
@@ -395,6 +396,9 @@ fn packed_key(
     if setup.table.levels > 1 {
         h.bytes(format!("levels {}", setup.table.levels).as_bytes());
     }
+    if kind == VariantKind::ChebyshevW && reads_boxes(dev, setup) {
+        h.bytes(b"summed-area planes");
+    }
     let (format, _) = filterable_format(dev, setup.table.format)?;
     h.bytes(format!("{format:?}").as_bytes());
     Ok(Some(h.finish()))
@@ -430,6 +434,10 @@ struct TableGpu {
     info: Buffer,
     sampler: Sampler,
     image: Image,
+    /// The summed-area planes (a 1×1 placeholder where there are none).
+    summed: Image,
+    /// Whether the shader reads `summed` at the pixel's footprint.
+    boxes: bool,
 }
 
 impl TableGpu {
@@ -461,6 +469,9 @@ impl TableGpu {
             format,
             region: *table.region(),
             bytes: texel_bytes_of(planes, layout, fp.layers, format),
+            summed: table.summed().map_or_else(Vec::new, |s| {
+                texel_bytes_of(&s, layout, fp.layers, TableFormat::Rgba32f)
+            }),
         };
         debug_assert_eq!(packed.bytes.len(), fp.bytes);
         let gpu = Self::from_packed(kind, dev, spec, &packed, layout, start)?;
@@ -538,6 +549,32 @@ impl TableGpu {
                 levels.get(i).map_or([0.0; 4], |l| l.map(|x| x as f32))
             }),
         };
+        let summed_desc = |w: usize, h: usize| ImageDesc {
+            format: vk::Format::R32G32B32A32_SFLOAT,
+            width: w as u32,
+            height: h as u32,
+            layers: layers as u32,
+            usage: vk::ImageUsageFlags::SAMPLED,
+            aspect: vk::ImageAspectFlags::COLOR,
+            view_type,
+        };
+        let summed = if !p.summed.is_empty() {
+            Image::sampled_with_data(
+                dev,
+                &format!("{kind} summed table"),
+                summed_desc(p.nu + 1, p.nv + 1),
+                16,
+                &p.summed,
+            )?
+        } else {
+            Image::sampled_with_data(
+                dev,
+                &format!("{kind} summed table (none)"),
+                summed_desc(1, 1),
+                16,
+                &vec![0u8; 16 * layers],
+            )?
+        };
         let info = Buffer::with_data(
             dev,
             &format!("{kind} table info"),
@@ -555,13 +592,14 @@ impl TableGpu {
                     p.nv,
                     spec.texel_uv,
                     spec.step_nm,
-                    match level_count {
-                        1 => String::new(),
-                        n => format!(" {n} levels for the pixel footprint"),
+                    match (p.summed.is_empty(), level_count) {
+                        (false, _) => " summed-area planes for the pixel footprint".to_string(),
+                        (true, 1) => String::new(),
+                        (true, n) => format!(" {n} levels for the pixel footprint"),
                     }
                 ),
                 build_ms: start.elapsed().as_secs_f64() * 1e3,
-                gpu_bytes: p.bytes.len(),
+                gpu_bytes: p.bytes.len() + p.summed.len(),
                 fetches: p.fetches,
                 table_build: None,
                 disc_prefiltered: false,
@@ -576,8 +614,20 @@ impl TableGpu {
                 vk::SamplerAddressMode::CLAMP_TO_EDGE,
             )?,
             image,
+            boxes: !p.summed.is_empty(),
+            summed,
         })
     }
+}
+
+/// Whether `chebyshev-w` reads its table as the mean over a pixel's footprint from
+/// summed-area planes ([`crate::brdf::table::Summed`]): where the footprint is asked for
+/// (`levels > 1`) and the device filters float32 linearly (the sums need its precision);
+/// elsewhere it reads the levels pre-filtered for the footprint.
+pub(super) fn reads_boxes(dev: &Device, setup: &DrawSetup<'_>) -> bool {
+    let linear =
+        vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
+    setup.table.levels > 1 && dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear)
 }
 
 /// `format` where the device filters it linearly (float32 falls back to float16), and its
@@ -677,6 +727,11 @@ impl PreparedVariant for TableGpu {
                 kind: vk::DescriptorType::UNIFORM_BUFFER,
                 stages: vk::ShaderStageFlags::FRAGMENT,
             },
+            Binding {
+                binding: 5,
+                kind: vk::DescriptorType::COMBINED_IMAGE_SAMPLER,
+                stages: vk::ShaderStageFlags::FRAGMENT,
+            },
         ]
     }
 
@@ -684,12 +739,18 @@ impl PreparedVariant for TableGpu {
         vec![
             (1, Resource::Sampled(&self.image, &self.sampler)),
             (4, Resource::Uniform(&self.info)),
+            (5, Resource::Sampled(&self.summed, &self.sampler)),
         ]
     }
 
     fn specialise(&self, spec: &mut Specialisation) {
         spec[SpecConstant::TableTerms] = self.terms;
-        spec[SpecConstant::FootprintLevels] = (self.levels > 1) as u32;
+        // FOOTPRINT_POINT, _LEVELS or _BOX (glsl/chebyshev_w.frag).
+        spec[SpecConstant::Footprint] = match (self.boxes, self.levels > 1) {
+            (true, _) => 2,
+            (false, true) => 1,
+            (false, false) => 0,
+        };
         spec[SpecConstant::DiscPrefiltered] = self.stats.disc_prefiltered as u32;
     }
 
