@@ -12,6 +12,7 @@
 // applies to PNG output; EXR keeps them linear).
 #include "interface.glsl"
 #include "table.glsl"
+#include "footprint_texture.glsl"
 
 layout(location = 0) in vec3 inTangent;
 layout(location = 1) in vec3 inWr;
@@ -68,7 +69,7 @@ void main() {
     }
     vec3 c = !inside ? OUTSIDE : (n > 0 ? sum / float(n) : vec3(0.0));
     if (OUTPUT_MODE == MODE_MESH && TEXTURE_BLENDING && inside && n == 0) {
-        c = vec3(dot(texture(surfaceTexture, inUv).rgb, vec3(0.2126, 0.7152, 0.0722)) / 3.0);
+        c = vec3(dot(textureOverFootprint(surfaceTexture, inUv).rgb, vec3(0.2126, 0.7152, 0.0722)) / 3.0);
     }
     outColour = vec4(c, 1.0);
 }

@@ -15,6 +15,7 @@ layout(location = 4) in vec2 inUv;
 
 // The texture's linear albedo, already scaled (a 1×1 black one without a texture).
 layout(set = 0, binding = 0) uniform sampler2D albedo;
+#include "footprint_texture.glsl"
 layout(set = 0, binding = 1, std140) uniform Camera {
     vec4 eye; // xyz: the eye in world space
 } camera;
@@ -37,7 +38,7 @@ void main() {
     float le = length(e);
     vec3 toEye = le > 1e-20 ? e / le : n;
     vec3 wr = vec3(dot(toEye, t), dot(toEye, b), dot(toEye, n));
-    vec3 tex = texture(albedo, inUv).rgb;
+    vec3 tex = textureOverFootprint(albedo, inUv).rgb;
     outTangent = vec4(t, tex.r);
     outBitangent = vec4(b, tex.g);
     outNormal = vec4(n, tex.b);

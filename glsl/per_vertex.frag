@@ -6,6 +6,7 @@
 #include "gain.glsl"
 #include "colour.glsl"
 #include "sky.glsl"
+#include "footprint_texture.glsl"
 
 layout(location = 0) in vec3 inWi;
 layout(location = 1) in vec3 inWr;
@@ -28,7 +29,7 @@ void main() {
         // Algorithm 4 (colour.glsl's textureBlend), its texture part lit from the disc's
         // centre: (1 − w_d)·c_diffraction + ((1 − α) + w_d)·t, plus the uniform sky (sky.glsl).
         float irradiance = max(wi.z, 0.0) * params.lighting.x;
-        vec3 cTexture = params.shading.y * texture(surfaceTexture, inUv).rgb;
+        vec3 cTexture = params.shading.y * textureOverFootprint(surfaceTexture, inUv).rgb;
         vec3 h = safeNormalize(wi + wr);
         float f = schlickFresnel(clamp(dot(wr, h), 0.0, 1.0));
         c = textureBlend(c, vec3(0.0), f, params.lighting.z)

@@ -10,6 +10,7 @@
 #include "gain.glsl"
 #include "colour.glsl"
 #include "sky.glsl"
+#include "footprint_texture.glsl"
 
 // Mesh mode: the tangent frame (T, B, N) in world space and ωr in it (diffraction.vert).
 layout(location = 0) in vec3 inTangent;
@@ -39,7 +40,7 @@ void main() {
         vec3 wr = safeNormalize(inWr);
         vec3 cTexture = vec3(0.0);
         if (TEXTURE_BLENDING) {
-            cTexture = params.shading.y * texture(surfaceTexture, inUv).rgb;
+            cTexture = params.shading.y * textureOverFootprint(surfaceTexture, inUv).rgb;
         }
         // The light's disc: Σ_k weight_k · shade(ωi_k), every direction shaded in full
         // (scene::TextureSpec::shade states the same on the CPU); one entry for a point.

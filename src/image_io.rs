@@ -460,6 +460,48 @@ pub fn apply_tone(rgb: &mut [[f32; 3]], exposure: f32, tone: Tone, white: f32) -
     Ok(())
 }
 
+/// The mip chain of a texture of linear colour, `width × height` (row-major), the texture
+/// first: each level halves each side (rounding down, at least 1) and holds the mean of the
+/// 2×2 texels of the level above that it covers (an odd side's last row or column joins
+/// the texels before it, so that every texel counts), down to 1×1. A pixel that covers many texels reads the level of its footprint
+/// (trilinearly) instead of one texel's colour.
+pub fn mip_chain(width: u32, height: u32, rgb: &[[f32; 3]]) -> Vec<(u32, u32, Vec<[f32; 3]>)> {
+    let mut chain = vec![(width, height, rgb.to_vec())];
+    loop {
+        let (w, h, src) = chain.last().expect("the texture itself");
+        let (w, h) = (*w as usize, *h as usize);
+        if w == 1 && h == 1 {
+            return chain;
+        }
+        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+        // Source texels [lo, hi) of level texel i along a side of n source texels.
+        let span = |i: usize, n: usize, m: usize| {
+            let lo = (i * n) / m;
+            let hi = ((i + 1) * n) / m;
+            (lo, hi.max(lo + 1))
+        };
+        let mut out = Vec::with_capacity(nw * nh);
+        for y in 0..nh {
+            let (y0, y1) = span(y, h, nh);
+            for x in 0..nw {
+                let (x0, x1) = span(x, w, nw);
+                let mut sum = [0.0f64; 3];
+                for sy in y0..y1 {
+                    for sx in x0..x1 {
+                        let p = src[sy * w + sx];
+                        for c in 0..3 {
+                            sum[c] += f64::from(finite_or_zero(p[c]));
+                        }
+                    }
+                }
+                let n = ((y1 - y0) * (x1 - x0)) as f64;
+                out.push(sum.map(|s| (s / n) as f32));
+            }
+        }
+        chain.push((nw as u32, nh as u32, out));
+    }
+}
+
 /// Box-filters a supersampled frame: every `factor × factor` block of linear colour becomes
 /// its mean (the pixel integrates radiance, as a sensor does; the tone curve comes after).
 /// Non-finite samples count as 0. `width` and `height` must be multiples of `factor ≥ 1`.
@@ -540,6 +582,37 @@ pub fn delta_e_over(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_mip_chain_halves_to_one_texel_and_keeps_the_mean() {
+        // A checkerboard of black and white: every coarser level is uniform grey.
+        let board: Vec<[f32; 3]> = (0..64 * 16)
+            .map(|i| [((i % 64 + i / 64) % 2) as f32; 3])
+            .collect();
+        let chain = mip_chain(64, 16, &board);
+        let sizes: Vec<(u32, u32)> = chain.iter().map(|(w, h, _)| (*w, *h)).collect();
+        assert_eq!(
+            sizes,
+            [(64, 16), (32, 8), (16, 4), (8, 2), (4, 1), (2, 1), (1, 1)]
+        );
+        for (w, h, level) in &chain[1..] {
+            assert_eq!(level.len(), (w * h) as usize);
+            assert!(
+                level.iter().flatten().all(|&c| (c - 0.5).abs() < 1e-6),
+                "{w}×{h}"
+            );
+        }
+        // Odd sides: a 5×3 ramp; the last column and row join the texels before them.
+        let ramp: Vec<[f32; 3]> = (0..15)
+            .map(|i| [(i % 5) as f32, (i / 5) as f32, 1.0])
+            .collect();
+        let chain = mip_chain(5, 3, &ramp);
+        assert_eq!(chain[1].0, 2);
+        assert_eq!(chain[1].1, 1);
+        assert_eq!(chain[1].2, vec![[0.5, 1.0, 1.0], [3.0, 1.0, 1.0]]);
+        assert_eq!(chain[2].2, vec![[1.75, 1.0, 1.0]]);
+        assert_eq!(chain.len(), 3);
+    }
 
     fn tmp_dir(tag: &str) -> std::path::PathBuf {
         let d = std::env::temp_dir().join(format!("diffract-imgio-{tag}-{}", std::process::id()));

@@ -201,17 +201,25 @@ impl ImageDesc {
     }
 }
 
-/// A 2D (array) or 3D image with one view covering all of it, in GPU memory.
+/// A 2D (array) or 3D image with one view covering all of it (every mip level), in GPU
+/// memory.
 pub struct Image {
     dev: Arc<Device>,
     pub raw: vk::Image,
     pub view: vk::ImageView,
     pub desc: ImageDesc,
+    /// Mip levels: 1, or a chain that halves each side down to 1×1.
+    mips: u32,
     allocation: Option<Allocation>,
 }
 
 impl Image {
     pub fn new(dev: &Arc<Device>, name: &str, desc: ImageDesc) -> Result<Self> {
+        Self::with_mips(dev, name, desc, 1)
+    }
+
+    /// An image of `mips` levels, level `k` `max(1, width >> k) × max(1, height >> k)`.
+    fn with_mips(dev: &Arc<Device>, name: &str, desc: ImageDesc, mips: u32) -> Result<Self> {
         let image_type = if desc.is_3d() {
             vk::ImageType::TYPE_3D
         } else {
@@ -221,7 +229,7 @@ impl Image {
             .image_type(image_type)
             .format(desc.format)
             .extent(desc.extent())
-            .mip_levels(1)
+            .mip_levels(mips)
             .array_layers(desc.array_layers())
             .samples(vk::SampleCountFlags::TYPE_1)
             .tiling(vk::ImageTiling::OPTIMAL)
@@ -236,6 +244,7 @@ impl Image {
             raw,
             view: vk::ImageView::null(),
             desc,
+            mips,
             allocation: None,
         };
         dev.set_name(raw, name);
@@ -266,7 +275,7 @@ impl Image {
         vk::ImageSubresourceRange {
             aspect_mask: self.desc.aspect,
             base_mip_level: 0,
-            level_count: 1,
+            level_count: self.mips,
             base_array_layer: 0,
             layer_count: self.desc.array_layers(),
         }
@@ -278,32 +287,56 @@ impl Image {
     pub fn sampled_with_data(
         dev: &Arc<Device>,
         name: &str,
-        mut desc: ImageDesc,
+        desc: ImageDesc,
         texel_bytes: usize,
         bytes: &[u8],
     ) -> Result<Self> {
-        let expected =
-            desc.width as usize * desc.height as usize * desc.layers as usize * texel_bytes;
-        if bytes.len() != expected {
-            // The copy would read past the staging buffer (or leave texels undefined).
+        Self::sampled_with_mips(dev, name, desc, texel_bytes, &[bytes])
+    }
+
+    /// [`Self::sampled_with_data`] for a mip chain: `levels[k]` holds level `k`'s texels
+    /// (`max(1, width >> k) × max(1, height >> k)`, layer after layer), the image first.
+    pub fn sampled_with_mips(
+        dev: &Arc<Device>,
+        name: &str,
+        mut desc: ImageDesc,
+        texel_bytes: usize,
+        levels: &[&[u8]],
+    ) -> Result<Self> {
+        let size = |k: usize| ((desc.width >> k).max(1), (desc.height >> k).max(1));
+        let mut offsets = Vec::with_capacity(levels.len());
+        let mut total = 0usize;
+        for (k, bytes) in levels.iter().enumerate() {
+            let (w, h) = size(k);
+            let expected = w as usize * h as usize * desc.layers as usize * texel_bytes;
+            if bytes.len() != expected {
+                // The copy would read past the staging buffer (or leave texels undefined).
+                return Err(Error::invalid(
+                    "image upload",
+                    format!(
+                        "{name}: {} bytes for level {k}'s {w}×{h}×{} texels of {texel_bytes} bytes",
+                        bytes.len(),
+                        desc.layers
+                    ),
+                ));
+            }
+            offsets.push(total);
+            total += bytes.len();
+        }
+        let full = 32 - desc.width.max(desc.height).max(1).leading_zeros();
+        if levels.is_empty() || levels.len() as u32 > full || (levels.len() > 1 && desc.is_3d()) {
             return Err(Error::invalid(
                 "image upload",
-                format!(
-                    "{name}: {} bytes for {}×{}×{} texels of {texel_bytes} bytes",
-                    bytes.len(),
-                    desc.width,
-                    desc.height,
-                    desc.layers
-                ),
+                format!("{name}: {} mip levels of {full}", levels.len()),
             ));
         }
         desc.usage |= vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST;
-        let image = Image::new(dev, name, desc)?;
+        let image = Image::with_mips(dev, name, desc, levels.len() as u32)?;
         let staging = Buffer::with_data(
             dev,
             &format!("{name} staging"),
             vk::BufferUsageFlags::TRANSFER_SRC,
-            bytes,
+            &levels.concat(),
         )?;
         let range = image.range();
         dev.submit_once(&format!("upload {name}"), |cb| {
@@ -316,14 +349,26 @@ impl Image {
                 .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                 .image(image.raw)
                 .subresource_range(range);
-            let region = vk::BufferImageCopy::default()
-                .image_subresource(vk::ImageSubresourceLayers {
-                    aspect_mask: desc.aspect,
-                    mip_level: 0,
-                    base_array_layer: 0,
-                    layer_count: desc.array_layers(),
+            let regions: Vec<vk::BufferImageCopy> = offsets
+                .iter()
+                .enumerate()
+                .map(|(k, &at)| {
+                    let (w, h) = size(k);
+                    vk::BufferImageCopy::default()
+                        .buffer_offset(at as u64)
+                        .image_subresource(vk::ImageSubresourceLayers {
+                            aspect_mask: desc.aspect,
+                            mip_level: k as u32,
+                            base_array_layer: 0,
+                            layer_count: desc.array_layers(),
+                        })
+                        .image_extent(vk::Extent3D {
+                            width: w,
+                            height: h,
+                            ..desc.extent()
+                        })
                 })
-                .image_extent(desc.extent());
+                .collect();
             let to_read = vk::ImageMemoryBarrier::default()
                 .src_access_mask(vk::AccessFlags::TRANSFER_WRITE)
                 .dst_access_mask(vk::AccessFlags::SHADER_READ)
@@ -333,7 +378,7 @@ impl Image {
                 .dst_queue_family_index(vk::QUEUE_FAMILY_IGNORED)
                 .image(image.raw)
                 .subresource_range(range);
-            // SAFETY: cb is recording; the staging buffer holds width·height·layers texels
+            // SAFETY: cb is recording; the staging buffer holds every level's texels
             // (checked above) and outlives the submission.
             unsafe {
                 dev.raw.cmd_pipeline_barrier(
@@ -350,7 +395,7 @@ impl Image {
                     staging.raw,
                     image.raw,
                     vk::ImageLayout::TRANSFER_DST_OPTIMAL,
-                    &[region],
+                    &regions,
                 );
                 dev.raw.cmd_pipeline_barrier(
                     cb,
@@ -389,21 +434,47 @@ pub struct Sampler {
 }
 
 impl Sampler {
-    /// `filter` for both magnification and minification, `address` on every axis.
+    /// `filter` for both magnification and minification, `address` on every axis; the
+    /// image's first mip level alone.
     pub fn new(
         dev: &Arc<Device>,
         name: &str,
         filter: vk::Filter,
         address: vk::SamplerAddressMode,
     ) -> Result<Self> {
+        Self::create(dev, name, filter, address, false)
+    }
+
+    /// Linear filtering between texels and between mip levels (trilinear), `address` on
+    /// every axis: a pixel reads the mip level of its footprint.
+    pub fn trilinear(
+        dev: &Arc<Device>,
+        name: &str,
+        address: vk::SamplerAddressMode,
+    ) -> Result<Self> {
+        Self::create(dev, name, vk::Filter::LINEAR, address, true)
+    }
+
+    fn create(
+        dev: &Arc<Device>,
+        name: &str,
+        filter: vk::Filter,
+        address: vk::SamplerAddressMode,
+        mips: bool,
+    ) -> Result<Self> {
+        let (mode, max_lod) = if mips {
+            (vk::SamplerMipmapMode::LINEAR, vk::LOD_CLAMP_NONE)
+        } else {
+            (vk::SamplerMipmapMode::NEAREST, 0.0)
+        };
         let info = vk::SamplerCreateInfo::default()
             .mag_filter(filter)
             .min_filter(filter)
-            .mipmap_mode(vk::SamplerMipmapMode::NEAREST)
+            .mipmap_mode(mode)
             .address_mode_u(address)
             .address_mode_v(address)
             .address_mode_w(address)
-            .max_lod(0.0);
+            .max_lod(max_lod);
         // SAFETY: live device, valid create info.
         let raw =
             unsafe { dev.raw.create_sampler(&info, None) }.map_err(Error::vk("vkCreateSampler"))?;

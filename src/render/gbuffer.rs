@@ -101,10 +101,9 @@ impl GBufferPass {
             crate::gpu::memory::bytes_of(&mesh.indices),
         )?;
         let texture = albedo_image(dev, albedo)?;
-        let sampler = Sampler::new(
+        let sampler = Sampler::trilinear(
             dev,
-            "G-buffer albedo (linear)",
-            vk::Filter::LINEAR,
+            "G-buffer albedo (trilinear)",
             vk::SamplerAddressMode::REPEAT,
         )?;
         let layout = PipelineLayout::new(
@@ -288,22 +287,29 @@ fn albedo_image(dev: &Arc<Device>, albedo: Option<&Albedo>) -> Result<Image> {
         ));
     }
     let linear = vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
-    let (format, bytes, texel) = if dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear) {
-        let b: Vec<u8> = rgb
-            .iter()
-            .flat_map(|p| [p[0], p[1], p[2], 1.0])
-            .flat_map(f32::to_le_bytes)
-            .collect();
-        (vk::Format::R32G32B32A32_SFLOAT, b, 16)
-    } else {
-        let b: Vec<u8> = rgb
-            .iter()
-            .flat_map(|p| [p[0], p[1], p[2], 1.0])
-            .flat_map(|x| crate::gpu::formats::f32_to_f16(x).to_le_bytes())
-            .collect();
-        (vk::Format::R16G16B16A16_SFLOAT, b, 8)
+    let wide = dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear);
+    let encode = |px: &[[f32; 3]]| -> Vec<u8> {
+        let texels = px.iter().flat_map(|p| [p[0], p[1], p[2], 1.0]);
+        if wide {
+            texels.flat_map(f32::to_le_bytes).collect()
+        } else {
+            texels
+                .flat_map(|x| crate::gpu::formats::f32_to_f16(x).to_le_bytes())
+                .collect()
+        }
     };
-    Image::sampled_with_data(
+    let (format, texel) = if wide {
+        (vk::Format::R32G32B32A32_SFLOAT, 16)
+    } else {
+        (vk::Format::R16G16B16A16_SFLOAT, 8)
+    };
+    // The mip chain, so a G-buffer pixel reads the albedo over its footprint.
+    let levels: Vec<Vec<u8>> = crate::image_io::mip_chain(w, h, &rgb)
+        .iter()
+        .map(|(_, _, px)| encode(px))
+        .collect();
+    let levels: Vec<&[u8]> = levels.iter().map(Vec::as_slice).collect();
+    Image::sampled_with_mips(
         dev,
         "G-buffer albedo",
         ImageDesc {
@@ -316,6 +322,6 @@ fn albedo_image(dev: &Arc<Device>, albedo: Option<&Albedo>) -> Result<Image> {
             view_type: vk::ImageViewType::TYPE_2D,
         },
         texel,
-        &bytes,
+        &levels,
     )
 }

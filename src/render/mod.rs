@@ -256,10 +256,9 @@ impl Renderer {
             region_margin: 0.0,
             table_region: None,
             shader_overrides: Default::default(),
-            linear: Sampler::new(
+            linear: Sampler::trilinear(
                 &dev,
-                "surface texture (linear)",
-                vk::Filter::LINEAR,
+                "surface texture (trilinear)",
                 vk::SamplerAddressMode::REPEAT,
             )?,
             vert_map: ShaderModule::new(&dev, "brdfmap.vert", shaders::BRDFMAP_VERT)?,
@@ -728,7 +727,8 @@ impl Renderer {
     }
 
     /// Uploads a scene texture's pixels (sRGB bytes) into an `R8G8B8A8_SRGB` image, so
-    /// sampling returns linear colour.
+    /// sampling returns linear colour, with its mip chain averaged in linear colour
+    /// ([`crate::image_io::mip_chain`]): a pixel that covers many texels reads their mean.
     fn upload_texture(
         &self,
         spec: &crate::scene::TextureSpec,
@@ -742,8 +742,21 @@ impl Renderer {
                 msg: format!("{w}×{h} texture; each side must be 1..={max} on this device"),
             });
         }
-        let bytes: Vec<u8> = rgb.iter().flat_map(|p| [p[0], p[1], p[2], 255]).collect();
-        Image::sampled_with_data(
+        let linear = env_scene::Albedo::from_srgb8(w, h, rgb, 1.0);
+        let chain = crate::image_io::mip_chain(w, h, &linear.rgb);
+        let levels: Vec<Vec<u8>> =
+            std::iter::once(rgb.iter().flat_map(|p| [p[0], p[1], p[2], 255]).collect())
+                .chain(chain[1..].iter().map(|(_, _, px)| {
+                    px.iter()
+                        .flat_map(|p| {
+                            let c = crate::colour::linear_to_srgb8(p.map(f64::from), 1.0);
+                            [c[0], c[1], c[2], 255]
+                        })
+                        .collect()
+                }))
+                .collect();
+        let levels: Vec<&[u8]> = levels.iter().map(Vec::as_slice).collect();
+        Image::sampled_with_mips(
             &self.dev,
             "surface texture",
             ImageDesc {
@@ -756,7 +769,7 @@ impl Renderer {
                 view_type: vk::ImageViewType::TYPE_2D,
             },
             4,
-            &bytes,
+            &levels,
         )
     }
 }
