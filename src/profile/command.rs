@@ -317,7 +317,12 @@ fn picture_setup(args: &ProfileArgs) -> Result<Option<super::picture::PictureSet
         std::fs::create_dir_all(dir)
             .map_err(|e| Error::invalid("picture-maps", format!("{}: {e}", dir.display())))?;
     }
+    let label = match &args.picture_scene {
+        Some(p) => format!("the scene {}", p.display()),
+        None => "the default scene".to_string(),
+    };
     Ok(Some(super::picture::PictureSetup {
+        label,
         scene,
         aa,
         reference_ss,

@@ -34,6 +34,8 @@ pub const DEFAULT_SIZE: u32 = 128;
 #[derive(Debug, Clone)]
 pub struct PictureSetup {
     pub scene: Scene,
+    /// What the scene is, for the table's line: "the default scene" or its file.
+    pub label: String,
     /// Samples a pixel per side of each row's pictures.
     pub aa: Vec<u32>,
     /// Samples a pixel per side of the reference.
@@ -68,6 +70,8 @@ pub struct PictureRow {
 /// The picture rows of a profile.
 #[derive(Debug, Clone, PartialEq)]
 pub struct PictureRun {
+    /// The scene ([`PictureSetup::label`]).
+    pub label: String,
     pub width: u32,
     pub height: u32,
     pub reference_ss: u32,
@@ -227,6 +231,7 @@ pub fn run(
         crate::image_io::write_png_rgb8(&file, w, h, reference.srgb.clone())?;
     }
     let mut out = PictureRun {
+        label: setup.label.clone(),
         width: w,
         height: h,
         reference_ss: setup.reference_ss,
@@ -303,7 +308,8 @@ impl PictureRun {
     pub fn table(&self) -> String {
         let c = &self.convergence;
         let mut s = format!(
-            "\nwhole picture: the default scene at {}×{} ({} of its pixels scored) against the same drawn by {} at {}×{} samples a pixel (GPU {}); the reference at half that rate is off by rel-L2 {:.2e}, ΔE2000 p99 {:.2}, ꟻLIP {:.4}\n",
+            "\nwhole picture: {} at {}×{} ({} of its pixels scored) against the same drawn by {} at {}×{} samples a pixel (GPU {}); the reference at half that rate is off by rel-L2 {:.2e}, ΔE2000 p99 {:.2}, ꟻLIP {:.4}\n",
+            self.label,
             self.width,
             self.height,
             self.pixels,
