@@ -7,6 +7,7 @@
 //! colour science (transfer curve, Lab, ΔE) is [`crate::colour`]'s; this module only moves
 //! pixels and bytes. No non-finite value ever reaches a file: NaN and ±Inf are written as 0.
 
+use rayon::prelude::*;
 use std::path::Path;
 
 use crate::colour;
@@ -480,10 +481,11 @@ pub fn mip_chain(width: u32, height: u32, rgb: &[[f32; 3]]) -> Vec<(u32, u32, Ve
             let hi = ((i + 1) * n) / m;
             (lo, hi.max(lo + 1))
         };
-        let mut out = Vec::with_capacity(nw * nh);
-        for y in 0..nh {
+        let mut out = vec![[0.0f32; 3]; nw * nh];
+        // Rows in parallel: a 4096×1024 texture's chain is made for every draw that blends it.
+        out.par_chunks_mut(nw).enumerate().for_each(|(y, row)| {
             let (y0, y1) = span(y, h, nh);
-            for x in 0..nw {
+            for (x, texel) in row.iter_mut().enumerate() {
                 let (x0, x1) = span(x, w, nw);
                 let mut sum = [0.0f64; 3];
                 for sy in y0..y1 {
@@ -495,9 +497,9 @@ pub fn mip_chain(width: u32, height: u32, rgb: &[[f32; 3]]) -> Vec<(u32, u32, Ve
                     }
                 }
                 let n = ((y1 - y0) * (x1 - x0)) as f64;
-                out.push(sum.map(|s| (s / n) as f32));
+                *texel = sum.map(|s| (s / n) as f32);
             }
-        }
+        });
         chain.push((nw as u32, nh as u32, out));
     }
 }

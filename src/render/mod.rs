@@ -747,8 +747,9 @@ impl Renderer {
         let levels: Vec<Vec<u8>> =
             std::iter::once(rgb.iter().flat_map(|p| [p[0], p[1], p[2], 255]).collect())
                 .chain(chain[1..].iter().map(|(_, _, px)| {
-                    px.iter()
-                        .flat_map(|p| {
+                    use rayon::prelude::*;
+                    px.par_iter()
+                        .flat_map_iter(|p| {
                             let c = crate::colour::linear_to_srgb8(p.map(f64::from), 1.0);
                             [c[0], c[1], c[2], 255]
                         })
