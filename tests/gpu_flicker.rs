@@ -3,7 +3,8 @@
 //! samples a pixel with the default table read at each pixel's footprint and read at the
 //! pixels' centres, against the same frames at 8×8. A frame-to-frame change beyond the
 //! converged pictures' own change is flicker: glints that a pixel's centre hits in one
-//! frame and misses in the next. Filtered to the footprint, the flicker must be smaller.
+//! frame and misses in the next. Read over the footprint, the flicker must be a quarter
+//! smaller or more.
 
 mod gpu_util;
 
@@ -87,5 +88,9 @@ fn the_footprint_steadies_a_slow_orbit() {
     eprintln!(
         "flicker of a {STEP_DEG}° a frame orbit at {SIZE}², 2×2: {f:.3} filtered to the footprint, {c:.3} at the pixels' centres (ΔE2000 beyond the 8×8 frames' change)"
     );
-    assert!(f < c, "filtered {f} against {c} at the pixels' centres");
+    // Measured 0.25 against 0.42 (both with the texture read over the footprint).
+    assert!(
+        f < 0.75 * c,
+        "filtered {f} against {c} at the pixels' centres"
+    );
 }
