@@ -199,31 +199,13 @@ impl GTable for Levelled {
 mod tests {
     use super::*;
 
+    /// A test table whose planes are `f(u, v)` and half of it.
     fn table(nu: usize, nv: usize, f: impl Fn(f64, f64) -> f64) -> ChebyshevW {
-        let region = Region {
-            lo: [-0.1, -0.05, -2.0],
-            hi: [0.1, 0.05, 0.0],
-        };
-        let coeffs: Vec<Vec<[f64; 3]>> = (0..2)
-            .map(|j| {
-                (0..nu * nv)
-                    .map(|p| {
-                        let u = region.lo[0] + (p % nu) as f64 * 0.2 / (nu - 1) as f64;
-                        let v = region.lo[1] + (p / nu) as f64 * 0.1 / (nv - 1) as f64;
-                        let g = f(u, v) / (j + 1) as f64;
-                        [g, 2.0 * g, 3.0 * g]
-                    })
-                    .collect()
-            })
-            .collect();
-        let splines = coeffs.iter().map(|c| spline_plane(c, nu, nv)).collect();
-        ChebyshevW {
-            region,
-            nu,
-            nv,
-            coeffs,
-            splines,
-        }
+        super::super::test_chebyshev_w(nu, nv, |i, k, j| {
+            let u = -0.1 + i as f64 * 0.2 / (nu - 1) as f64;
+            let v = -0.05 + k as f64 * 0.1 / (nv - 1) as f64;
+            f(u, v) / (j + 1) as f64
+        })
     }
 
     /// A level holds, at its nodes, the tent average of the finer level's nodes, read

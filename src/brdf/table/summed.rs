@@ -127,33 +127,13 @@ impl GTable for Summed {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::brdf::table::spline_plane;
 
-    /// A table of `nu × nv` nodes over a small region whose two coefficient planes are
-    /// `f(u, v)` and a tenth of it (XYZ in ratio 1 : 2 : 3).
+    /// A test table whose two coefficient planes are `f(i, k)` at node `(i, k)` and a
+    /// tenth of it.
     fn table(nu: usize, nv: usize, f: impl Fn(usize, usize) -> f64) -> Summed {
-        let region = Region {
-            lo: [-0.1, -0.05, -2.0],
-            hi: [0.1, 0.05, 0.0],
-        };
-        let coeffs: Vec<Vec<[f64; 3]>> = (0..2)
-            .map(|j| {
-                (0..nu * nv)
-                    .map(|p| {
-                        let g = f(p % nu, p / nu) / (1 + 9 * j) as f64;
-                        [g, 2.0 * g, 3.0 * g]
-                    })
-                    .collect()
-            })
-            .collect();
-        let splines = coeffs.iter().map(|c| spline_plane(c, nu, nv)).collect();
-        Summed::new(ChebyshevW {
-            region,
-            nu,
-            nv,
-            coeffs,
-            splines,
-        })
+        Summed::new(super::super::test_chebyshev_w(nu, nv, |i, k, j| {
+            f(i, k) / (1 + 9 * j) as f64
+        }))
     }
 
     /// `(u, v)` of node coordinate `(a, b)` (fractions of a spacing allowed).
