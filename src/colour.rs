@@ -178,6 +178,19 @@ pub fn linear_srgb_to_xyz(rgb: [f64; 3]) -> [f64; 3] {
     (*m * glam::DVec3::from(rgb)).to_array()
 }
 
+/// The linear values of the 256 8-bit sRGB codes (IEC 61966-2-1's inverse curve).
+pub fn srgb8_decode_table() -> [f32; 256] {
+    std::array::from_fn(|c| {
+        let x = c as f64 / 255.0;
+        let l = if x <= 0.04045 {
+            x / 12.92
+        } else {
+            ((x + 0.055) / 1.055).powf(2.4)
+        };
+        l as f32
+    })
+}
+
 /// The sRGB transfer curve (IEC 61966-2-1) of a linear value, clamped to [0, 1] first.
 /// NaN maps to 0 so it can never reach an output.
 pub fn srgb_encode(linear: f64) -> f64 {

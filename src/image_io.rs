@@ -462,46 +462,67 @@ pub fn apply_tone(rgb: &mut [[f32; 3]], exposure: f32, tone: Tone, white: f32) -
 }
 
 /// The mip chain of a texture of linear colour, `width × height` (row-major), the texture
-/// first: each level halves each side (rounding down, at least 1) and holds the mean of the
-/// 2×2 texels of the level above that it covers (an odd side's last row or column joins
-/// the texels before it, so that every texel counts), down to 1×1. A pixel that covers many texels reads the level of its footprint
-/// (trilinearly) instead of one texel's colour.
+/// first ([`mip_levels`]).
 pub fn mip_chain(width: u32, height: u32, rgb: &[[f32; 3]]) -> Vec<(u32, u32, Vec<[f32; 3]>)> {
     let mut chain = vec![(width, height, rgb.to_vec())];
-    loop {
-        let (w, h, src) = chain.last().expect("the texture itself");
-        let (w, h) = (*w as usize, *h as usize);
-        if w == 1 && h == 1 {
-            return chain;
-        }
-        let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
-        // Source texels [lo, hi) of level texel i along a side of n source texels.
-        let span = |i: usize, n: usize, m: usize| {
-            let lo = (i * n) / m;
-            let hi = ((i + 1) * n) / m;
-            (lo, hi.max(lo + 1))
+    chain.extend(mip_levels(width, height, |i| rgb[i]));
+    chain
+}
+
+/// The levels below a `width × height` texture whose texel `i` (row-major) has linear colour
+/// `at(i)`: each level halves each side (rounding down, at least 1) and holds the mean of the
+/// 2×2 texels of the level above that it covers (an odd side's last row or column joins the
+/// texels before it, so that every texel counts), down to 1×1. A pixel that covers many
+/// texels reads the level of its footprint (trilinearly) instead of one texel's colour. The
+/// texture itself is read through `at` once and not copied (an 8-bit texture need not be
+/// held in float).
+pub fn mip_levels(
+    width: u32,
+    height: u32,
+    at: impl Fn(usize) -> [f32; 3] + Sync,
+) -> Vec<(u32, u32, Vec<[f32; 3]>)> {
+    let mut levels: Vec<(u32, u32, Vec<[f32; 3]>)> = Vec::new();
+    let (mut w, mut h) = (width as usize, height as usize);
+    while w > 1 || h > 1 {
+        let next = match levels.last() {
+            Some((_, _, src)) => halve(w, h, |i| src[i]),
+            None => halve(w, h, &at),
         };
-        let mut out = vec![[0.0f32; 3]; nw * nh];
-        // Rows in parallel: a 4096×1024 texture's chain is made for every draw that blends it.
-        out.par_chunks_mut(nw).enumerate().for_each(|(y, row)| {
-            let (y0, y1) = span(y, h, nh);
-            for (x, texel) in row.iter_mut().enumerate() {
-                let (x0, x1) = span(x, w, nw);
-                let mut sum = [0.0f64; 3];
-                for sy in y0..y1 {
-                    for sx in x0..x1 {
-                        let p = src[sy * w + sx];
-                        for c in 0..3 {
-                            sum[c] += f64::from(finite_or_zero(p[c]));
-                        }
+        (w, h) = ((w / 2).max(1), (h / 2).max(1));
+        levels.push((w as u32, h as u32, next));
+    }
+    levels
+}
+
+/// The level below a `w × h` one whose texel `i` is `at(i)` ([`mip_levels`]).
+fn halve(w: usize, h: usize, at: impl Fn(usize) -> [f32; 3] + Sync) -> Vec<[f32; 3]> {
+    let (nw, nh) = ((w / 2).max(1), (h / 2).max(1));
+    // Source texels [lo, hi) of level texel i along a side of n source texels.
+    let span = |i: usize, n: usize, m: usize| {
+        let lo = (i * n) / m;
+        let hi = ((i + 1) * n) / m;
+        (lo, hi.max(lo + 1))
+    };
+    let mut out = vec![[0.0f32; 3]; nw * nh];
+    // Rows in parallel: a 4096×1024 texture's chain is made for every draw that blends it.
+    out.par_chunks_mut(nw).enumerate().for_each(|(y, row)| {
+        let (y0, y1) = span(y, h, nh);
+        for (x, texel) in row.iter_mut().enumerate() {
+            let (x0, x1) = span(x, w, nw);
+            let mut sum = [0.0f64; 3];
+            for sy in y0..y1 {
+                for sx in x0..x1 {
+                    let p = at(sy * w + sx);
+                    for c in 0..3 {
+                        sum[c] += f64::from(finite_or_zero(p[c]));
                     }
                 }
-                let n = ((y1 - y0) * (x1 - x0)) as f64;
-                *texel = sum.map(|s| (s / n) as f32);
             }
-        });
-        chain.push((nw as u32, nh as u32, out));
-    }
+            let n = ((y1 - y0) * (x1 - x0)) as f64;
+            *texel = sum.map(|s| (s / n) as f32);
+        }
+    });
+    out
 }
 
 /// Box-filters a supersampled frame: every `factor × factor` block of linear colour becomes

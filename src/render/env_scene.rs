@@ -43,15 +43,7 @@ impl Albedo {
     /// `scale` times the linear value of sRGB-encoded `bytes`.
     pub fn from_srgb8(width: u32, height: u32, bytes: &[[u8; 3]], scale: f64) -> Self {
         // The 256 codes' values once (a texel takes three lookups, not three powers).
-        let lin: [f32; 256] = std::array::from_fn(|c| {
-            let x = c as f64 / 255.0;
-            let l = if x <= 0.04045 {
-                x / 12.92
-            } else {
-                ((x + 0.055) / 1.055).powf(2.4)
-            };
-            (l * scale) as f32
-        });
+        let lin = crate::colour::srgb8_decode_table().map(|l| (f64::from(l) * scale) as f32);
         Albedo {
             width,
             height,

@@ -742,11 +742,11 @@ impl Renderer {
                 msg: format!("{w}×{h} texture; each side must be 1..={max} on this device"),
             });
         }
-        let linear = env_scene::Albedo::from_srgb8(w, h, rgb, 1.0);
-        let chain = crate::image_io::mip_chain(w, h, &linear.rgb);
+        let lut = crate::colour::srgb8_decode_table();
+        let below = crate::image_io::mip_levels(w, h, |i| rgb[i].map(|c| lut[usize::from(c)]));
         let levels: Vec<Vec<u8>> =
             std::iter::once(rgb.iter().flat_map(|p| [p[0], p[1], p[2], 255]).collect())
-                .chain(chain[1..].iter().map(|(_, _, px)| {
+                .chain(below.iter().map(|(_, _, px)| {
                     use rayon::prelude::*;
                     px.par_iter()
                         .flat_map_iter(|p| {
