@@ -484,10 +484,18 @@ impl TableOptions {
         }
         let w_nodes = self.w_nodes_for_field(kind, h_range_um, [region.lo[2], region.hi[2]]);
         let texel_bytes = self.format.texel_bytes();
+        // chebyshev-w read over a pixel's footprint also holds summed-area planes: three
+        // float32 sums a coefficient and node (counted where the device may not filter
+        // float32 and the levels take their place: they take less).
+        let summed = if kind == VariantKind::ChebyshevW && self.levels > 1 {
+            12 * w_nodes
+        } else {
+            0
+        };
         let e = region.extent();
         let bytes = |t: f64| {
             let nodes = |len: f64| ((len / t).ceil() + 1.0).max(2.0);
-            nodes(e[0]) * nodes(e[1]) * (w_nodes * texel_bytes) as f64
+            nodes(e[0]) * nodes(e[1]) * (w_nodes * texel_bytes + summed) as f64
         };
         // The smallest table (2×2 nodes) must fit, else no spacing does.
         if bytes(f64::INFINITY) > self.budget_bytes as f64 {
@@ -996,6 +1004,21 @@ mod tests {
             .spec(VariantKind::ChebyshevW, &m, 0.375, r)
             .unwrap();
         assert_eq!((spec.texel_uv, asked), (default_texel, None));
+        // Read over a pixel's footprint, the summed-area planes (12 bytes a coefficient and
+        // node) count against the budget too.
+        let summed = TableOptions {
+            levels: 6,
+            ..with(None, 8 << 20)
+        };
+        let (spec, _) = summed.spec(VariantKind::ChebyshevW, &m, 0.375, r).unwrap();
+        let (nu, nv) = spec.uv_nodes().unwrap();
+        let per_node = spec.w_nodes * (TableOptions::default().format.texel_bytes() + 12);
+        assert!(nu * nv * per_node <= 8 << 20);
+        let plain = with(None, 8 << 20)
+            .spec(VariantKind::ChebyshevW, &m, 0.375, r)
+            .unwrap()
+            .0;
+        assert!(spec.texel_uv > plain.texel_uv);
     }
 
     #[test]
