@@ -201,7 +201,7 @@ mod tests {
 
     /// A test table whose planes are `f(u, v)` and half of it.
     fn table(nu: usize, nv: usize, f: impl Fn(f64, f64) -> f64) -> ChebyshevW {
-        super::super::test_chebyshev_w(nu, nv, |i, k, j| {
+        super::super::representation::test_chebyshev_w(nu, nv, |i, k, j| {
             let u = -0.1 + i as f64 * 0.2 / (nu - 1) as f64;
             let v = -0.05 + k as f64 * 0.1 / (nv - 1) as f64;
             f(u, v) / (j + 1) as f64

@@ -513,6 +513,42 @@ impl GTable for Dhillon {
     }
 }
 
+/// A `chebyshev-w` table for unit tests: `nu × nv` nodes over a small region (u in ±0.1,
+/// v in ±0.05, w in [−2, 0]), two coefficient planes, plane `j`'s XYZ at node `(i, k)`
+/// `g, 2g, 3g` with `g = f(i, k, j)`.
+#[cfg(test)]
+pub(crate) fn test_chebyshev_w(
+    nu: usize,
+    nv: usize,
+    f: impl Fn(usize, usize, usize) -> f64,
+) -> ChebyshevW {
+    let region = Region {
+        lo: [-0.1, -0.05, -2.0],
+        hi: [0.1, 0.05, 0.0],
+    };
+    let coeffs: Vec<Vec<[f64; 3]>> = (0..2)
+        .map(|j| {
+            (0..nu * nv)
+                .map(|p| {
+                    let g = f(p % nu, p / nu, j);
+                    [g, 2.0 * g, 3.0 * g]
+                })
+                .collect()
+        })
+        .collect();
+    let splines = coeffs
+        .iter()
+        .map(|c| super::spline::spline_plane(c, nu, nv))
+        .collect();
+    ChebyshevW {
+        region,
+        nu,
+        nv,
+        coeffs,
+        splines,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

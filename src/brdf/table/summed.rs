@@ -13,8 +13,8 @@
 
 use rayon::prelude::*;
 
+use super::region::Region;
 use super::representation::{ChebyshevW, GTable};
-use super::Region;
 
 /// A `chebyshev-w` table with the summed-area planes of its coefficients. As a [`GTable`] it
 /// is the table itself (what the maps and the CPU model read, and what the GPU reads at a
@@ -131,9 +131,11 @@ mod tests {
     /// A test table whose two coefficient planes are `f(i, k)` at node `(i, k)` and a
     /// tenth of it.
     fn table(nu: usize, nv: usize, f: impl Fn(usize, usize) -> f64) -> Summed {
-        Summed::new(super::super::test_chebyshev_w(nu, nv, |i, k, j| {
-            f(i, k) / (1 + 9 * j) as f64
-        }))
+        Summed::new(super::super::representation::test_chebyshev_w(
+            nu,
+            nv,
+            |i, k, j| f(i, k) / (1 + 9 * j) as f64,
+        ))
     }
 
     /// `(u, v)` of node coordinate `(a, b)` (fractions of a spacing allowed).
@@ -184,7 +186,7 @@ mod tests {
                 std::array::from_fn(|k| (inv * (a[k] - b[k] - cc[k] + d[k])) as f64)
             })
             .collect();
-        crate::brdf::table::clenshaw(&means, t.base.w_hat(uvw[2]))
+        super::super::representation::clenshaw(&means, t.base.w_hat(uvw[2]))
     }
 
     fn f32_planes(t: &Summed) -> Vec<Vec<[f32; 3]>> {
