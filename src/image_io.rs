@@ -461,14 +461,6 @@ pub fn apply_tone(rgb: &mut [[f32; 3]], exposure: f32, tone: Tone, white: f32) -
     Ok(())
 }
 
-/// The mip chain of a texture of linear colour, `width × height` (row-major), the texture
-/// first ([`mip_levels`]).
-pub fn mip_chain(width: u32, height: u32, rgb: &[[f32; 3]]) -> Vec<(u32, u32, Vec<[f32; 3]>)> {
-    let mut chain = vec![(width, height, rgb.to_vec())];
-    chain.extend(mip_levels(width, height, |i| rgb[i]));
-    chain
-}
-
 /// The levels below a `width × height` texture whose texel `i` (row-major) has linear colour
 /// `at(i)`: each level halves each side (rounding down, at least 1) and holds the mean of the
 /// 2×2 texels of the level above that it covers (an odd side's last row or column joins the
@@ -605,6 +597,13 @@ pub fn delta_e_over(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The texture, then [`mip_levels`].
+    fn mip_chain(width: u32, height: u32, rgb: &[[f32; 3]]) -> Vec<(u32, u32, Vec<[f32; 3]>)> {
+        let mut chain = vec![(width, height, rgb.to_vec())];
+        chain.extend(mip_levels(width, height, |i| rgb[i]));
+        chain
+    }
 
     #[test]
     fn a_mip_chain_halves_to_one_texel_and_keeps_the_mean() {

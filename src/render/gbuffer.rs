@@ -304,9 +304,12 @@ fn albedo_image(dev: &Arc<Device>, albedo: Option<&Albedo>) -> Result<Image> {
         (vk::Format::R16G16B16A16_SFLOAT, 8)
     };
     // The mip chain, so a G-buffer pixel reads the albedo over its footprint.
-    let levels: Vec<Vec<u8>> = crate::image_io::mip_chain(w, h, &rgb)
-        .iter()
-        .map(|(_, _, px)| encode(px))
+    let levels: Vec<Vec<u8>> = std::iter::once(encode(&rgb))
+        .chain(
+            crate::image_io::mip_levels(w, h, |i| rgb[i])
+                .iter()
+                .map(|(_, _, px)| encode(px)),
+        )
         .collect();
     let levels: Vec<&[u8]> = levels.iter().map(Vec::as_slice).collect();
     Image::sampled_with_mips(

@@ -728,7 +728,7 @@ impl Renderer {
 
     /// Uploads a scene texture's pixels (sRGB bytes) into an `R8G8B8A8_SRGB` image, so
     /// sampling returns linear colour, with its mip chain averaged in linear colour
-    /// ([`crate::image_io::mip_chain`]): a pixel that covers many texels reads their mean.
+    /// ([`crate::image_io::mip_levels`]): a pixel that covers many texels reads their mean.
     fn upload_texture(
         &self,
         spec: &crate::scene::TextureSpec,

@@ -549,32 +549,29 @@ impl TableGpu {
                 levels.get(i).map_or([0.0; 4], |l| l.map(|x| x as f32))
             }),
         };
-        let summed_desc = |w: usize, h: usize| ImageDesc {
-            format: vk::Format::R32G32B32A32_SFLOAT,
-            width: w as u32,
-            height: h as u32,
-            layers: layers as u32,
-            usage: vk::ImageUsageFlags::SAMPLED,
-            aspect: vk::ImageAspectFlags::COLOR,
-            view_type,
-        };
-        let summed = if !p.summed.is_empty() {
-            Image::sampled_with_data(
-                dev,
-                &format!("{kind} summed table"),
-                summed_desc(p.nu + 1, p.nv + 1),
-                16,
-                &p.summed,
-            )?
+        // A table without summed planes binds one placeholder texel a layer.
+        let placeholder;
+        let (sw, sh, summed_bytes, what) = if p.summed.is_empty() {
+            placeholder = vec![0u8; 16 * layers];
+            (1, 1, placeholder.as_slice(), "summed table (none)")
         } else {
-            Image::sampled_with_data(
-                dev,
-                &format!("{kind} summed table (none)"),
-                summed_desc(1, 1),
-                16,
-                &vec![0u8; 16 * layers],
-            )?
+            (p.nu + 1, p.nv + 1, p.summed.as_slice(), "summed table")
         };
+        let summed = Image::sampled_with_data(
+            dev,
+            &format!("{kind} {what}"),
+            ImageDesc {
+                format: vk::Format::R32G32B32A32_SFLOAT,
+                width: sw as u32,
+                height: sh as u32,
+                layers: layers as u32,
+                usage: vk::ImageUsageFlags::SAMPLED,
+                aspect: vk::ImageAspectFlags::COLOR,
+                view_type,
+            },
+            16,
+            summed_bytes,
+        )?;
         let info = Buffer::with_data(
             dev,
             &format!("{kind} table info"),
@@ -625,18 +622,21 @@ impl TableGpu {
 /// (`levels > 1`) and the device filters float32 linearly (the sums need its precision);
 /// elsewhere it reads the levels pre-filtered for the footprint.
 pub(super) fn reads_boxes(dev: &Device, setup: &DrawSetup<'_>) -> bool {
+    setup.table.levels > 1 && filters_linearly(dev, vk::Format::R32G32B32A32_SFLOAT)
+}
+
+/// Whether the device samples `format` with linear filtering.
+fn filters_linearly(dev: &Device, format: vk::Format) -> bool {
     let linear =
         vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
-    setup.table.levels > 1 && dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear)
+    dev.supports_format(format, linear)
 }
 
 /// `format` where the device filters it linearly (float32 falls back to float16), and its
 /// Vulkan format; an error where it filters neither.
 fn filterable_format(dev: &Device, format: TableFormat) -> Result<(TableFormat, vk::Format)> {
-    let linear =
-        vk::FormatFeatureFlags::SAMPLED_IMAGE | vk::FormatFeatureFlags::SAMPLED_IMAGE_FILTER_LINEAR;
     let format = match format {
-        TableFormat::Rgba32f if dev.supports_format(vk::Format::R32G32B32A32_SFLOAT, linear) => {
+        TableFormat::Rgba32f if filters_linearly(dev, vk::Format::R32G32B32A32_SFLOAT) => {
             TableFormat::Rgba32f
         }
         _ => TableFormat::Rgba16f,
@@ -645,7 +645,7 @@ fn filterable_format(dev: &Device, format: TableFormat) -> Result<(TableFormat, 
         TableFormat::Rgba32f => vk::Format::R32G32B32A32_SFLOAT,
         TableFormat::Rgba16f => vk::Format::R16G16B16A16_SFLOAT,
     };
-    if !dev.supports_format(vk_format, linear) {
+    if !filters_linearly(dev, vk_format) {
         return Err(Error::invalid(
             "table format",
             format!("{} cannot filter {vk_format:?} linearly", dev.info.name),
