@@ -629,7 +629,7 @@ impl Draw {
         let frame = self.frames.begin()?;
         if let Some(ms) = frame.previous_gpu_ms {
             self.timing.add_gpu(ms);
-            self.env.frame_gpu_ms(ms);
+            self.env.frame_gpu_ms(ms, FRAMES_IN_FLIGHT);
         }
         Ok(frame)
     }

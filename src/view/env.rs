@@ -122,6 +122,8 @@ struct View {
     done: u32,
     /// Frames that added samples.
     frames: u32,
+    /// Frames that drew this picture (added samples or resolved it).
+    recorded: u32,
     /// The cap was reached and said.
     reported: bool,
     cleared: bool,
@@ -249,9 +251,15 @@ impl EnvView {
         self.on() && self.view.is_some()
     }
 
-    /// The GPU time of a frame that drew the picture: the batch follows it.
-    pub fn frame_gpu_ms(&mut self, ms: f64) {
-        if !self.drawing() {
+    /// The GPU time read as a frame begins, that of the frame `frames_in_flight` before it:
+    /// the batch follows it where that frame drew the picture (the picture's first frames
+    /// read the times of frames that drew the passes instead).
+    pub fn frame_gpu_ms(&mut self, ms: f64, frames_in_flight: usize) {
+        let timed_picture = self
+            .view
+            .as_ref()
+            .is_some_and(|v| v.recorded as usize >= frames_in_flight);
+        if !self.drawing() || !timed_picture {
             return;
         }
         if ms < 0.5 * FRAME_MS {
@@ -672,6 +680,7 @@ impl EnvView {
             map: map_picture,
             done: 0,
             frames: 0,
+            recorded: 0,
             reported: false,
             cleared: false,
             started: Instant::now(),
@@ -711,6 +720,7 @@ impl EnvView {
                 "no environment picture to draw",
             ));
         };
+        view.recorded += 1;
         let raw = dev.raw();
         let pictures: Vec<(&Picture, &EnvKernel)> = std::iter::once((&view.mesh, &kernels.scene))
             .chain(view.map.as_ref().map(|m| (m, &kernels.map)))
