@@ -210,9 +210,20 @@ pub struct LeftOut {
     pub wavelengths: Option<WavelengthsLeft>,
     /// The DFT texels uploaded (`flss`, `nmm`).
     pub texels: Option<TexelsLeft>,
+    /// The series terms of a table kept (`chebyshev-w`'s Chebyshev terms in `w`).
+    pub terms: Option<TermsLeft>,
     /// GPU memory of the variant's resources as built, and keeping everything (bytes).
     pub gpu_bytes: usize,
     pub gpu_bytes_keep_all: usize,
+}
+
+/// A table's series terms kept and left out at `tolerance` (the material's, relative to
+/// the table's largest `|c_0|`): the terms left out add at most `tail · peak` to `G` at a
+/// node ([`crate::brdf::table::Truncation`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct TermsLeft {
+    pub truncation: crate::brdf::table::Truncation,
+    pub tolerance: f64,
 }
 
 /// Wavelengths kept and left out.
@@ -343,6 +354,21 @@ impl Report<'_> {
                 self.plan.terms,
                 if self.plan.auto { "auto" } else { "--terms" }
             ));
+        } else if let Some(TermsLeft {
+            truncation: t,
+            tolerance,
+        }) = self.left.and_then(|l| l.terms)
+        {
+            parts.push(if t.kept < t.of {
+                format!(
+                    "{} of {} series terms in w (adding ≤ {:.1e} of the peak ≤ {tolerance:.0e})",
+                    t.of - t.kept,
+                    t.of,
+                    t.tail,
+                )
+            } else {
+                format!("no series terms (all {} above {tolerance:.0e})", t.of)
+            });
         } else if self.left.is_some() {
             parts.push("no series terms (exact table)".to_string());
         }
@@ -447,6 +473,19 @@ impl Report<'_> {
                     w.dropped_weight[1],
                     w.dropped_weight[2],
                     w.tolerance
+                ));
+            }
+            if let Some(TermsLeft {
+                truncation: t,
+                tolerance,
+            }) = l.terms
+            {
+                out.push(format!(
+                    "series terms in w: kept T_0..T_{} of T_0..T_{}; the rest add at most {:.1e} of the table's largest c_0 ({:.3e}) to G (tolerance {tolerance:.0e})",
+                    t.kept.saturating_sub(1),
+                    t.of.saturating_sub(1),
+                    t.tail,
+                    t.peak
                 ));
             }
             if let Some(t) = &l.texels {
@@ -601,6 +640,65 @@ mod tests {
             "380–390, 700, 780"
         );
         assert_eq!(ranges_nm(&[], 5.0), "none");
+    }
+
+    #[test]
+    fn the_line_says_which_series_terms_were_left_out() {
+        let plan = TermPlan {
+            expansion: crate::spectrum::Expansion::Chebyshev,
+            terms: 10,
+            auto: true,
+            tolerance: 1e-3,
+            precision: crate::brdf::truncation::Precision::F32,
+            reach: crate::brdf::truncation::Reach::ALL,
+            a: 1.0,
+            truncation: 1e-4,
+            rounding: 1e-5,
+            window: 0.0,
+            warnings: Vec::new(),
+        };
+        let left = |kept: usize| LeftOut {
+            wavelengths: None,
+            texels: None,
+            terms: Some(TermsLeft {
+                truncation: crate::brdf::table::Truncation {
+                    kept,
+                    of: 12,
+                    tail: if kept < 12 { 6.7e-4 } else { 0.0 },
+                    peak: 0.31,
+                },
+                tolerance: 1e-3,
+            }),
+            gpu_bytes: 3,
+            gpu_bytes_keep_all: 9,
+        };
+        let report = |l: &LeftOut| {
+            let r = Report {
+                left: Some(l),
+                variant: "chebyshev-w",
+                plan: &plan,
+                features: Vec::new(),
+                gpu_bytes: l.gpu_bytes,
+                keep_all: false,
+            };
+            (r.line(), r.details())
+        };
+        let (line, details) = report(&left(4));
+        assert!(
+            line.contains("8 of 12 series terms in w (adding ≤ 6.7e-4 of the peak ≤ 1e-3)"),
+            "{line}"
+        );
+        assert!(
+            details
+                .iter()
+                .any(|d| d.contains("kept T_0..T_3 of T_0..T_11")),
+            "{details:?}"
+        );
+        let (line, _) = report(&left(12));
+        assert!(
+            line.contains("no series terms (all 12 above 1e-3)"),
+            "{line}"
+        );
     }
 
     #[test]

@@ -66,7 +66,26 @@ fn map_both_ways(kind: VariantKind, heightfield: &str, theta: f64, table: Option
         if let Some(t) = &all.texels {
             assert_eq!(t.kept, t.stored);
         }
+        assert!(all.terms.is_none(), "{kind}: keeping all left terms out");
     }
+    // chebyshev-w leaves out the terms in w whose sum stays within the tolerance of the
+    // peak, and says so; no other variant has such terms.
+    let series = match &rec.terms {
+        Some(t) => {
+            assert_eq!(kind, VariantKind::ChebyshevW);
+            let t = t.truncation;
+            assert!(
+                t.kept < t.of && t.tail > 0.0 && t.tail <= m.tolerance,
+                "{t:?}"
+            );
+            assert!(left.variant.name.contains(&format!(" of {}", t.of)));
+            t.tail * t.peak
+        }
+        None => {
+            assert_ne!(kind, VariantKind::ChebyshevW, "no record of its terms");
+            0.0
+        }
+    };
     // The wavelengths are leave_out::wavelengths_needed's, for the colour table it loops
     // over (the material's per pixel, the table step's in a build).
     let w = rec.wavelengths.as_ref().unwrap();
@@ -104,9 +123,10 @@ fn map_both_ways(kind: VariantKind, heightfield: &str, theta: f64, table: Option
         assert_eq!(full.variant.gpu_bytes, rec.gpu_bytes_keep_all);
     }
 
-    // Per pixel: the difference is the left-out wavelengths' share, at most C · weight. A
-    // table interpolates that share between its nodes with a cubic B-spline in (u, v) and a
-    // Chebyshev series in w, which can overshoot the nodes' values a little.
+    // Per pixel: the difference is the left-out wavelengths' share, at most C · weight, and
+    // the left-out terms' (|T_j| ≤ 1), at most C · tail · peak. A table interpolates those
+    // between its nodes with a cubic B-spline in (u, v) and a Chebyshev series in w, which
+    // can overshoot the nodes' values a little.
     let overshoot = if rec.texels.is_some() { 1.01 } else { 1.5 };
     let max = full.rgb.iter().map(|p| p[1]).fold(0.0f32, f32::max) as f64;
     assert!(max > 1e-3, "{kind}: an empty map tests nothing");
@@ -132,7 +152,7 @@ fn map_both_ways(kind: VariantKind, heightfield: &str, theta: f64, table: Option
             let c = diffract::brdf::gain(wi, wr, &p.shading);
             for ch in 0..3 {
                 let d = (a[ch] as f64 - b[ch] as f64).abs();
-                let bound = c * w.dropped_weight[ch] * overshoot + 2e-6 * max;
+                let bound = c * (w.dropped_weight[ch] + series) * overshoot + 2e-6 * max;
                 assert!(
                     d <= bound,
                     "{kind}: pixel ({i},{j}) channel {ch}: {} vs {} (bound {bound:.2e})",

@@ -198,12 +198,13 @@ pub fn run(
     let inputs = SceneInputs::load(scene, true)?;
     let prepared = prepare(base, cache_dir)?;
     r.set_variant(VariantKind::DEFAULT);
-    // Unfiltered: at that rate the samples themselves average each pixel's footprint.
+    // Unfiltered: at that rate the samples themselves average each pixel's footprint. With
+    // every term and wavelength kept, so that the rows' error includes what they leave out.
     r.set_table_options(TableOptions {
         levels: 1,
         ..TableOptions::RENDER
     });
-    r.set_leave_out(true);
+    r.set_leave_out(false);
     eprintln!(
         "profile: picture reference: {} at {}×{} samples a pixel",
         VariantKind::DEFAULT.resolve().name(),

@@ -334,8 +334,9 @@ impl EnvLighting {
                 Ok(sampled.slices)
             },
         )?;
-        let (table, dropped) =
+        let (table, truncation) =
             ChebyshevW::from_nodes_within(spec.region, &slices, Some(TERM_TOLERANCE));
+        let dropped = truncation.of - truncation.kept;
         drop(slices);
         let last = table.decay().last().copied().unwrap_or(0.0);
         if dropped == 0 && last > W_TOLERANCE {

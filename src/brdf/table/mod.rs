@@ -32,7 +32,7 @@ pub use nodes::{
     chebyshev_nodes, chebyshev_w_nodes, uniform_nodes, CHEBYSHEV_W_TOLERANCE, MIN_CHEBYSHEV_W_NODES,
 };
 pub use region::{Region, Response, Slices, TableSpec, MAX_NODES_UV, MAX_NODES_W, MAX_SAMPLES};
-pub use representation::{clenshaw, ChebyshevW, Dhillon, GTable, Volume, F32_ROUNDOFF};
+pub use representation::{clenshaw, ChebyshevW, Dhillon, GTable, Truncation, Volume, F32_ROUNDOFF};
 pub use sample::{
     sample_g, sample_g_kept, sample_g_kept_in, sample_g_lines, sample_g_lines_in, Sampled,
     FAST_BUILD_TOLERANCE,

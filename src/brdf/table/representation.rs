@@ -195,12 +195,12 @@ impl ChebyshevW {
 
     /// [`Self::from_nodes`] with its highest terms dropped as [`Self::truncate`] drops
     /// them at `tolerance` before the splines are fitted (only the kept terms are fitted);
-    /// also the terms dropped. `None` keeps every term.
+    /// also what was dropped. `None` keeps every term.
     pub fn from_nodes_within(
         region: Region,
         slices: &Slices,
         tolerance: Option<f64>,
-    ) -> (Self, usize) {
+    ) -> (Self, Truncation) {
         let k = slices.data.len();
         let n = slices.nu * slices.nv;
         let coeffs = (0..k)
@@ -230,13 +230,21 @@ impl ChebyshevW {
             coeffs,
             splines: Vec::new(),
         };
+        let decay = table.decay();
+        let peak = table.peak_c0();
         let dropped = tolerance.map_or(0, |t| table.truncate(t));
+        let truncation = Truncation {
+            kept: k - dropped,
+            of: k,
+            tail: decay[k - dropped..].iter().sum(),
+            peak,
+        };
         table.splines = table
             .coeffs
             .par_iter()
             .map(|c| spline_plane(c, slices.nu, slices.nv))
             .collect();
-        (table, dropped)
+        (table, truncation)
     }
 
     /// `ŵ ∈ [−1, 1]` of `w`.
@@ -248,9 +256,13 @@ impl ChebyshevW {
     /// The largest `|c_j|` (over texels and channels) relative to the largest `|c_0|`, per
     /// `j`: how fast the series decays.
     pub fn decay(&self) -> Vec<f64> {
-        let max_of = |c: &Vec<[f64; 3]>| c.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()));
-        let c0 = max_of(&self.coeffs[0]).max(f64::MIN_POSITIVE);
-        self.coeffs.iter().map(|c| max_of(c) / c0).collect()
+        let c0 = self.peak_c0().max(f64::MIN_POSITIVE);
+        self.coeffs.iter().map(|c| largest(c) / c0).collect()
+    }
+
+    /// The largest `|c_0|` over texels and channels: what [`Self::decay`] is relative to.
+    pub fn peak_c0(&self) -> f64 {
+        self.coeffs.first().map_or(0.0, |c| largest(c))
     }
 
     /// Drops the highest terms while the sum of their [`Self::decay`] stays within
@@ -269,6 +281,24 @@ impl ChebyshevW {
         self.splines.truncate(keep);
         dropped
     }
+}
+
+/// The largest magnitude of a plane, over texels and channels.
+fn largest(plane: &[[f64; 3]]) -> f64 {
+    plane.iter().flatten().fold(0.0f64, |m, x| m.max(x.abs()))
+}
+
+/// The terms [`ChebyshevW::from_nodes_within`] kept of a series, and the most those it
+/// dropped add to `G`: `tail · peak` (`|T_j| ≤ 1`), per channel, at the nodes.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Truncation {
+    pub kept: usize,
+    /// The terms the nodes gave.
+    pub of: usize,
+    /// The dropped terms' [`ChebyshevW::decay`] summed (0 when none were).
+    pub tail: f64,
+    /// The largest `|c_0|` ([`ChebyshevW::peak_c0`]), in `G`'s units.
+    pub peak: f64,
 }
 
 /// Clenshaw's recurrence for `Σ_j c_j T_j(x)`.

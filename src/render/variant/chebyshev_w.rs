@@ -52,7 +52,7 @@ impl Variant for ChebyshevW {
     }
 
     fn fetch_formula(&self) -> &'static str {
-        "4⌈3K/4⌉ (K coefficients, four values a texel, four bilinear fetches a spline)"
+        "4⌈3K/4⌉ (K coefficients, at most the w nodes: those the tolerance keeps; four values a texel, four bilinear fetches a spline)"
     }
 
     fn profile_presets(&self) -> &'static [Preset] {
@@ -84,13 +84,17 @@ impl Variant for ChebyshevW {
             setup,
             LAYOUT.layout,
             table::ChebyshevW::nodes,
-            |r, s| -> Result<Box<dyn table::GTable>> {
-                let base = table::ChebyshevW::from_nodes(r, &s);
-                Ok(if super::table::reads_boxes(dev, setup) {
+            |r, s| -> Result<(Box<dyn table::GTable>, _)> {
+                // The terms whose sum stays within the material's tolerance of the peak
+                // are left out (and their planes with them), as wavelengths are.
+                let (base, terms) =
+                    table::ChebyshevW::from_nodes_within(r, &s, setup.leave_out_tolerance());
+                let table: Box<dyn table::GTable> = if super::table::reads_boxes(dev, setup) {
                     Box::new(table::Summed::new(base))
                 } else {
                     Box::new(table::Levelled::new(base, setup.table.levels))
-                })
+                };
+                Ok((table, Some(terms)))
             },
         )
     }

@@ -94,7 +94,7 @@ impl Variant for Dhillon {
                     0.1 * tolerance,
                 );
                 d.check(tolerance)?;
-                Ok(d)
+                Ok((d, None))
             },
         )
     }

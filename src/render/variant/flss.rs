@@ -169,7 +169,7 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
     let stack = prepared.load_terms(setup.report)?;
     let (selection, wavelengths) = WavelengthsLeft::of(
         &setup.colour(&prepared.colour),
-        setup.lambda_tolerance(),
+        setup.leave_out_tolerance(),
         "per pixel",
     );
     // A single-wavelength map may ask for any λ; the scene's colour only for the kept ones.
@@ -208,6 +208,7 @@ pub(super) fn prepare_terms(dev: &Arc<Device>, setup: &DrawSetup<'_>) -> Result<
             stored: stack.band,
         }),
         wavelengths: Some(wavelengths),
+        terms: None,
         gpu_bytes: bytes(&band),
         gpu_bytes_keep_all: bytes(&stack.band),
     };

@@ -175,7 +175,8 @@ impl VariantKind {
             let nodes = spec.uv_nodes()?;
             let dims = (nodes.0 + 2 * t.ghosts, nodes.1 + 2 * t.ghosts);
             let mut f = table::footprint(t.layout, spec.w_nodes, nodes, dims, inputs.table.format);
-            f.at_most = t.fitted;
+            // chebyshev-w leaves out the terms its table does not need, once built.
+            f.at_most = t.fitted || (self == VariantKind::ChebyshevW && inputs.leave_out);
             Ok(f)
         })())
     }
@@ -577,8 +578,9 @@ pub(crate) struct DrawSetup<'a> {
 }
 
 impl DrawSetup<'_> {
-    /// The tolerance wavelengths are left out at, `None` when everything is kept.
-    pub fn lambda_tolerance(&self) -> Option<f64> {
+    /// The tolerance wavelengths and a table's series terms are left out at, `None` when
+    /// everything is kept.
+    pub fn leave_out_tolerance(&self) -> Option<f64> {
         self.leave_out.then_some(self.prepared.material.tolerance)
     }
 

@@ -7,15 +7,16 @@
 use std::path::Path;
 
 use super::TableFormat;
-use crate::brdf::table::Region;
+use crate::brdf::table::{Region, Truncation};
 use crate::cache::{mark_used, CacheDir, Fnv1a, PACKED_FILES};
 use crate::report::Report;
 
 const MAGIC: &[u8; 8] = b"DIFFPACK";
 /// Bump when the layout of the texels or of the file changes.
-const VERSION: u64 = 3;
-/// Header: magic, version, key, 8 sizes, format, 6 region bounds, byte count.
-const HEADER: usize = 8 + 8 + 8 + 8 * 8 + 8 + 6 * 8 + 8;
+const VERSION: u64 = 4;
+/// Header: magic, version, key, 8 sizes, format, 6 region bounds, the series' truncation
+/// (4 words), byte count.
+const HEADER: usize = 8 + 8 + 8 + 8 * 8 + 8 + 6 * 8 + 4 * 8 + 8;
 
 /// The texels of a table as one image: `planes` coefficient planes of `nu × nv` nodes,
 /// stored `pu × pv` texels a layer in `layers` layers of `format`, over `region`, with
@@ -36,6 +37,9 @@ pub struct Packed {
     /// Summed-area planes (`(nu + 1) × (nv + 1)` texels, `layers` layers, float32) for box
     /// reads at a pixel's footprint; empty where the table has none.
     pub summed: Vec<u8>,
+    /// The series terms kept of those the nodes gave (`chebyshev-w`); `None` for a table
+    /// that is no such series.
+    pub terms: Option<Truncation>,
 }
 
 impl Packed {
@@ -63,6 +67,21 @@ impl Packed {
         }
         out.extend_from_slice(&format.to_le_bytes());
         for v in self.region.lo.iter().chain(&self.region.hi) {
+            out.extend_from_slice(&v.to_le_bytes());
+        }
+        // `of` = 0: no series.
+        let t = self.terms.unwrap_or(Truncation {
+            kept: 0,
+            of: 0,
+            tail: 0.0,
+            peak: 0.0,
+        });
+        for v in [
+            t.of as u64,
+            t.kept as u64,
+            t.tail.to_bits(),
+            t.peak.to_bits(),
+        ] {
             out.extend_from_slice(&v.to_le_bytes());
         }
         out.extend_from_slice(&(self.bytes.len() as u64).to_le_bytes());
@@ -116,12 +135,21 @@ impl Packed {
             region,
             bytes: Vec::new(),
             summed: Vec::new(),
+            terms: (word(17) > 0).then(|| Truncation {
+                of: word(17) as usize,
+                kept: word(18) as usize,
+                tail: real(19),
+                peak: real(20),
+            }),
         };
+        if p.terms.is_some_and(|t| t.kept != p.planes || t.kept > t.of) {
+            return Err("series terms do not match the planes".into());
+        }
         let expected =
             p.pu.checked_mul(p.pv)
                 .and_then(|t| t.checked_mul(p.layers))
                 .and_then(|t| t.checked_mul(format.texel_bytes()));
-        let count = size(17)?;
+        let count = size(21)?;
         if expected != Some(count) || body.len() < HEADER + count + 8 {
             return Err("texel count does not match its sizes".into());
         }
@@ -211,6 +239,7 @@ mod tests {
             },
             bytes: (0..5 * 4 * 8).map(|i| i as u8).collect(),
             summed: Vec::new(),
+            terms: None,
         }
     }
 
@@ -234,6 +263,28 @@ mod tests {
         };
         let data = with.encode(7);
         assert_eq!(Packed::decode(&data, 7), Ok(with.clone()));
+        // A truncated series keeps its record; one that disagrees with the planes is refused.
+        let truncated = Packed {
+            terms: Some(Truncation {
+                kept: 2,
+                of: 5,
+                tail: 3.5e-4,
+                peak: 0.25,
+            }),
+            ..packed()
+        };
+        let data = truncated.encode(7);
+        assert_eq!(Packed::decode(&data, 7), Ok(truncated.clone()));
+        let wrong = Packed {
+            planes: 3,
+            layers: 3,
+            bytes: vec![0; 5 * 4 * 8 * 3],
+            ..truncated
+        };
+        assert!(
+            Packed::decode(&wrong.encode(7), 7).is_err(),
+            "terms ≠ planes"
+        );
         let short = Packed {
             summed: vec![1; 4 * 3 * 16 - 16],
             ..packed()

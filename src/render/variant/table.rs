@@ -13,13 +13,13 @@ use super::{
     CpuModel, DrawSetup, PreparedVariant, SpecConstant, Specialisation, TableFormat, TableOptions,
     VariantKind, VariantStats,
 };
-use crate::brdf::table::{prefilter_disc, GTable, Levelled, Region, Slices, TableSpec};
+use crate::brdf::table::{prefilter_disc, GTable, Levelled, Region, Slices, TableSpec, Truncation};
 use crate::colour::ColourTable;
 use crate::gpu::formats::f32_to_f16;
 use crate::gpu::memory::{Buffer, Image, ImageDesc, Pod, Sampler};
 use crate::gpu::pipeline::{Binding, Resource};
 use crate::gpu::Device;
-use crate::leave_out::{LeftOut, WavelengthsLeft};
+use crate::leave_out::{LeftOut, TermsLeft, WavelengthsLeft};
 use crate::{Error, Result};
 
 use super::packed::{self, Packed};
@@ -186,15 +186,15 @@ struct TableInfoUbo {
 unsafe impl Pod for TableInfoUbo {}
 
 /// Samples `G` at the `w` nodes `nodes(spec)` (through the table cache), assembles the
-/// representation of `kind` from the samples (which may refuse it), and uploads it; a
-/// progress bar shows the build on a terminal.
+/// representation of `kind` from the samples (which may refuse it; a series says which of
+/// its terms it kept), and uploads it; a progress bar shows the build on a terminal.
 pub(crate) fn prepare<T: GTable + 'static>(
     kind: VariantKind,
     dev: &Arc<Device>,
     setup: &DrawSetup<'_>,
     layout: Layout,
     nodes: fn(&TableSpec) -> Vec<f64>,
-    assemble: impl FnOnce(Region, Slices) -> Result<T>,
+    assemble: impl FnOnce(Region, Slices) -> Result<(T, Option<Truncation>)>,
 ) -> Result<Box<dyn PreparedVariant>> {
     let start = Instant::now();
     let material = &setup.prepared.material;
@@ -237,7 +237,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
     // Leaving out: the build integrates only the wavelengths whose weight matters.
     let (selection, wavelengths) = WavelengthsLeft::of(
         &setup.colour(&ColourTable::new(spec.step_nm)?),
-        setup.lambda_tolerance(),
+        setup.leave_out_tolerance(),
         "in the table build",
     );
     let keep = setup.leave_out.then_some(selection.keep.as_slice());
@@ -254,7 +254,7 @@ pub(crate) fn prepare<T: GTable + 'static>(
         if let Some(cached) = packed::load(dir, key, (nu, nv), most, setup.report) {
             let mut gpu = TableGpu::from_packed(kind, dev, &spec, &cached, layout, start)?;
             let built = crate::render::table_build::Built::Cached.to_string();
-            finish_stats(&mut gpu, built, setup, wavelengths);
+            finish_stats(&mut gpu, built, setup, wavelengths, layout);
             return Ok(Box::new(gpu));
         }
     }
@@ -296,13 +296,20 @@ pub(crate) fn prepare<T: GTable + 'static>(
     if smoothed {
         smooth_slices(&mut samples);
     }
-    let table = assemble(spec.region, samples)?;
-    let (mut gpu, texels) =
-        TableGpu::upload(kind, dev, &spec, &table, layout, setup.table.format, start)?;
+    let (table, terms) = assemble(spec.region, samples)?;
+    let (mut gpu, texels) = TableGpu::upload(
+        kind,
+        dev,
+        &spec,
+        (&table, terms),
+        layout,
+        setup.table.format,
+        start,
+    )?;
     if let (Some(key), Some(dir)) = (packed_key, setup.cache_dir) {
         packed::store(dir, key, texels, setup.report);
     }
-    finish_stats(&mut gpu, built.to_string(), setup, wavelengths);
+    finish_stats(&mut gpu, built.to_string(), setup, wavelengths, layout);
     if setup.keep_model {
         gpu.model = Some(TableModel(Box::new(table)));
     }
@@ -327,7 +334,7 @@ pub(crate) fn upload_built(
         kind,
         dev,
         spec,
-        table,
+        (table, None),
         layout.layout,
         format,
         Instant::now(),
@@ -341,18 +348,31 @@ fn finish_stats(
     built: String,
     setup: &DrawSetup<'_>,
     wavelengths: WavelengthsLeft,
+    layout: Layout,
 ) {
     gpu.stats.table_build = Some(built);
     gpu.stats.disc_prefiltered = setup.disc.is_some();
     if gpu.stats.disc_prefiltered {
         gpu.stats.name.push_str(" sun's disc pre-filtered");
     }
-    // The table's size does not depend on the wavelengths: the saving is build time.
+    // The table's size does not depend on the wavelengths: the saving is build time. The
+    // terms left out save their layers (the planes and the sums alike).
+    let terms = gpu.series.zip(setup.leave_out_tolerance());
+    let all_bytes = match terms {
+        Some((t, _)) => {
+            gpu.stats.gpu_bytes * layer_count(t.of, layout) / layer_count(t.kept, layout).max(1)
+        }
+        None => gpu.stats.gpu_bytes,
+    };
     gpu.left_out = Some(LeftOut {
         wavelengths: Some(wavelengths),
         texels: None,
+        terms: terms.map(|(truncation, tolerance)| TermsLeft {
+            truncation,
+            tolerance,
+        }),
         gpu_bytes: gpu.stats.gpu_bytes,
-        gpu_bytes_keep_all: gpu.stats.gpu_bytes,
+        gpu_bytes_keep_all: all_bytes,
     });
 }
 
@@ -399,6 +419,10 @@ fn packed_key(
     if kind == VariantKind::ChebyshevW && reads_boxes(dev, setup) {
         h.bytes(b"summed-area planes");
     }
+    if let (VariantKind::ChebyshevW, Some(t)) = (kind, setup.leave_out_tolerance()) {
+        h.bytes(b"series terms within");
+        h.u64(t.to_bits());
+    }
     let (format, _) = filterable_format(dev, setup.table.format)?;
     h.bytes(format!("{format:?}").as_bytes());
     Ok(Some(h.finish()))
@@ -429,6 +453,8 @@ struct TableGpu {
     model: Option<TableModel>,
     left_out: Option<LeftOut>,
     terms: u32,
+    /// What a series kept of its terms.
+    series: Option<Truncation>,
     /// Levels of its table pre-filtered for a pixel's footprint (1: none).
     levels: usize,
     info: Buffer,
@@ -442,12 +468,13 @@ struct TableGpu {
 
 impl TableGpu {
     /// Packs `table`'s planes for `layout` in `format` (where the device filters it) and
-    /// uploads them ([`Self::from_packed`]); also the packed texels, for the cache.
+    /// uploads them ([`Self::from_packed`]); also the packed texels, for the cache. `terms`:
+    /// what a series kept of its terms.
     fn upload(
         kind: VariantKind,
         dev: &Arc<Device>,
         spec: &TableSpec,
-        table: &dyn GTable,
+        (table, terms): (&dyn GTable, Option<Truncation>),
         layout: Layout,
         format: TableFormat,
         start: Instant,
@@ -472,6 +499,7 @@ impl TableGpu {
             summed: table.summed().map_or_else(Vec::new, |s| {
                 texel_bytes_of(&s, layout, fp.layers, TableFormat::Rgba32f)
             }),
+            terms,
         };
         debug_assert_eq!(packed.bytes.len(), fp.bytes);
         let gpu = Self::from_packed(kind, dev, spec, &packed, layout, start)?;
@@ -583,8 +611,12 @@ impl TableGpu {
             left_out: None,
             stats: VariantStats {
                 name: format!(
-                    "{kind} K={} {}×{} texel {:.4} dλ={} {format:?}{}",
+                    "{kind} K={}{} {}×{} texel {:.4} dλ={} {format:?}{}",
                     p.planes,
+                    match p.terms {
+                        Some(t) if t.kept < t.of => format!(" of {}", t.of),
+                        _ => String::new(),
+                    },
                     p.nu,
                     p.nv,
                     spec.texel_uv,
@@ -602,6 +634,7 @@ impl TableGpu {
                 disc_prefiltered: false,
             },
             terms: p.planes as u32,
+            series: p.terms,
             levels: level_count,
             info,
             sampler: Sampler::new(

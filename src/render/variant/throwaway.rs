@@ -88,7 +88,7 @@ impl Variant for Throwaway {
             setup,
             Layout::Volume,
             table::Volume::nodes,
-            |r, s| Ok(table::Volume::from_slices(r, s)),
+            |r, s| Ok((table::Volume::from_slices(r, s), None)),
         )?;
         Ok(Box::new(ThrowawayGpu(inner)))
     }

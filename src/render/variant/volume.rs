@@ -80,7 +80,7 @@ impl Variant for Volume {
             setup,
             Layout::Volume,
             table::Volume::nodes,
-            |r, s| Ok(table::Volume::from_slices(r, s)),
+            |r, s| Ok((table::Volume::from_slices(r, s), None)),
         )
     }
 }
