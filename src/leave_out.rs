@@ -367,7 +367,7 @@ impl Report<'_> {
                     t.tail,
                 )
             } else {
-                format!("no series terms (all {} above {tolerance:.0e})", t.of)
+                format!("no series terms (all {} needed at {tolerance:.0e})", t.of)
             });
         } else if self.left.is_some() {
             parts.push("no series terms (exact table)".to_string());
@@ -696,7 +696,7 @@ mod tests {
         );
         let (line, _) = report(&left(12));
         assert!(
-            line.contains("no series terms (all 12 above 1e-3)"),
+            line.contains("no series terms (all 12 needed at 1e-3)"),
             "{line}"
         );
     }
