@@ -65,7 +65,7 @@ fn the_picture_rows_fall_with_supersampling_against_a_finer_picture() {
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(o.status.success(), "{err}");
     assert!(
-        out.contains("whole picture: the default scene at 64×64")
+        out.contains("whole picture: the default scene at 64×64, its surface builtin:elaphe-grown")
             && out.contains("at 8×8 samples a pixel")
             && out.contains("the reference at half that rate is off by"),
         "{out}"

@@ -164,10 +164,17 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     let base = args.material.apply(Material::default());
     let env = env_profile(args, &base)?;
     let picture = picture_setup(args)?;
-    // The user's numbers and height field are checked before the device opens (each
+    // The picture's scene brings its own material (the default scene's grown Elaphe skin);
+    // the material flags given override it, as they override the maps' default material.
+    let picture_material = picture
+        .as_ref()
+        .map(|p| args.material.apply(p.scene.material.clone()));
+    // The user's numbers and height fields are checked before the device opens (each
     // variant loads the field again when it prepares; that is cheap next to its terms).
-    base.validate()?;
-    base.load_heightfield(&crate::report::Stderr)?;
+    for m in std::iter::once(&base).chain(&picture_material) {
+        m.validate()?;
+        m.load_heightfield(&crate::report::Stderr)?;
+    }
     let mut renderer = Renderer::new(crate::cli::gpu::validation_requested())?;
     let mesh = (counts.mesh_size > 0).then(|| {
         let mut s = Scene::default_scene();
@@ -193,14 +200,14 @@ pub fn run(args: &ProfileArgs) -> Result<()> {
     };
     let mut run = profile_with_env(&mut renderer, &setup, env.as_ref())?;
     print!("{}", format_table(renderer.device_name(), &setup, &run));
-    if let Some(p) = &picture {
+    if let (Some(p), Some(material)) = (&picture, &picture_material) {
         let rows = picture_rows(args)?;
         let frames = match counts.frames {
             Frames::Fixed(n) => n,
             Frames::Budget(_) => 3,
         };
         let cache = setup.cache_dir.as_deref();
-        let done = super::picture::run(&mut renderer, p, &rows, &setup.base, frames, cache)?;
+        let done = super::picture::run(&mut renderer, p, &rows, material, frames, cache)?;
         print!("{}", done.table());
         run.picture = Some(done);
     }

@@ -72,6 +72,8 @@ pub struct PictureRow {
 pub struct PictureRun {
     /// The scene ([`PictureSetup::label`]).
     pub label: String,
+    /// The height field of the material it is drawn with.
+    pub surface: String,
     pub width: u32,
     pub height: u32,
     pub reference_ss: u32,
@@ -183,8 +185,10 @@ fn prepare(material: &Material, cache_dir: Option<&Path>) -> Result<PreparedMate
     material.prepare_anywhere(hf, cache_dir, &crate::report::Stderr)
 }
 
-/// Draws and scores the picture rows of `rows` (each at every mode of `setup.aa`) on `r`;
-/// the reference is the default variant with `render`'s table options.
+/// Draws and scores the picture rows of `rows` (each at every mode of `setup.aa`) on `r`,
+/// the scene's surface of `base` (`diffract profile` passes the scene's own material with
+/// its material flags applied); the reference is the default variant with `render`'s table
+/// options.
 pub fn run(
     r: &mut Renderer,
     setup: &PictureSetup,
@@ -233,6 +237,7 @@ pub fn run(
     }
     let mut out = PictureRun {
         label: setup.label.clone(),
+        surface: base.heightfield.clone(),
         width: w,
         height: h,
         reference_ss: setup.reference_ss,
@@ -309,10 +314,11 @@ impl PictureRun {
     pub fn table(&self) -> String {
         let c = &self.convergence;
         let mut s = format!(
-            "\nwhole picture: {} at {}×{} ({} of its pixels scored) against the same drawn by {} at {}×{} samples a pixel (GPU {}); the reference at half that rate is off by rel-L2 {:.2e}, ΔE2000 p99 {:.2}, ꟻLIP {:.4}\n",
+            "\nwhole picture: {} at {}×{}, its surface {} ({} of its pixels scored) against the same drawn by {} at {}×{} samples a pixel (GPU {}); the reference at half that rate is off by rel-L2 {:.2e}, ΔE2000 p99 {:.2}, ꟻLIP {:.4}\n",
             self.label,
             self.width,
             self.height,
+            self.surface,
             self.pixels,
             VariantKind::DEFAULT.resolve().name(),
             self.reference_ss,
