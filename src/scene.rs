@@ -783,7 +783,7 @@ mod tests {
             parsed.output,
             Output {
                 exposure: 400.0,
-                supersample: 2,
+                supersample: 3,
                 tone: Tone::Filmic,
                 ..Output::default()
             }

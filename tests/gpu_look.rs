@@ -1,7 +1,7 @@
 //! The default scene as a person sees it: the close-up of the corn snake under
 //! the sun's disc, with the default variant, must be free of aliasing. Supersampling is the
 //! anti-aliasing: a 512² render and a 1024² render box-filtered to 512² (16 samples a pixel
-//! against the default 4) differ, over the pixels the snake covers, by mean CIEDE2000 ≤ 2
+//! against the default 9) differ, over the pixels the snake covers, by mean CIEDE2000 ≤ 2
 //! and p99 ≤ 10. Without supersampling the same comparison fails, so the test can tell.
 //! The default scene also has a golden image (64², `tests/golden/closeup_64.png`). Both
 //! live in one test so the table of the view is built once (then read from a disk cache).
@@ -80,18 +80,19 @@ fn default_scene_matches_golden_and_is_free_of_aliasing() {
     let cache = Path::new(env!("CARGO_MANIFEST_DIR")).join("target/test-output/look-cache");
     std::fs::create_dir_all(&cache).expect("cache dir");
     let scene = default_scene();
-    assert_eq!(scene.output.supersample, 2, "the default supersamples 2×2");
+    let ss = scene.output.supersample;
+    assert_eq!(ss, 3, "the default supersamples 3×3");
     let Some(small) = render_at(&scene, 64, 2, &cache) else {
         return;
     };
     assert!(small.rgb.iter().flatten().all(|c| c.is_finite()));
     check_golden("closeup_64", &small);
 
-    let a = render_at(&scene, 512, 2, &cache).unwrap();
+    let a = render_at(&scene, 512, ss, &cache).unwrap();
     let fine = render_at(&scene, 1024, 2, &cache).unwrap();
     let (mean, p99, covered) = aliasing(&scene, &a, &fine);
     eprintln!(
-        "default 512² (4 samples) vs 1024² → 512² (16 samples), {covered} covered pixels: \
+        "default 512² (9 samples) vs 1024² → 512² (16 samples), {covered} covered pixels: \
          ΔE2000 mean {mean:.3}, p99 {p99:.3}"
     );
     assert!(
@@ -111,6 +112,6 @@ fn default_scene_matches_golden_and_is_free_of_aliasing() {
     assert!(
         mean1 > mean && p99_1 > p99,
         "supersampling does not reduce the difference: 1 sample mean {mean1:.3} p99 {p99_1:.3}, \
-         4 samples mean {mean:.3} p99 {p99:.3}"
+         9 samples mean {mean:.3} p99 {p99:.3}"
     );
 }

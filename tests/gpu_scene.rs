@@ -394,7 +394,7 @@ fn render_command_resolves_supersampling_and_exposure() {
         .output()
         .expect("run diffract");
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    // The expected aliasing error of what it wrote, from its 2×2 samples' spread.
+    // The expected aliasing error of what it wrote, from its 3×3 samples' spread.
     let stdout = String::from_utf8_lossy(&o.stdout);
     let line = stdout
         .lines()
@@ -406,7 +406,7 @@ fn render_command_resolves_supersampling_and_exposure() {
         .and_then(|v| v.parse().ok())
         .unwrap_or_else(|| panic!("{line}"));
     assert!(e > 0.0 && e.is_finite(), "{line}");
-    assert!(line.contains("2×2 samples"), "{line}");
+    assert!(line.contains("3×3 samples"), "{line}");
     let (w, h, px) = image_io::read_png_rgb8(&out).unwrap();
     assert_eq!((w, h), (24, 16));
     let scene = Scene::default_scene();

@@ -1083,7 +1083,7 @@ fn small_default_scene(dir: &Path, extra: &str) -> PathBuf {
     let text = base
         .replace("width = 512", "width = 48")
         .replace("height = 512", "height = 48")
-        .replace("supersample = 2 ", "supersample = 1 ");
+        .replace("supersample = 3 ", "supersample = 1 ");
     assert!(
         text.contains("supersample = 1 "),
         "the default scene's [output] moved"

@@ -314,7 +314,8 @@ pub struct EnvSceneArgs<'a> {
 /// `args`): the scene in radiance units ([`crate::render::env_scene`]), written as
 /// `render` writes scenes (supersampled, exposed, tone-mapped for a PNG).
 pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap>) -> Result<()> {
-    crate::render::env_scene::check_size(None, scene)?;
+    use crate::render::env_scene::{check_size, fit_supersample};
+    check_size(None, &fit_supersample(None, scene).0)?;
     refuse_variant(args.gpu.variant)?;
     let start = std::time::Instant::now();
     let material = args.material.clone();
@@ -330,7 +331,20 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     let t = &args.gpu.table;
     let spec = t.env_spec(material.coherence_um)?;
     let dev = crate::gpu::Device::new(crate::cli::gpu::validation_requested())?;
-    crate::render::env_scene::check_size(Some(&dev), scene)?;
+    let (fitted, asked) = fit_supersample(Some(&dev), scene);
+    check_size(Some(&dev), &fitted)?;
+    if let Some(asked) = asked {
+        let (w, h) = fitted.output.render_size();
+        crate::report::Report::note(
+            &crate::report::Stderr,
+            &format!(
+                "G-buffer: {s}×{s} samples a pixel ({w}×{h}), not [output] supersample = {asked}, whose G-buffer would pass the {} pixels this device can hold; the environment's samples are shared among an output pixel's G-buffer pixels whatever their count",
+                crate::render::env_scene::gbuffer_pixels_most(Some(&dev)),
+                s = fitted.output.supersample,
+            ),
+        );
+    }
+    let scene = &fitted;
     let shading = material.shading();
     let (lighting, built) = lighting_for(&hf, &material, &spec, args.cache)?;
     let lights = crate::render::env_scene::scene_lights(scene, !args.env.no_sun, lighting.white);

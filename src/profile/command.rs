@@ -111,7 +111,8 @@ pub struct ProfileArgs {
     /// Side of the picture rows' pictures [default: 128, the size CI renders at].
     #[arg(long)]
     pub picture_size: Option<u32>,
-    /// Anti-aliasing modes of the picture rows, samples a pixel per side [default: 1,2,4].
+    /// Anti-aliasing modes of the picture rows, samples a pixel per side [default: 1,2,3,4;
+    /// the default scene takes 3].
     #[arg(long, value_delimiter = ',', value_name = "N,...")]
     pub picture_aa: Vec<u32>,
     /// Samples a pixel per side of the picture rows' reference [default: 16].

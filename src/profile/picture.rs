@@ -24,7 +24,7 @@ use crate::Result;
 use super::plan::Variant;
 
 /// Anti-aliasing modes of the picture rows unless `--picture-aa` says otherwise.
-pub const DEFAULT_AA: [u32; 3] = [1, 2, 4];
+pub const DEFAULT_AA: [u32; 4] = [1, 2, 3, 4];
 /// Samples a pixel (per side) of the reference picture unless `--picture-reference-ss`.
 pub const REFERENCE_SS: u32 = 16;
 /// Side of the pictures unless `--picture-size` says otherwise: the size CI renders at.

@@ -413,13 +413,39 @@ pub struct EnvSceneFrame {
 /// host holds about 100 bytes a pixel while it rasterises (2 GB here).
 pub const MAX_GBUFFER_PIXELS: u64 = 4096 * 4096;
 
+/// The most G-buffer pixels an environment-lit scene may draw: [`MAX_GBUFFER_PIXELS`] and,
+/// given `dev`, the largest storage buffer it binds (64 bytes a pixel).
+pub fn gbuffer_pixels_most(dev: Option<&Device>) -> u64 {
+    let device = dev.map_or(u64::MAX, |d| crate::gpu::compute::max_storage_range(d) / 64);
+    MAX_GBUFFER_PIXELS.min(device)
+}
+
+/// `scene` with `[output] supersample` lowered, where its G-buffer would pass the limit
+/// ([`check_size`]), to the most samples a pixel whose G-buffer fits, and the supersampling
+/// it asked for; `None` when it fits as asked (or not even at one sample a pixel, which
+/// [`check_size`] refuses). The G-buffer's samples only anti-alias the surface and the point
+/// lights: an output pixel's environment samples are shared among them whatever their count.
+pub fn fit_supersample(dev: Option<&Device>, scene: &Scene) -> (Scene, Option<u32>) {
+    let out = &scene.output;
+    let limit = gbuffer_pixels_most(dev);
+    let fits = |s: u32| u64::from(out.width * s) * u64::from(out.height * s) <= limit;
+    let asked = out.supersample.max(1);
+    match (1..asked).rev().find(|&s| fits(s)) {
+        Some(s) if !fits(asked) => {
+            let mut fitted = scene.clone();
+            fitted.output.supersample = s;
+            (fitted, Some(asked))
+        }
+        _ => (scene.clone(), None),
+    }
+}
+
 /// Refuses a scene whose G-buffer would pass [`MAX_GBUFFER_PIXELS`] or, given `dev`, the
 /// largest storage buffer it binds (64 bytes a pixel), before any work.
 pub fn check_size(dev: Option<&Device>, scene: &Scene) -> Result<()> {
     let (w, h) = scene.output.render_size();
     let pixels = u64::from(w) * u64::from(h);
-    let device = dev.map_or(u64::MAX, |d| crate::gpu::compute::max_storage_range(d) / 64);
-    let limit = MAX_GBUFFER_PIXELS.min(device);
+    let limit = gbuffer_pixels_most(dev);
     if pixels > limit {
         return Err(crate::Error::invalid(
             "image size",
@@ -554,6 +580,32 @@ mod tests {
             [sq as f32, sq as f32, sq as f32, 0.0],
             [point as f32, point as f32, point as f32, 0.0],
         ]
+    }
+
+    #[test]
+    fn a_g_buffer_over_the_limit_takes_the_most_samples_that_fit() {
+        let sized = |side: u32, ss: u32| {
+            let mut s = Scene::default_scene();
+            s.output.width = side;
+            s.output.height = side;
+            s.output.supersample = ss;
+            s
+        };
+        // 1024² at 3×3 is 3072², within 4096².
+        let (fitted, asked) = fit_supersample(None, &sized(1024, 3));
+        assert_eq!((fitted.output.supersample, asked), (3, None));
+        assert!(check_size(None, &fitted).is_ok());
+        // 2048² at 3×3 would be 6144²; at 2×2 it is 4096², the limit.
+        let (fitted, asked) = fit_supersample(None, &sized(2048, 3));
+        assert_eq!((fitted.output.supersample, asked), (2, Some(3)));
+        assert!(check_size(None, &fitted).is_ok());
+        // 3000² at 4×4 fits only at one sample a pixel.
+        let (fitted, asked) = fit_supersample(None, &sized(3000, 4));
+        assert_eq!((fitted.output.supersample, asked), (1, Some(4)));
+        // 8192² does not fit at all: left as asked, and refused.
+        let (fitted, asked) = fit_supersample(None, &sized(8192, 2));
+        assert_eq!((fitted.output.supersample, asked), (2, None));
+        assert!(check_size(None, &fitted).is_err());
     }
 
     #[test]
