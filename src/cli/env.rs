@@ -314,8 +314,7 @@ pub struct EnvSceneArgs<'a> {
 /// `args`): the scene in radiance units ([`crate::render::env_scene`]), written as
 /// `render` writes scenes (supersampled, exposed, tone-mapped for a PNG).
 pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap>) -> Result<()> {
-    use crate::render::env_scene::{check_size, fit_supersample};
-    check_size(None, &fit_supersample(None, scene).0)?;
+    crate::render::env_scene::fit_size(None, scene)?;
     refuse_variant(args.gpu.variant)?;
     let start = std::time::Instant::now();
     let material = args.material.clone();
@@ -331,18 +330,9 @@ pub fn run_env_scene(args: &EnvSceneArgs<'_>, scene: &Scene, env: Option<&EnvMap
     let t = &args.gpu.table;
     let spec = t.env_spec(material.coherence_um)?;
     let dev = crate::gpu::Device::new(crate::cli::gpu::validation_requested())?;
-    let (fitted, asked) = fit_supersample(Some(&dev), scene);
-    check_size(Some(&dev), &fitted)?;
-    if let Some(asked) = asked {
-        let (w, h) = fitted.output.render_size();
-        crate::report::Report::note(
-            &crate::report::Stderr,
-            &format!(
-                "G-buffer: {s}×{s} samples a pixel ({w}×{h}), not [output] supersample = {asked}, whose G-buffer would pass the {} pixels this device can hold; the environment's samples are shared among an output pixel's G-buffer pixels whatever their count",
-                crate::render::env_scene::gbuffer_pixels_most(Some(&dev)),
-                s = fitted.output.supersample,
-            ),
-        );
+    let (fitted, note) = crate::render::env_scene::fit_size(Some(&dev), scene)?;
+    if let Some(line) = note {
+        crate::report::Report::note(&crate::report::Stderr, &line);
     }
     let scene = &fitted;
     let shading = material.shading();

@@ -440,6 +440,22 @@ pub fn fit_supersample(dev: Option<&Device>, scene: &Scene) -> (Scene, Option<u3
     }
 }
 
+/// [`fit_supersample`], then [`check_size`] on what it gives: the scene to draw, and where
+/// its supersampling was lowered, the line that says so.
+pub fn fit_size(dev: Option<&Device>, scene: &Scene) -> Result<(Scene, Option<String>)> {
+    let (fitted, asked) = fit_supersample(dev, scene);
+    check_size(dev, &fitted)?;
+    let note = asked.map(|asked| {
+        let (w, h) = fitted.output.render_size();
+        format!(
+            "G-buffer: {s}×{s} samples a pixel ({w}×{h}), not [output] supersample = {asked}, whose G-buffer would pass the {} pixels this device can hold; the environment's samples are shared among an output pixel's G-buffer pixels whatever their count",
+            gbuffer_pixels_most(dev),
+            s = fitted.output.supersample,
+        )
+    });
+    Ok((fitted, note))
+}
+
 /// Refuses a scene whose G-buffer would pass [`MAX_GBUFFER_PIXELS`] or, given `dev`, the
 /// largest storage buffer it binds (64 bytes a pixel), before any work.
 pub fn check_size(dev: Option<&Device>, scene: &Scene) -> Result<()> {
@@ -606,6 +622,12 @@ mod tests {
         let (fitted, asked) = fit_supersample(None, &sized(8192, 2));
         assert_eq!((fitted.output.supersample, asked), (2, None));
         assert!(check_size(None, &fitted).is_err());
+        // fit_size: the line only where the supersampling was lowered; the refusal as is.
+        let (fitted, note) = fit_size(None, &sized(2048, 3)).unwrap();
+        assert_eq!(fitted.output.supersample, 2);
+        assert!(note.is_some_and(|n| n.contains("2×2 samples a pixel (4096×4096)")));
+        assert!(fit_size(None, &sized(1024, 3)).unwrap().1.is_none());
+        assert!(fit_size(None, &sized(8192, 2)).is_err());
     }
 
     #[test]
