@@ -3,7 +3,7 @@
 //! from, which also draws `chebyshev-w`; the environment's CDFs; the lights), the stages'
 //! device objects ([`EnvKernel`]) with the variant they evaluate bound beside them
 //! ([`crate::render::env_brdf`]), and the dispatches that add `N` samples per pixel in
-//! passes ([`dispatch_passes`]), a BRDF map's (glsl/env_map.glsl) among them.
+//! rounds ([`dispatch_rounds`]), a BRDF map's (glsl/env_map.glsl) among them.
 //!
 //! **The BRDF's sampler.** The largest over `M` nodes uniform in `w` of the table's
 //! `G_X + G_Y + G_Z` is evaluated (as the spline interpolates it) at the corners of cells
@@ -652,16 +652,17 @@ impl<'a> Dispatch<'a> {
     }
 }
 
-/// A pass of [`dispatch_passes`]: the pixels it integrates (indices into the G-buffer;
-/// empty for every pixel of a map) and the samples each has when it ends (every listed
-/// pixel has taken the same number before it).
-pub(crate) struct Pass {
+/// Pixels that [`dispatch_rounds`] gives samples `[from, to)` (indices into the G-buffer;
+/// empty for every pixel of a map): every one of them has taken `from` samples before.
+pub(crate) struct Group {
     pub pixels: Vec<u32>,
-    pub samples: u32,
+    pub from: u32,
+    pub to: u32,
 }
 
-/// What decides the next pass from the sums so far and the samples of the last pass.
-pub(crate) type NextPass<'a> = dyn FnMut(&[[f32; 4]], u32) -> Option<Pass> + 'a;
+/// What decides the next round of groups from the sums so far (none: the integration
+/// ends).
+pub(crate) type NextRound<'a> = dyn FnMut(&[[f32; 4]]) -> Vec<Group> + 'a;
 
 /// The device objects of an integration that stay while the environment, the table and
 /// the stage stay: the table's coefficients, the environment's radiance and CDFs, the
@@ -669,7 +670,7 @@ pub(crate) type NextPass<'a> = dyn FnMut(&[[f32; 4]], u32) -> Option<Pass> + 'a;
 /// the rotation is bound per [`EnvTarget`]; [`EnvKernel::record`] adds samples
 /// `[base, base + count)` to a target's running sums, so a progressive picture (the
 /// viewer) dispatches a few samples a frame into the same sums, and an adaptive one
-/// ([`dispatch_passes`]) narrows the pixels between passes ([`EnvKernel::set_pass`]).
+/// ([`dispatch_rounds`]) narrows the pixels between rounds ([`EnvKernel::set_pass`]).
 pub(crate) struct EnvKernel {
     dev: Arc<Device>,
     pipeline: ComputePipeline,
@@ -1015,7 +1016,7 @@ fn params(
     }
 }
 
-/// What [`dispatch_passes`] integrated.
+/// What [`dispatch_rounds`] integrated.
 pub(crate) struct Integrated {
     /// `outputs` vec4s a pixel: the stage's raw sums.
     pub sums: Vec<[f32; 4]>,
@@ -1026,14 +1027,15 @@ pub(crate) struct Integrated {
     pub dropped: u64,
 }
 
-/// Runs `d` with `lighting` in passes: `first`, then whatever `next` asks for after reading
-/// the sums so far (it gets them and the samples of the last pass; `None` ends).
-pub(crate) fn dispatch_passes(
+/// Runs `d` with `lighting` in rounds: `first`, then whatever `next` asks for after reading
+/// the sums so far (no group ends). Each group of a round is submitted apart (its pixels
+/// are bound for it); the sums are read back after the round's last.
+pub(crate) fn dispatch_rounds(
     dev: &Arc<Device>,
     lighting: &EnvLighting,
     d: &Dispatch<'_>,
-    first: Pass,
-    next: &mut NextPass<'_>,
+    first: Vec<Group>,
+    next: &mut NextRound<'_>,
 ) -> Result<Integrated> {
     let brdf = match d.brdf {
         Some(b) => Arc::clone(b),
@@ -1050,24 +1052,29 @@ pub(crate) fn dispatch_passes(
         MemoryLocation::GpuToCpu,
     )?;
     let start = Instant::now();
-    let mut pass = Some(first);
-    let mut done = 0;
+    let mut round = first;
     let mut sums = Vec::new();
-    while let Some(p) = pass.take() {
-        if d.extra.is_some() {
-            kernel.set_pass(&mut target, &p.pixels)?;
+    loop {
+        round.retain(|g| {
+            g.to.min(d.samples) > g.from && (d.extra.is_none() || !g.pixels.is_empty())
+        });
+        let Some(last) = round.len().checked_sub(1) else {
+            break;
+        };
+        for (i, g) in round.iter().enumerate() {
+            if d.extra.is_some() {
+                kernel.set_pass(&mut target, &g.pixels)?;
+            }
+            dev.submit_once(d.name, |cb| {
+                kernel.record(cb, &target, g.from, g.to.min(d.samples) - g.from)?;
+                if i == last {
+                    compute::copy_to_host(dev, cb, &target.out, &readback, out_bytes);
+                }
+                Ok(())
+            })?;
         }
-        let to = p.samples.min(d.samples);
-        dev.submit_once(d.name, |cb| {
-            kernel.record(cb, &target, done, to - done)?;
-            compute::copy_to_host(dev, cb, &target.out, &readback, out_bytes);
-            Ok(())
-        })?;
-        done = to;
         sums = read_sums(&readback, d.pixels * d.outputs)?;
-        if done < d.samples {
-            pass = next(&sums, done).filter(|q| !q.pixels.is_empty() && q.samples > done);
-        }
+        round = next(&sums);
     }
     let dropped = sums
         .chunks_exact(d.outputs as usize)
@@ -1129,11 +1136,12 @@ pub fn render_env_brdf_map(
     req: &EnvMapRequest<'_>,
 ) -> Result<EnvPicture> {
     let lights = map_lights(lighting, req.sun);
-    let first = Pass {
+    let first = vec![Group {
         pixels: Vec::new(),
-        samples: req.samples,
-    };
-    let run = dispatch_passes(
+        from: 0,
+        to: req.samples,
+    }];
+    let run = dispatch_rounds(
         dev,
         lighting,
         &Dispatch {
@@ -1150,7 +1158,7 @@ pub fn render_env_brdf_map(
             )
         },
         first,
-        &mut |_, _| None,
+        &mut |_| Vec::new(),
     )?;
     Ok(EnvPicture {
         size: req.size,

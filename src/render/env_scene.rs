@@ -3,8 +3,8 @@
 //! ([`super::gbuffer`]; per covered pixel the orthonormal tangent frame, `ωr` in it and
 //! the texture's albedo), then the compute
 //! stage (glsl/env_scene.glsl, with the variant's BRDF) integrates the covered pixels in
-//! passes, each pass narrowed to the pixels whose noise is still above the target, with
-//! the estimator the environment-lit BRDF map uses (glsl/env_common.glsl).
+//! rounds, each round narrowed to the pixels whose noise is still above the target (in
+//! groups by the samples their noise predicts they need, [`Plan`]), with the estimator the environment-lit BRDF map uses (glsl/env_common.glsl).
 //!
 //! **Units.** The picture is radiance (linear sRGB). The texture of thesis Algorithm 4 is an
 //! albedo on the scale of the diffraction colours (`[texture] gain`, relative to a mirror's
@@ -21,7 +21,7 @@ use std::sync::Arc;
 
 use rayon::prelude::*;
 
-use super::env::{dispatch_passes, Dispatch, EnvLighting};
+use super::env::{dispatch_rounds, Dispatch, EnvLighting, Group};
 use crate::brdf::Shading;
 use crate::colour::linear_srgb_to_xyz;
 use crate::gpu::Device;
@@ -197,8 +197,8 @@ pub const SCENE_OUTPUTS: u64 = 3;
 /// spread of its batch sums.
 pub const NOISE_BATCH: u32 = 4;
 
-/// Samples per output pixel of the first pass of an adaptive render; each later pass
-/// doubles the samples of the pixels still above the target.
+/// Samples per output pixel of the first round of an adaptive render; later rounds give the
+/// pixels still above the target what their noise predicts they need ([`Plan`]).
 pub const FIRST_PASS_SAMPLES: u32 = 64;
 
 /// When an output pixel has taken enough samples: when the CIEDE2000 difference between
@@ -283,10 +283,131 @@ fn pixel_noise(sums: &[[f32; 4]], members: &[u32]) -> ([f64; 3], [f64; 3]) {
     (var.map(f64::sqrt), mean)
 }
 
+/// The most a round multiplies an output pixel's samples by ([`Plan`]).
+const MOST_GROWTH: f64 = 4.0;
+/// The least a round multiplies an output pixel's samples by.
+const LEAST_GROWTH: f64 = 1.25;
+/// The margin on an output pixel's predicted need.
+const NEED_MARGIN: f64 = 1.1;
+/// Fewest G-buffer pixels a group of a round is dispatched with: a smaller group joins the
+/// one that starts where it does and goes further (two cores of lavapipe share a dispatch
+/// by its workgroups of 64).
+const LEAST_GROUP: usize = 512;
+
+/// The sample counts (per G-buffer pixel) at which an adaptive render's groups end: `first`,
+/// then a quarter octave apart, each a multiple of 8 (so that a light sample every m-th,
+/// m ≤ 8 dividing `first` and `most`, stays exactly 1/m of them,
+/// [`crate::light::set::light_every`]), up to `most`.
+fn ladder(first: u32, most: u32) -> Vec<u32> {
+    let mut rungs = vec![first.min(most)];
+    let mut exact = f64::from(first.max(1));
+    while let Some(&last) = rungs.last().filter(|&&r| r < most) {
+        exact *= 2f64.powf(0.25);
+        let rung = ((exact / 8.0).ceil() as u32 * 8).max((last / 8 + 1) * 8);
+        rungs.push(rung.min(most));
+    }
+    rungs
+}
+
+/// The rounds of an adaptive render: what each output pixel has taken (per G-buffer pixel)
+/// and whether it goes on. After each round, an output pixel whose estimated noise is `r`
+/// times the target takes what `r²` predicts it needs (the noise falls as the square root
+/// of the samples), times [`NEED_MARGIN`], at least [`LEAST_GROWTH`] and at most
+/// [`MOST_GROWTH`] times what it has, up on the [`ladder`]: it stops close to its need
+/// instead of up to twice past it, and a pixel far from its target gets there in fewer
+/// rounds.
+struct Plan {
+    reached: Vec<u32>,
+    live: Vec<bool>,
+    ladder: Vec<u32>,
+}
+
+impl Plan {
+    fn new(outputs: usize, first: u32, most: u32) -> Self {
+        Plan {
+            reached: vec![first.min(most); outputs],
+            live: vec![true; outputs],
+            ladder: ladder(first, most),
+        }
+    }
+
+    /// The count a pixel that has `n` samples and an estimated noise `ratio` times the
+    /// target goes on to (`n` itself: it stops).
+    fn next_count(&self, n: u32, ratio: f64) -> u32 {
+        let most = *self.ladder.last().unwrap_or(&n);
+        if ratio < 1.0 || n >= most {
+            return n;
+        }
+        let n = f64::from(n);
+        let want = (n * ratio * ratio * NEED_MARGIN).clamp(n * LEAST_GROWTH, n * MOST_GROWTH);
+        // A NaN or infinite estimate (a single batch) goes the furthest.
+        let want = if want.is_nan() { n * MOST_GROWTH } else { want };
+        self.ladder
+            .iter()
+            .copied()
+            .find(|&c| f64::from(c) >= want)
+            .unwrap_or(most)
+    }
+
+    /// The groups of the next round from the sums so far (`groups`: each output pixel's
+    /// G-buffer pixels).
+    fn next_round(
+        &mut self,
+        groups: &[Vec<u32>],
+        sums: &[[f32; 4]],
+        target: &NoiseTarget,
+    ) -> Vec<Group> {
+        let next: Vec<u32> = groups
+            .par_iter()
+            .enumerate()
+            .map(|(o, m)| {
+                let n = self.reached[o];
+                if !self.live[o] {
+                    return n;
+                }
+                let (se, mean) = pixel_noise(sums, m);
+                self.next_count(n, target.delta_e_of(mean, se) / target.delta_e)
+            })
+            .collect();
+        let mut by_span = std::collections::BTreeMap::<(u32, u32), Vec<usize>>::new();
+        for (o, to) in next.into_iter().enumerate() {
+            self.live[o] = self.live[o] && to > self.reached[o];
+            if self.live[o] {
+                by_span.entry((self.reached[o], to)).or_default().push(o);
+            }
+        }
+        // A small group goes on with the next one from the same start (further: more
+        // samples never hurt).
+        let mut round: Vec<Group> = Vec::new();
+        let mut carried: Vec<usize> = Vec::new();
+        let spans: Vec<(u32, u32)> = by_span.keys().copied().collect();
+        for (i, &(from, to)) in spans.iter().enumerate() {
+            let mut outputs = std::mem::take(&mut carried);
+            outputs.extend(by_span.remove(&(from, to)).unwrap_or_default());
+            let size: usize = outputs.iter().map(|&o| groups[o].len()).sum();
+            if size < LEAST_GROUP && spans.get(i + 1).is_some_and(|s| s.0 == from) {
+                carried = outputs;
+                continue;
+            }
+            outputs.iter().for_each(|&o| self.reached[o] = to);
+            round.push(Group {
+                pixels: outputs
+                    .iter()
+                    .flat_map(|&o| groups[o].iter().copied())
+                    .collect(),
+                from,
+                to,
+            });
+        }
+        round
+    }
+}
+
 /// Linear-sRGB radiance of every covered pixel of `g` (in `g.covered`'s order), the
 /// samples each took and the dispatches' time. With a noise target, every pixel takes
 /// [`FIRST_PASS_SAMPLES`] per output pixel (at most `req.samples`), then the output pixels
-/// still above the target double theirs, pass by pass, up to `req.samples`.
+/// still above the target take, round by round, what their noise predicts they need
+/// ([`Plan`]), up to `req.samples`.
 pub fn shade_gbuffer(
     dev: &Arc<Device>,
     lighting: &EnvLighting,
@@ -303,28 +424,12 @@ pub fn shade_gbuffer(
         None => req.samples,
     };
     let groups = output_groups(g);
-    let mut next = |sums: &[[f32; 4]], done: u32| {
-        let target = req.noise?;
-        let pixels: Vec<u32> = groups
-            .par_iter()
-            .filter(|m| {
-                // Every sample of the last pass, added or in a dropped batch.
-                let at = 3 * m[0] as usize;
-                sums[at][3] as u32 + sums[at + 1][3] as u32 * NOISE_BATCH >= done
-            })
-            .filter(|m| {
-                let (se, mean) = pixel_noise(sums, m);
-                target.delta_e_of(mean, se) >= target.delta_e
-            })
-            .flatten()
-            .copied()
-            .collect();
-        Some(super::env::Pass {
-            pixels,
-            samples: (2 * done).min(req.samples),
-        })
+    let mut plan = Plan::new(groups.len(), first, req.samples);
+    let mut next = |sums: &[[f32; 4]]| match req.noise {
+        Some(target) => plan.next_round(&groups, sums, &target),
+        None => Vec::new(),
     };
-    let run = dispatch_passes(
+    let run = dispatch_rounds(
         dev,
         lighting,
         &Dispatch {
@@ -346,10 +451,11 @@ pub fn shade_gbuffer(
             name: "env scene",
             per_dispatch: None,
         },
-        super::env::Pass {
+        vec![Group {
             pixels: (0..g.covered.len() as u32).collect(),
-            samples: first,
-        },
+            from: 0,
+            to: first,
+        }],
         &mut next,
     )?;
     let rgb = run
@@ -647,6 +753,95 @@ mod tests {
         // One batch tells nothing about the spread: infinite, so the pixel goes on.
         let (se, _) = pixel_noise(&sums(&[1.0], 0.0), &[0]);
         assert!(se[0].is_infinite());
+    }
+
+    #[test]
+    fn the_ladder_climbs_a_quarter_octave_a_rung_in_multiples_of_eight() {
+        for (first, most) in [(16, 256), (8, 114), (4, 64), (64, 1024), (16, 16), (24, 20)] {
+            let l = ladder(first, most);
+            assert_eq!(l[0], first.min(most), "{l:?}");
+            assert_eq!(*l.last().unwrap(), most, "{l:?}");
+            for w in l.windows(2) {
+                assert!(w[1] > w[0], "{l:?}");
+                assert!(w[1] % 8 == 0 || w[1] == most, "{l:?}");
+                // A quarter octave, or the least step of 8 where that is more.
+                assert!(
+                    f64::from(w[1]) <= f64::from(w[0]) * 2f64.powf(0.25) + 8.0,
+                    "{l:?}"
+                );
+            }
+        }
+        assert_eq!(ladder(16, 64), vec![16, 24, 32, 40, 48, 56, 64]);
+    }
+
+    #[test]
+    fn a_pixel_goes_on_to_what_its_noise_predicts_within_bounds() {
+        let plan = Plan::new(1, 16, 256);
+        // Below the target: it stops where it is.
+        assert_eq!(plan.next_count(16, 0.9), 16);
+        // Just above: at least a quarter more.
+        assert_eq!(plan.next_count(16, 1.01), 24);
+        // 1.5 times the target: 1.5²·1.1 = 2.475 times the samples, the next rung up.
+        let c = plan.next_count(64, 1.5);
+        assert!(
+            c as f64 >= 64.0 * 2.475 && (c as f64) < 64.0 * 2.475 * 1.2,
+            "{c}"
+        );
+        // Far above, or unknown (one batch): at most four times, up on the ladder.
+        for r in [10.0, f64::INFINITY, f64::NAN] {
+            let c = plan.next_count(32, r);
+            assert!((128..=136).contains(&c), "{r}: {c}");
+        }
+        // Never past the most; at the most it stops.
+        assert_eq!(plan.next_count(200, 3.0), 256);
+        assert_eq!(plan.next_count(256, 3.0), 256);
+    }
+
+    #[test]
+    fn a_round_groups_the_pixels_by_their_counts_and_merges_small_groups() {
+        let target = NoiseTarget {
+            delta_e: 0.3,
+            scale: 1.0,
+            tone: crate::image_io::Tone::Linear,
+            white: 8.0,
+        };
+        // Four batches a G-buffer pixel (16 samples). Output pixel 0: no spread (stops);
+        // 1: a little over the target; 2: far over it; each holds one G-buffer pixel.
+        let noisy = |d: f64| sums(&[0.2 - d, 0.2 + d, 0.2 - d, 0.2 + d], 0.0);
+        let mut raw = Vec::new();
+        for d in [0.0, 0.006, 0.05] {
+            raw.extend(noisy(d));
+        }
+        let ratio = |o: usize| {
+            let (se, mean) = pixel_noise(&raw, &[o as u32]);
+            target.delta_e_of(mean, se) / target.delta_e
+        };
+        let r = [0, 1, 2].map(ratio);
+        assert!(
+            r[0] < 1.0 && r[1] > 1.0 && r[1] < 2.0 && r[2] > 2.0,
+            "{r:?}"
+        );
+        let groups = vec![vec![0u32], vec![1], vec![2]];
+        let mut plan = Plan::new(3, 16, 256);
+        let (to1, to2) = (plan.next_count(16, ratio(1)), plan.next_count(16, ratio(2)));
+        assert!(to1 < to2);
+        let round = plan.next_round(&groups, &raw, &target);
+        // Both go on from 16; the smaller group (one pixel) joins the one that goes further.
+        assert_eq!(round.len(), 1);
+        assert_eq!((round[0].from, round[0].to), (16, to2));
+        assert_eq!(round[0].pixels, vec![1, 2]);
+        assert_eq!(plan.reached, vec![16, to2, to2]);
+        assert_eq!(plan.live, vec![false, true, true]);
+        // A stopped pixel stays stopped; with the same sums the others go on again.
+        let again = plan.next_round(&groups, &raw, &target);
+        assert!(again
+            .iter()
+            .all(|g| !g.pixels.contains(&0) && g.from == to2));
+        // Without spread anywhere the round is empty: the integration ends.
+        let calm: Vec<[f32; 4]> = (0..3).flat_map(|_| noisy(0.0)).collect();
+        assert!(Plan::new(3, 16, 256)
+            .next_round(&groups, &calm, &target)
+            .is_empty());
     }
 
     #[test]
