@@ -268,11 +268,14 @@ fn env_stages(
     ENV_STAGES
         .iter()
         .map(|stage| {
+            // ENV_STAGE tells the variant's evaluator that it runs in a compute stage.
             let replaced: String = source
                 .lines()
                 .map(|l| {
                     if l.trim() == SHADE_MAIN {
                         format!("#include \"{stage}.glsl\"\n")
+                    } else if l.starts_with("#version") {
+                        format!("{l}\n#define ENV_STAGE 1\n")
                     } else {
                         format!("{l}\n")
                     }

@@ -24,13 +24,19 @@ layout(constant_id = 11) const int FOOTPRINT = FOOTPRINT_POINT;
 // The level of the table for the pixel's footprint (brdf::table::levels): the footprint's
 // covariance in texels of the finest level is (J Jᵀ)/12 for the pixel's box (J: ∂(u, v)/
 // ∂(x, y)); the level whose kernel (variance h²(4^L − 1)/6) matches its mean over
-// directions, the nearest. 0 for a point (a map, the compute stages).
+// directions, the nearest. 0 for a point (a map, a compute stage's sample).
 int footprintLevel() {
     int count = int(tableInfo.atlas.z);
     vec2 h = 1.0 / (tableInfo.invExtent.xy * (tableInfo.nodes.xy - 1.0));
     vec2 dx = gUvFootprint.xy / h;
     vec2 dy = gUvFootprint.zw / h;
     float mean = (dot(dx, dx) + dot(dy, dy)) / 24.0;
+#ifdef ENV_STAGE
+    // The compute stages' point lights, where the box cannot be read, take the level of
+    // half the footprint's width: nearer the converged picture than the full width there
+    // (docs/lighting.md, footprints of the point lights).
+    mean *= 0.25;
+#endif
     return clamp(int(floor(0.5 * log2(1.0 + 6.0 * mean) + 0.5)), 0, count - 1);
 }
 
@@ -133,11 +139,17 @@ vec3 diffractionXyz(vec3 wi, vec3 wr) {
     if (gainC == 0.0 || !tableFraction(-wi - wr, f)) {
         return vec3(0.0);
     }
-    // A map's pixels are directions: they read the table at their point.
-    bool mesh = OUTPUT_MODE == MODE_MESH;
-    vec3 g = FOOTPRINT == FOOTPRINT_BOX && mesh ? footprintAt(f)
-           : FOOTPRINT == FOOTPRINT_LEVELS      ? seriesAt(f, footprintLevel())
-                                                : seriesAt(f, 0);
+    // A map's pixels are directions: they read the table at their point. In the compute
+    // stages a point light reads the box of its G-buffer footprint and a sample, which has
+    // none, the spline at its point (glsl/env_common.glsl, setFootprint).
+#ifdef ENV_STAGE
+    bool boxed = FOOTPRINT == FOOTPRINT_BOX && gUvFootprint != vec4(0.0);
+#else
+    bool boxed = FOOTPRINT == FOOTPRINT_BOX && OUTPUT_MODE == MODE_MESH;
+#endif
+    vec3 g = boxed                           ? footprintAt(f)
+           : FOOTPRINT == FOOTPRINT_LEVELS   ? seriesAt(f, footprintLevel())
+                                             : seriesAt(f, 0);
     // G ≥ 0: the splines and the series in w may overshoot below zero; light cannot.
     return gainC * max(g, vec3(0.0));
 }

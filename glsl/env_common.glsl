@@ -282,10 +282,12 @@ vec2 uvStep(vec3 d, vec2 uv, int k) {
     return gHas[k] ? a : (gHas[k + 1] ? b : vec2(0.0));
 }
 
-// gUvFootprint (interface.glsl) of the light towards d at s.
+// gUvFootprint (interface.glsl) of the light towards d at s: the steps one pixel along x
+// and y, as the raster pass's dFdx and dFdy give them, so that chebyshev-w reads the same
+// box over the pixel's footprint in both (glsl/chebyshev_w.frag, footprintAt).
 void setFootprint(Surface s, vec3 d) {
     vec2 uv = uvOf(s, d);
-    gUvFootprint = 0.5 * vec4(uvStep(d, uv, 0), uvStep(d, uv, 2));
+    gUvFootprint = vec4(uvStep(d, uv, 0), uvStep(d, uv, 2));
 }
 
 // Adds scale·L·[(1 − w_d)·C·G] to xyz and the texture part to rgb (header): of the lights

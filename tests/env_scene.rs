@@ -591,7 +591,7 @@ fn the_default_samples_keep_the_sky_within_p99_one_of_converged() {
     let format = diffract::render::variant::TableFormat::Rgba16f;
     let volume = Arc::new(default_pair(&dev, l, &shading, (format, 6), volume).expect("pair"));
     // The unbiased row as `--variant chebyshev-w` draws it: its point lights read the same
-    // levels for their footprints.
+    // boxes over their footprints.
     let own = Arc::new(l.brdf_in(&dev, &shading, format, 6).expect("chebyshev-w"));
     let draw = |brdf: Option<&Arc<EnvBrdf>>, samples: u32, seed: u32, noise: Option<f64>| {
         let frame = render_env_scene(
@@ -646,8 +646,9 @@ fn the_default_samples_keep_the_sky_within_p99_one_of_converged() {
 
 /// The compute stages' footprints (`GBuffer::neighbours`, glsl/env_common.glsl
 /// `setFootprint`): the default scene lit by its sun alone (its eight directions are point
-/// lights) at 32², supersample 2, drawn by `chebyshev-w` reading its table at each point
-/// light's footprint (6 levels) and at the point (1 level), against the same scene drawn at
+/// lights) at 32², supersample 2, drawn by `chebyshev-w` reading its table over each point
+/// light's footprint (the box the raster pass reads, from summed-area planes) and at the
+/// point (`levels` 1), against the same scene drawn at
 /// 16×16 G-buffer pixels an output pixel (128², supersample 4, box-filtered to 32²) at the
 /// point. Over the covered pixels, in linear radiance and in every channel, the filtered
 /// picture is nearer: relative L2 under half the unfiltered one's, and no worse in any of

@@ -44,7 +44,7 @@ pub struct TableArgs {
     /// read at the pixel's centre. More: a raster pass reads the mean over the footprint's
     /// box from summed-area planes where the device filters float32 (else from this many
     /// levels pre-filtered, each twice as coarse as the one before); the compute stages'
-    /// point lights read the level their footprint spans among this many.
+    /// point lights read the same box over their footprints in the G-buffer.
     #[arg(long, default_value_t = TableOptions::RENDER.levels)]
     pub table_levels: usize,
 }

@@ -376,8 +376,9 @@ impl EnvLighting {
     }
 
     /// [`EnvLighting::brdf`] stored in `format` (`--table-format`: the values are those of
-    /// a relative table, [`EnvBrdf::scale`], so float16 holds them) with `levels` levels
-    /// pre-filtered for a pixel's footprint (`--table-levels`; 1: the table alone).
+    /// a relative table, [`EnvBrdf::scale`], so float16 holds them), read over a pixel's
+    /// footprint where `levels` > 1 (`--table-levels`; 1: the table alone,
+    /// [`EnvBrdf::chebyshev_w`]).
     pub fn brdf_in(
         &self,
         dev: &Arc<Device>,

@@ -68,9 +68,11 @@ impl EnvBrdf {
     }
 
     /// `chebyshev-w` drawn from `table` (radiance units; the environment's sampling table,
-    /// so the draw builds no second one), stored in `format` over `spec`, with `levels`
-    /// levels pre-filtered for a pixel's footprint: the scene stage reads them for the
-    /// point lights (glsl/env_common.glsl, `setFootprint`), the samples read the finest.
+    /// so the draw builds no second one), stored in `format` over `spec`; with `levels` > 1
+    /// the scene stage reads the point lights over their footprints (glsl/env_common.glsl,
+    /// `setFootprint`) from summed-area planes, as the raster pass reads its fragments
+    /// (`levels` levels pre-filtered where the device does not filter float32), and the
+    /// samples the spline at their point.
     pub(crate) fn chebyshev_w(
         dev: &Arc<Device>,
         table: &ChebyshevW,
@@ -83,8 +85,14 @@ impl EnvBrdf {
         let upload = |t: &dyn crate::brdf::table::GTable| {
             super::variant::table::upload_built(VariantKind::ChebyshevW, dev, spec, t, format)
         };
+        // The point lights read the box of their footprint from summed-area planes, as
+        // the raster pass reads its fragments', where the device filters them; else the
+        // level pre-filtered nearest to it.
         let variant = match levels {
             0 | 1 => upload(&scaled)?,
+            _ if super::variant::table::sums_filter(dev) => {
+                upload(&crate::brdf::table::Summed::new(scaled))?
+            }
             n => upload(&crate::brdf::table::Levelled::new(scaled, n))?,
         };
         Self::new(
@@ -367,7 +375,8 @@ impl super::Renderer {
 
 /// The stages' default where light is sampled ([`scene_variant`]): `samples` (`volume`)
 /// draws the samples, and `chebyshev-w` from `lighting`'s own table, stored in `format`
-/// with `levels` levels for the pixel's footprint, the point lights.
+/// and read over each pixel's footprint where `levels` > 1 ([`EnvBrdf::chebyshev_w`]), the
+/// point lights.
 pub fn default_pair(
     dev: &Arc<crate::gpu::Device>,
     lighting: &super::env::EnvLighting,

@@ -655,7 +655,13 @@ impl TableGpu {
 /// (`levels > 1`) and the device filters float32 linearly (the sums need its precision);
 /// elsewhere it reads the levels pre-filtered for the footprint.
 pub(super) fn reads_boxes(dev: &Device, setup: &DrawSetup<'_>) -> bool {
-    setup.table.levels > 1 && filters_linearly(dev, vk::Format::R32G32B32A32_SFLOAT)
+    setup.table.levels > 1 && sums_filter(dev)
+}
+
+/// Whether `dev` filters the summed-area planes (float32) linearly, as
+/// [`crate::brdf::table::Summed`] needs.
+pub(crate) fn sums_filter(dev: &Device) -> bool {
+    filters_linearly(dev, vk::Format::R32G32B32A32_SFLOAT)
 }
 
 /// Whether the device samples `format` with linear filtering.
