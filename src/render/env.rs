@@ -105,33 +105,15 @@ impl GDensity {
             (r.hi[0] - r.lo[0]) / nbu as f64,
             (r.hi[1] - r.lo[1]) / nbv as f64,
         ];
-        let k = table.splines.len();
-        let su = nu + 2;
         // The largest G over the w nodes at every cell corner.
         let mut corners = vec![0.0f64; (nbu + 1) * (nbv + 1)];
         for m in 0..DENSITY_NODES {
             let w = r.lo[2] + (r.hi[2] - r.lo[2]) * m as f64 / (DENSITY_NODES - 1) as f64;
-            let x = table.w_hat(w);
-            // The spline coefficients of the plane G(·, ·, w) (the series is linear).
-            let plane: Vec<[f64; 3]> = (0..su * (nv + 2))
-                .into_par_iter()
-                .map(|p| {
-                    let c: Vec<[f64; 3]> = (0..k).map(|j| table.splines[j][p]).collect();
-                    clenshaw(&c, x)
-                })
-                .collect();
-            corners.par_iter_mut().enumerate().for_each(|(p, c)| {
-                let (a, b) = (p % (nbu + 1), p / (nbu + 1));
-                let g = spline_sum(
-                    &plane,
-                    su,
-                    a as f64 / sub as f64,
-                    b as f64 / sub as f64,
-                    nu,
-                    nv,
-                );
-                *c = c.max(g);
-            });
+            let g = plane_sum(table, table.w_hat(w), sub);
+            corners
+                .par_iter_mut()
+                .zip(g.par_iter())
+                .for_each(|(c, g)| *c = c.max(*g));
         }
         let corners = floored(&corners, nbu + 1, nbv + 1);
         let mut cells = vec![0.0f64; nbu * nbv];
@@ -160,6 +142,48 @@ impl GDensity {
             data,
         }
     }
+}
+
+/// `Σ_c max(0, G_c)` of `table`'s plane at `ŵ = x` at the corners of cells `sub` times
+/// finer than its nodes, row by row. At the nodes themselves (`sub` = 1) the spline takes
+/// the nodes' values, so the series is summed there from the coefficients directly.
+fn plane_sum(table: &ChebyshevW, x: f64, sub: usize) -> Vec<f64> {
+    let (nu, nv, k) = (table.nu, table.nv, table.coeffs.len());
+    if sub == 1 {
+        return (0..nu * nv)
+            .into_par_iter()
+            .map_init(Vec::new, |c, p| {
+                c.clear();
+                c.extend((0..k).map(|j| table.coeffs[j][p]));
+                clenshaw(c, x).iter().map(|v| v.max(0.0)).sum::<f64>()
+            })
+            .collect();
+    }
+    // The spline coefficients of the plane G(·, ·, w) (the series is linear).
+    let su = nu + 2;
+    let plane: Vec<[f64; 3]> = (0..su * (nv + 2))
+        .into_par_iter()
+        .map_init(Vec::new, |c, p| {
+            c.clear();
+            c.extend((0..k).map(|j| table.splines[j][p]));
+            clenshaw(c, x)
+        })
+        .collect();
+    let (nbu, nbv) = (sub * (nu - 1), sub * (nv - 1));
+    (0..(nbu + 1) * (nbv + 1))
+        .into_par_iter()
+        .map(|p| {
+            let (a, b) = (p % (nbu + 1), p / (nbu + 1));
+            spline_sum(
+                &plane,
+                su,
+                a as f64 / sub as f64,
+                b as f64 / sub as f64,
+                nu,
+                nv,
+            )
+        })
+        .collect()
 }
 
 /// `Σ_c max(0, G_c)` of the cubic B-spline with coefficients `plane` (`su` wide, one ghost
@@ -1196,6 +1220,58 @@ pub fn map_direction(i: u32, j: u32, size: u32) -> Option<[f64; 3]> {
 mod tests {
     use super::*;
     use crate::light::env::EnvSource;
+
+    #[test]
+    fn a_plane_at_the_nodes_is_the_spline_at_the_nodes() {
+        // Three terms in w over 7×5 nodes, with negative values the sum clamps.
+        let (nu, nv) = (7usize, 5usize);
+        let coeffs: Vec<Vec<[f64; 3]>> = (0..3)
+            .map(|j| {
+                (0..nu * nv)
+                    .map(|p| {
+                        let (i, k) = ((p % nu) as f64, (p / nu) as f64);
+                        let g = (0.7 * i + 1.3 * k + j as f64).sin() / (1.0 + j as f64);
+                        [g, 0.5 * g - 0.1, 1.0 - g]
+                    })
+                    .collect()
+            })
+            .collect();
+        let table = ChebyshevW {
+            region: crate::brdf::table::Region {
+                lo: [-0.1, -0.05, -2.0],
+                hi: [0.1, 0.05, 0.0],
+            },
+            nu,
+            nv,
+            splines: coeffs
+                .iter()
+                .map(|c| crate::brdf::table::spline_plane(c, nu, nv))
+                .collect(),
+            coeffs,
+        };
+        for x in [-1.0, -0.3, 0.6, 1.0] {
+            let direct = plane_sum(&table, x, 1);
+            let plane: Vec<[f64; 3]> = (0..(nu + 2) * (nv + 2))
+                .map(|p| {
+                    let c: Vec<[f64; 3]> = table.splines.iter().map(|s| s[p]).collect();
+                    clenshaw(&c, x)
+                })
+                .collect();
+            for (p, d) in direct.iter().enumerate() {
+                let (i, k) = ((p % nu) as f64, (p / nu) as f64);
+                let spline = spline_sum(&plane, nu + 2, i, k, nu, nv);
+                assert!((d - spline).abs() < 1e-12, "{x} {p}: {d} {spline}");
+            }
+        }
+        // Finer cells go through the spline: at their nodes it agrees again.
+        let fine = plane_sum(&table, 0.2, 2);
+        let direct = plane_sum(&table, 0.2, 1);
+        for (p, d) in direct.iter().enumerate() {
+            let (i, k) = (p % nu, p / nu);
+            let at = 2 * k * (2 * (nu - 1) + 1) + 2 * i;
+            assert!((fine[at] - d).abs() < 1e-12, "{p}");
+        }
+    }
 
     #[test]
     fn the_irradiance_table_is_the_cosine_integral_of_the_map() {
