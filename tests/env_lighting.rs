@@ -160,7 +160,7 @@ fn environment_lit_pixels_match_the_f64_reference() {
     // The reference integrates the same f64 model of the BRDF (the table's own error
     // against the direct-sum reference is measured with the tables, docs/tables.md), so
     // what is compared is the integration: quadrature against Monte Carlo.
-    let g = |d: [f64; 3]| lighting.table.g(d).unwrap_or([0.0; 3]);
+    let g = |d: [f64; 3]| lighting.splined().g(d).unwrap_or([0.0; 3]);
     let size = 16;
     for (source, rotate) in [(EnvSource::Sky, 0.0), (EnvSource::Studio, 30.0)] {
         let env = EnvMap::load(&source, 1.0, rotate).unwrap();

@@ -276,7 +276,7 @@ fn reference(
     end: Option<Instant>,
 ) -> Reference {
     let start = Instant::now();
-    let g = |d: [f64; 3]| lighting.table.g(d).unwrap_or([0.0; 3]);
+    let g = |d: [f64; 3]| lighting.splined().g(d).unwrap_or([0.0; 3]);
     let (mut xyz, mut diff) = (Vec::with_capacity(pixels.len()), 0.0f64);
     let mut finest = env.spec.texel_uv;
     for &(i, j) in pixels {

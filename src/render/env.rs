@@ -105,6 +105,16 @@ impl GDensity {
             (r.hi[0] - r.lo[0]) / nbu as f64,
             (r.hi[1] - r.lo[1]) / nbv as f64,
         ];
+        // Cells finer than the nodes are read through the splines.
+        let fitted;
+        let table = if sub > 1 && table.splines.is_empty() {
+            let mut t = table.clone();
+            t.fit_splines();
+            fitted = t;
+            &fitted
+        } else {
+            table
+        };
         // The largest G over the w nodes at every cell corner.
         let mut corners = vec![0.0f64; (nbu + 1) * (nbv + 1)];
         for m in 0..DENSITY_NODES {
@@ -263,7 +273,12 @@ fn cdf_block(weights: &[f64], corners: &[f64], w: usize, h: usize, cell_area: f6
 
 /// What an environment-lit BRDF map is drawn from, prepared on the CPU once.
 pub struct EnvLighting {
+    /// The table's Chebyshev coefficients in `w` at the `(u, v)` nodes. Their splines are
+    /// fitted where they are read: by `chebyshev-w`'s upload ([`Self::brdf_in`]) on its
+    /// own copy, and by [`Self::splined`] for the CPU; a scene drawn by `volume` alone
+    /// (no point light) reads none.
     pub table: ChebyshevW,
+    splined: std::sync::OnceLock<ChebyshevW>,
     /// What the table was sampled over.
     pub spec: TableSpec,
     pub density: GDensity,
@@ -359,7 +374,7 @@ impl EnvLighting {
             },
         )?;
         let (table, truncation) =
-            ChebyshevW::from_nodes_within(spec.region, &slices, Some(TERM_TOLERANCE));
+            ChebyshevW::coefficients_within(spec.region, &slices, Some(TERM_TOLERANCE));
         let dropped = truncation.of - truncation.kept;
         drop(slices);
         let last = table.decay().last().copied().unwrap_or(0.0);
@@ -375,6 +390,7 @@ impl EnvLighting {
         let mirror_scale = Response::radiance(coherence_um, shading).scale();
         let lighting = EnvLighting {
             table,
+            splined: std::sync::OnceLock::new(),
             spec: *spec,
             density,
             white,
@@ -388,6 +404,18 @@ impl EnvLighting {
 }
 
 impl EnvLighting {
+    /// The table with its splines, as the CPU evaluates it ([`ChebyshevW::g`]): fitted on
+    /// the first call, on a copy of the coefficients.
+    pub fn splined(&self) -> &ChebyshevW {
+        self.splined.get_or_init(|| {
+            let mut t = self.table.clone();
+            if t.splines.is_empty() {
+                t.fit_splines();
+            }
+            t
+        })
+    }
+
     /// `chebyshev-w` drawn from the lighting's own table for the environment-lit stages,
     /// stored in float32, the table alone (read at each point).
     pub(crate) fn brdf(&self, dev: &Arc<Device>, shading: &Shading) -> Result<EnvBrdf> {

@@ -81,7 +81,11 @@ impl EnvBrdf {
         scale: f64,
         (format, levels): (super::variant::TableFormat, usize),
     ) -> Result<Self> {
-        let scaled = scaled(table, 1.0 / scale);
+        let mut scaled = scaled(table, 1.0 / scale);
+        // The lighting's table holds the coefficients; the splines are fitted on this copy.
+        if scaled.splines.is_empty() {
+            scaled.fit_splines();
+        }
         let upload = |t: &dyn crate::brdf::table::GTable| {
             super::variant::table::upload_built(VariantKind::ChebyshevW, dev, spec, t, format)
         };

@@ -201,6 +201,18 @@ impl ChebyshevW {
         slices: &Slices,
         tolerance: Option<f64>,
     ) -> (Self, Truncation) {
+        let (mut table, truncation) = Self::coefficients_within(region, slices, tolerance);
+        table.fit_splines();
+        (table, truncation)
+    }
+
+    /// [`Self::from_nodes_within`] without the splines, for a caller that reads the
+    /// coefficients alone or fits the splines later ([`Self::fit_splines`]).
+    pub fn coefficients_within(
+        region: Region,
+        slices: &Slices,
+        tolerance: Option<f64>,
+    ) -> (Self, Truncation) {
         let k = slices.data.len();
         let n = slices.nu * slices.nv;
         let coeffs = (0..k)
@@ -239,12 +251,18 @@ impl ChebyshevW {
             tail: decay[k - dropped..].iter().sum(),
             peak,
         };
-        table.splines = table
+        (table, truncation)
+    }
+
+    /// Fits the splines of the coefficient planes ([`Self::splines`]), which
+    /// [`Self::coefficients_within`] leaves empty.
+    pub fn fit_splines(&mut self) {
+        let (nu, nv) = (self.nu, self.nv);
+        self.splines = self
             .coeffs
             .par_iter()
-            .map(|c| spline_plane(c, slices.nu, slices.nv))
+            .map(|c| spline_plane(c, nu, nv))
             .collect();
-        (table, truncation)
     }
 
     /// `ŵ ∈ [−1, 1]` of `w`.
