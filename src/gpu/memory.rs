@@ -127,18 +127,30 @@ impl Buffer {
 
     /// Copies `bytes` to the start of a mapped buffer.
     pub fn write(&mut self, bytes: &[u8]) -> Result<()> {
+        self.write_at(0, bytes)
+    }
+
+    /// Copies `bytes` into the mapped memory from byte `offset` (host-visible buffers only).
+    pub fn write_at(&mut self, offset: usize, bytes: &[u8]) -> Result<()> {
         let slice = self
             .allocation
             .as_mut()
             .and_then(|a| a.mapped_slice_mut())
             .ok_or_else(|| Error::invalid("buffer write", "the buffer is not host-visible"))?;
-        if bytes.len() > slice.len() {
+        let end = offset
+            .checked_add(bytes.len())
+            .filter(|&e| e <= slice.len());
+        let Some(end) = end else {
             return Err(Error::invalid(
                 "buffer write",
-                format!("{} bytes into a {}-byte buffer", bytes.len(), slice.len()),
+                format!(
+                    "{} bytes at {offset} into a {}-byte buffer",
+                    bytes.len(),
+                    slice.len()
+                ),
             ));
-        }
-        slice[..bytes.len()].copy_from_slice(bytes);
+        };
+        slice[offset..end].copy_from_slice(bytes);
         Ok(())
     }
 
@@ -332,12 +344,17 @@ impl Image {
         }
         desc.usage |= vk::ImageUsageFlags::SAMPLED | vk::ImageUsageFlags::TRANSFER_DST;
         let image = Image::with_mips(dev, name, desc, levels.len() as u32)?;
-        let staging = Buffer::with_data(
+        // Each level straight into the mapped staging memory, at its offset.
+        let mut staging = Buffer::new(
             dev,
             &format!("{name} staging"),
+            total as u64,
             vk::BufferUsageFlags::TRANSFER_SRC,
-            &levels.concat(),
+            MemoryLocation::CpuToGpu,
         )?;
+        for (bytes, &at) in levels.iter().zip(&offsets) {
+            staging.write_at(at, bytes)?;
+        }
         let range = image.range();
         dev.submit_once(&format!("upload {name}"), |cb| {
             let to_dst = vk::ImageMemoryBarrier::default()
