@@ -94,7 +94,7 @@ impl Packed {
         out
     }
 
-    fn decode(data: &[u8], key: u64) -> std::result::Result<Self, String> {
+    fn decode(data: Vec<u8>, key: u64) -> std::result::Result<Self, String> {
         if data.len() < HEADER + 8 || &data[..8] != MAGIC {
             return Err("not a packed table".into());
         }
@@ -163,11 +163,12 @@ impl Packed {
         if !summed_ok {
             return Err("summed-area texel count does not match its sizes".into());
         }
-        Ok(Packed {
-            bytes: body[HEADER..HEADER + count].to_vec(),
-            summed: rest[8..].to_vec(),
-            ..p
-        })
+        // The texels stay in the buffer read (moved down over the header), not copied out.
+        let summed = rest[8..].to_vec();
+        let mut bytes = data;
+        bytes.truncate(HEADER + count);
+        bytes.drain(..HEADER);
+        Ok(Packed { bytes, summed, ..p })
     }
 }
 
@@ -184,7 +185,7 @@ pub fn load(
     let path = cache.file(PACKED_FILES, key);
     let limit = max_bytes.saturating_add((HEADER + 16) as u64);
     let data = cache.read(&path, "packed table cache", limit, report)?;
-    match Packed::decode(&data, key) {
+    match Packed::decode(data, key) {
         Ok(p) if (p.nu, p.nv) == nodes => {
             mark_used(&path);
             Some(p)
@@ -247,13 +248,13 @@ mod tests {
     fn a_packed_table_round_trips_and_damage_is_refused() {
         let p = packed();
         let data = p.encode(7);
-        assert_eq!(Packed::decode(&data, 7), Ok(p));
-        assert!(Packed::decode(&data, 8).is_err(), "another key");
+        assert_eq!(Packed::decode(data.clone(), 7), Ok(p));
+        assert!(Packed::decode(data.clone(), 8).is_err(), "another key");
         let mut bad = data.clone();
         bad[HEADER + 3] ^= 1;
-        assert!(Packed::decode(&bad, 7).is_err(), "a flipped texel");
+        assert!(Packed::decode(bad, 7).is_err(), "a flipped texel");
         assert!(
-            Packed::decode(&data[..data.len() - 1], 7).is_err(),
+            Packed::decode(data[..data.len() - 1].to_vec(), 7).is_err(),
             "cut short"
         );
         // With summed-area planes: (3 + 1) × (2 + 1) texels of 16 bytes in its one layer.
@@ -262,7 +263,7 @@ mod tests {
             ..packed()
         };
         let data = with.encode(7);
-        assert_eq!(Packed::decode(&data, 7), Ok(with.clone()));
+        assert_eq!(Packed::decode(data, 7), Ok(with.clone()));
         // A truncated series keeps its record; one that disagrees with the planes is refused.
         let truncated = Packed {
             terms: Some(Truncation {
@@ -274,7 +275,7 @@ mod tests {
             ..packed()
         };
         let data = truncated.encode(7);
-        assert_eq!(Packed::decode(&data, 7), Ok(truncated.clone()));
+        assert_eq!(Packed::decode(data, 7), Ok(truncated.clone()));
         let wrong = Packed {
             planes: 3,
             layers: 3,
@@ -282,7 +283,7 @@ mod tests {
             ..truncated
         };
         assert!(
-            Packed::decode(&wrong.encode(7), 7).is_err(),
+            Packed::decode(wrong.encode(7), 7).is_err(),
             "terms ≠ planes"
         );
         let short = Packed {
@@ -290,7 +291,7 @@ mod tests {
             ..packed()
         };
         assert!(
-            Packed::decode(&short.encode(7), 7).is_err(),
+            Packed::decode(short.encode(7), 7).is_err(),
             "summed planes of the wrong size"
         );
     }
