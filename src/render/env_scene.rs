@@ -4,7 +4,8 @@
 //! the texture's albedo), then the compute
 //! stage (glsl/env_scene.glsl, with the variant's BRDF) integrates the covered pixels in
 //! rounds, each round narrowed to the pixels whose noise is still above the target (in
-//! groups by the samples their noise predicts they need, [`Plan`]), with the estimator the environment-lit BRDF map uses (glsl/env_common.glsl).
+//! groups by the samples their noise predicts they need, [`Plan`]), with the estimator the
+//! environment-lit BRDF map uses (glsl/env_common.glsl).
 //!
 //! **Units.** The picture is radiance (linear sRGB). The texture of thesis Algorithm 4 is an
 //! albedo on the scale of the diffraction colours (`[texture] gain`, relative to a mirror's
