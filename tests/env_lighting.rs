@@ -5,7 +5,7 @@
 mod gpu_util;
 
 use diffract::brdf::env_reference::{env_radiance_converged, Frame, Quadrature};
-use diffract::brdf::table::{GTable, Region, TableSpec};
+use diffract::brdf::table::{Region, TableSpec};
 use diffract::brdf::{schlick_r0, Shading};
 use diffract::colour::{delta_e2000, xyz_to_lab, xyz_to_linear_srgb};
 use diffract::heightfield::HeightField;
@@ -160,7 +160,7 @@ fn environment_lit_pixels_match_the_f64_reference() {
     // The reference integrates the same f64 model of the BRDF (the table's own error
     // against the direct-sum reference is measured with the tables, docs/tables.md), so
     // what is compared is the integration: quadrature against Monte Carlo.
-    let g = |d: [f64; 3]| lighting.splined().g(d).unwrap_or([0.0; 3]);
+    let g = |d: [f64; 3]| lighting.g(d).unwrap_or([0.0; 3]);
     let size = 16;
     for (source, rotate) in [(EnvSource::Sky, 0.0), (EnvSource::Studio, 30.0)] {
         let env = EnvMap::load(&source, 1.0, rotate).unwrap();

@@ -9,7 +9,7 @@ mod gpu_util;
 use std::sync::{Arc, OnceLock};
 
 use diffract::brdf::env_reference::{env_radiance_converged, Frame, Quadrature};
-use diffract::brdf::table::{GTable, Region, TableSpec};
+use diffract::brdf::table::{Region, TableSpec};
 use diffract::colour::{delta_e2000, linear_srgb_to_xyz, xyz_to_lab, xyz_to_linear_srgb};
 use diffract::gpu::Device;
 use diffract::light::env::{map_to_direction, EnvMap, EnvSource};
@@ -373,7 +373,7 @@ fn a_disc_light_matches_the_f64_reference() {
     // part the disc covers), dense quadrature over (u, v) of the f64 model of the table.
     let xyz = linear_srgb_to_xyz(light.colour.map(f64::from)).map(|c| c * 2.0);
     let map = disc_map(2048, light.towards_light(), light.angular_radius(), xyz);
-    let table = |d: [f64; 3]| l.splined().g(d).unwrap_or([0.0; 3]);
+    let table = |d: [f64; 3]| l.g(d).unwrap_or([0.0; 3]);
     let e = f64::from(scene.output.exposure) / l.mirror_scale;
     let lab = |c: [f64; 3]| xyz_to_lab(linear_srgb_to_xyz(c.map(|x| x * e)));
     for (m, (k, frame, wr, _)) in picked.into_iter().enumerate() {
@@ -426,7 +426,7 @@ fn scene_pixels_under_the_sky_and_the_studio_match_the_f64_reference() {
             brdf: None,
         };
         let got = shade_gbuffer(&dev, l, &g, &req).unwrap().rgb;
-        let table = |d: [f64; 3]| l.splined().g(d).unwrap_or([0.0; 3]);
+        let table = |d: [f64; 3]| l.g(d).unwrap_or([0.0; 3]);
         let r0 = diffract::brdf::schlick_r0(shading.ior);
         for (k, frame, wr, tex) in chosen(&g) {
             // The diffraction part: dense quadrature over (u, v) of the f64 model of the same

@@ -14,7 +14,6 @@ use super::plan::EnvProfile;
 use super::score::pick_pixels;
 use super::stats::{bootstrap, error_stats};
 use crate::brdf::env_reference::{env_radiance, Frame, Quadrature};
-use crate::brdf::table::GTable;
 use crate::budget::{Cost, Fits, Keeper};
 use crate::heightfield::HeightField;
 use crate::light::set::EnvLight;
@@ -276,7 +275,7 @@ fn reference(
     end: Option<Instant>,
 ) -> Reference {
     let start = Instant::now();
-    let g = |d: [f64; 3]| lighting.splined().g(d).unwrap_or([0.0; 3]);
+    let g = |d: [f64; 3]| lighting.g(d).unwrap_or([0.0; 3]);
     let (mut xyz, mut diff) = (Vec::with_capacity(pixels.len()), 0.0f64);
     let mut finest = env.spec.texel_uv;
     for &(i, j) in pixels {

@@ -92,7 +92,7 @@ impl GDensity {
     /// specular `w` misses orders that are strong at another `w`, and their weights `G/p`
     /// reach the hundreds (measured: relative L2 error 0.77 at 256 samples on a 0.2 µm
     /// grating); the envelope over `w` keeps every weight below about 1.
-    pub fn new(table: &ChebyshevW) -> Self {
+    pub fn new(table: &ChebyshevW, splines: &std::sync::OnceLock<Vec<Vec<[f64; 3]>>>) -> Self {
         let r = table.region;
         let (nu, nv) = (table.nu, table.nv);
         let sub = if (SUB * (nu - 1)) * (SUB * (nv - 1)) <= MAX_DENSITY_CELLS {
@@ -105,21 +105,13 @@ impl GDensity {
             (r.hi[0] - r.lo[0]) / nbu as f64,
             (r.hi[1] - r.lo[1]) / nbv as f64,
         ];
-        // Cells finer than the nodes are read through the splines.
-        let fitted;
-        let table = if sub > 1 && table.splines.is_empty() {
-            let mut t = table.clone();
-            t.fit_splines();
-            fitted = t;
-            &fitted
-        } else {
-            table
-        };
+        // Cells finer than the nodes are read through the splines, fitted here if not yet.
+        let splines = (sub > 1).then(|| splines.get_or_init(|| table.spline_planes()).as_slice());
         // The largest G over the w nodes at every cell corner.
         let mut corners = vec![0.0f64; (nbu + 1) * (nbv + 1)];
         for m in 0..DENSITY_NODES {
             let w = r.lo[2] + (r.hi[2] - r.lo[2]) * m as f64 / (DENSITY_NODES - 1) as f64;
-            let g = plane_sum(table, table.w_hat(w), sub);
+            let g = plane_sum(table, splines, table.w_hat(w), sub);
             corners
                 .par_iter_mut()
                 .zip(g.par_iter())
@@ -155,27 +147,37 @@ impl GDensity {
 }
 
 /// `Σ_c max(0, G_c)` of `table`'s plane at `ŵ = x` at the corners of cells `sub` times
-/// finer than its nodes, row by row. At the nodes themselves (`sub` = 1) the spline takes
-/// the nodes' values, so the series is summed there from the coefficients directly.
-fn plane_sum(table: &ChebyshevW, x: f64, sub: usize) -> Vec<f64> {
+/// finer than its nodes, row by row, through the spline planes `splines` of its
+/// coefficients. At the nodes themselves (`sub` = 1) the spline takes the nodes' values,
+/// so the series is summed there from the coefficients directly, and `splines` may be
+/// `None`.
+fn plane_sum(
+    table: &ChebyshevW,
+    splines: Option<&[Vec<[f64; 3]>]>,
+    x: f64,
+    sub: usize,
+) -> Vec<f64> {
     let (nu, nv, k) = (table.nu, table.nv, table.coeffs.len());
-    if sub == 1 {
-        return (0..nu * nv)
-            .into_par_iter()
-            .map_init(Vec::new, |c, p| {
-                c.clear();
-                c.extend((0..k).map(|j| table.coeffs[j][p]));
-                clenshaw(c, x).iter().map(|v| v.max(0.0)).sum::<f64>()
-            })
-            .collect();
-    }
+    let splines = match splines {
+        Some(s) if sub > 1 => s,
+        _ => {
+            return (0..nu * nv)
+                .into_par_iter()
+                .map_init(Vec::new, |c, p| {
+                    c.clear();
+                    c.extend((0..k).map(|j| table.coeffs[j][p]));
+                    clenshaw(c, x).iter().map(|v| v.max(0.0)).sum::<f64>()
+                })
+                .collect();
+        }
+    };
     // The spline coefficients of the plane G(·, ·, w) (the series is linear).
     let su = nu + 2;
     let plane: Vec<[f64; 3]> = (0..su * (nv + 2))
         .into_par_iter()
         .map_init(Vec::new, |c, p| {
             c.clear();
-            c.extend((0..k).map(|j| table.splines[j][p]));
+            c.extend((0..k).map(|j| splines[j][p]));
             clenshaw(c, x)
         })
         .collect();
@@ -273,12 +275,14 @@ fn cdf_block(weights: &[f64], corners: &[f64], w: usize, h: usize, cell_area: f6
 
 /// What an environment-lit BRDF map is drawn from, prepared on the CPU once.
 pub struct EnvLighting {
-    /// The table's Chebyshev coefficients in `w` at the `(u, v)` nodes. Their splines are
-    /// fitted where they are read: by `chebyshev-w`'s upload ([`Self::brdf_in`]) on its
-    /// own copy, and by [`Self::splined`] for the CPU; a scene drawn by `volume` alone
-    /// (no point light) reads none.
+    /// The table's Chebyshev coefficients in `w` at the `(u, v)` nodes (its `splines`
+    /// left empty: [`Self::splines`]).
     pub table: ChebyshevW,
-    splined: std::sync::OnceLock<ChebyshevW>,
+    /// The splines of the coefficient planes, fitted once, by the first that reads them:
+    /// the density where its cells are finer than the nodes, `chebyshev-w`'s upload
+    /// ([`Self::brdf_in`]), the CPU's [`Self::g`]. A scene drawn by `volume` alone (no
+    /// point light) reads none.
+    splines: std::sync::OnceLock<Vec<Vec<[f64; 3]>>>,
     /// What the table was sampled over.
     pub spec: TableSpec,
     pub density: GDensity,
@@ -384,13 +388,14 @@ impl EnvLighting {
                 spec.w_nodes
             ));
         }
-        let density = GDensity::new(&table);
+        let splines = std::sync::OnceLock::new();
+        let density = GDensity::new(&table, &splines);
         let colours = ColourTable::new(spec.step_nm)?;
         let white = crate::brdf::env_reference::white(&colours);
         let mirror_scale = Response::radiance(coherence_um, shading).scale();
         let lighting = EnvLighting {
             table,
-            splined: std::sync::OnceLock::new(),
+            splines,
             spec: *spec,
             density,
             white,
@@ -404,16 +409,17 @@ impl EnvLighting {
 }
 
 impl EnvLighting {
-    /// The table with its splines, as the CPU evaluates it ([`ChebyshevW::g`]): fitted on
-    /// the first call, on a copy of the coefficients.
-    pub fn splined(&self) -> &ChebyshevW {
-        self.splined.get_or_init(|| {
-            let mut t = self.table.clone();
-            if t.splines.is_empty() {
-                t.fit_splines();
-            }
-            t
-        })
+    /// The spline planes of the table's coefficients, fitted on the first call.
+    pub fn splines(&self) -> &[Vec<[f64; 3]>] {
+        self.splines.get_or_init(|| self.table.spline_planes())
+    }
+
+    /// `G` of the table at `(u, v, w)` as the CPU evaluates it ([`GTable::g`]: clamped to
+    /// `G ≥ 0`), through [`Self::splines`].
+    pub fn g(&self, uvw: [f64; 3]) -> Option<[f64; 3]> {
+        self.table
+            .g_with(self.splines(), uvw)
+            .map(|g| g.map(|x| x.max(0.0)))
     }
 
     /// `chebyshev-w` drawn from the lighting's own table for the environment-lit stages,
@@ -440,7 +446,7 @@ impl EnvLighting {
     ) -> Result<EnvBrdf> {
         EnvBrdf::chebyshev_w(
             dev,
-            &self.table,
+            (&self.table, self.splines()),
             &self.spec,
             shading,
             self.mirror_scale,
@@ -1278,7 +1284,7 @@ mod tests {
             coeffs,
         };
         for x in [-1.0, -0.3, 0.6, 1.0] {
-            let direct = plane_sum(&table, x, 1);
+            let direct = plane_sum(&table, None, x, 1);
             let plane: Vec<[f64; 3]> = (0..(nu + 2) * (nv + 2))
                 .map(|p| {
                     let c: Vec<[f64; 3]> = table.splines.iter().map(|s| s[p]).collect();
@@ -1292,8 +1298,8 @@ mod tests {
             }
         }
         // Finer cells go through the spline: at their nodes it agrees again.
-        let fine = plane_sum(&table, 0.2, 2);
-        let direct = plane_sum(&table, 0.2, 1);
+        let fine = plane_sum(&table, Some(&table.splines), 0.2, 2);
+        let direct = plane_sum(&table, None, 0.2, 1);
         for (p, d) in direct.iter().enumerate() {
             let (i, k) = (p % nu, p / nu);
             let at = 2 * k * (2 * (nu - 1) + 1) + 2 * i;

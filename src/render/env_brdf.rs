@@ -67,25 +67,22 @@ impl EnvBrdf {
         self.variant.stats().name
     }
 
-    /// `chebyshev-w` drawn from `table` (radiance units; the environment's sampling table,
-    /// so the draw builds no second one), stored in `format` over `spec`; with `levels` > 1
+    /// `chebyshev-w` drawn from `table` with the spline planes `splines` of its
+    /// coefficients (radiance units; the environment's sampling table, so the draw builds
+    /// no second one), stored in `format` over `spec`; with `levels` > 1
     /// the scene stage reads the point lights over their footprints (glsl/env_common.glsl,
     /// `setFootprint`) from summed-area planes, as the raster pass reads its fragments
     /// (`levels` levels pre-filtered where the device does not filter float32), and the
     /// samples the spline at their point.
     pub(crate) fn chebyshev_w(
         dev: &Arc<Device>,
-        table: &ChebyshevW,
+        (table, splines): (&ChebyshevW, &[Vec<[f64; 3]>]),
         spec: &TableSpec,
         shading: &Shading,
         scale: f64,
         (format, levels): (super::variant::TableFormat, usize),
     ) -> Result<Self> {
-        let mut scaled = scaled(table, 1.0 / scale);
-        // The lighting's table holds the coefficients; the splines are fitted on this copy.
-        if scaled.splines.is_empty() {
-            scaled.fit_splines();
-        }
+        let scaled = scaled((table, splines), 1.0 / scale);
         let upload = |t: &dyn crate::brdf::table::GTable| {
             super::variant::table::upload_built(VariantKind::ChebyshevW, dev, spec, t, format)
         };
@@ -291,8 +288,9 @@ pub fn env_spirv(kind: VariantKind, stage: EnvStage) -> Result<&'static [u8]> {
     })
 }
 
-/// `table` times `factor` (the series and its splines are linear in `G`).
-fn scaled(table: &ChebyshevW, factor: f64) -> ChebyshevW {
+/// `table`, with the spline planes `splines` of its coefficients, times `factor` (the
+/// series and its splines are linear in `G`).
+fn scaled((table, splines): (&ChebyshevW, &[Vec<[f64; 3]>]), factor: f64) -> ChebyshevW {
     let mul = |planes: &[Vec<[f64; 3]>]| -> Vec<Vec<[f64; 3]>> {
         planes
             .iter()
@@ -304,7 +302,7 @@ fn scaled(table: &ChebyshevW, factor: f64) -> ChebyshevW {
         nu: table.nu,
         nv: table.nv,
         coeffs: mul(&table.coeffs),
-        splines: mul(&table.splines),
+        splines: mul(splines),
     }
 }
 

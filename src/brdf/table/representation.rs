@@ -257,12 +257,30 @@ impl ChebyshevW {
     /// Fits the splines of the coefficient planes ([`Self::splines`]), which
     /// [`Self::coefficients_within`] leaves empty.
     pub fn fit_splines(&mut self) {
+        self.splines = self.spline_planes();
+    }
+
+    /// The splines of the coefficient planes, as [`Self::fit_splines`] fits them, for a
+    /// caller that holds them apart from the table ([`Self::g_with`]).
+    pub fn spline_planes(&self) -> Vec<Vec<[f64; 3]>> {
         let (nu, nv) = (self.nu, self.nv);
-        self.splines = self
-            .coeffs
+        self.coeffs
             .par_iter()
             .map(|c| spline_plane(c, nu, nv))
+            .collect()
+    }
+
+    /// [`GTable::g_unclamped`] with the spline planes `splines` of this table's
+    /// coefficients ([`Self::spline_planes`]) in place of its own.
+    pub fn g_with(&self, splines: &[Vec<[f64; 3]>], [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
+        if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
+            return None;
+        }
+        let c: Option<Vec<[f64; 3]>> = splines
+            .iter()
+            .map(|p| spline(p, self.nu, self.nv, &self.region, u, v))
             .collect();
+        Some(clenshaw(&c?, self.w_hat(w)))
     }
 
     /// `ŵ ∈ [−1, 1]` of `w`.
@@ -334,16 +352,8 @@ impl GTable for ChebyshevW {
     fn region(&self) -> &Region {
         &self.region
     }
-    fn g_unclamped(&self, [u, v, w]: [f64; 3]) -> Option<[f64; 3]> {
-        if !(w >= self.region.lo[2] && w <= self.region.hi[2]) {
-            return None;
-        }
-        let c: Option<Vec<[f64; 3]>> = self
-            .splines
-            .iter()
-            .map(|p| spline(p, self.nu, self.nv, &self.region, u, v))
-            .collect();
-        Some(clenshaw(&c?, self.w_hat(w)))
+    fn g_unclamped(&self, uvw: [f64; 3]) -> Option<[f64; 3]> {
+        self.g_with(&self.splines, uvw)
     }
     fn planes(&self) -> &[Vec<[f64; 3]>] {
         &self.splines
